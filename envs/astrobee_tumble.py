@@ -1,0 +1,190 @@
+"""``AstrobeeTumble-v0``: online pose-and-twist estimation of a tumbling Astrobee."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from fkn_bench.envs.episodes import EpisodeStream
+from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, estimate_cost
+from fkn_bench.envs.spaces import MeasuredPose, action_space, observation_space, validate_actions
+from fkn_bench.scenarios import Scenario, get_scenario
+from fkn_bench.types import ArrayF
+
+__all__ = ["AstrobeeTumbleEnv", "EPISODE_SEED_BOUND"]
+
+EPISODE_SEED_BOUND = 2**31
+"""Episode seeds drawn by an unseeded ``reset()`` lie in ``[0, EPISODE_SEED_BOUND)``."""
+
+
+class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
+    """Estimate the pose and twist of a tumbling Astrobee from noisy pose measurements.
+
+    ## Description
+
+    A free-flying Astrobee rotates (forced at a constant world-frame rate, as in the
+    FlexKalmanNet paper, or tumbling torque-free with its flight inertia) while a pose sensor
+    reports its attitude and position with noise, at a configurable rate, with dropout, data
+    gaps, outliers and quaternion sign flips. The agent is a state estimator: at every step it
+    receives the current observation and answers with its 13-dim state estimate for that time,
+    which is scored against the hidden ground truth.
+
+    ## Observation Space
+
+    A ``Dict``:
+
+    | Key     | Space                   | Meaning                                                   |
+    |---------|-------------------------|-----------------------------------------------------------|
+    | `pose`  | `PoseBox(7,)` float64   | measured `[qw, qx, qy, qz, rx, ry, rz]` (wxyz, m); all NaN when missing |
+    | `valid` | `Discrete(2)`           | 1 when `pose` holds a measurement, else 0                 |
+    | `time`  | `Box(0, T dt, ())`      | time of the observation, s                                |
+
+    The measured quaternion may arrive as ``-q`` (scenarios with sign flips).
+
+    ## Action Space
+
+    ``Box(13,)`` float64: the estimate ``[qw, qx, qy, qz, rx, ry, rz, wx, wy, wz, vx, vy, vz]``
+    of the state at the time of the current observation (attitude body-to-world, position m,
+    world-frame angular velocity rad/s, velocity m/s). The quaternion is normalised for scoring;
+    a wrong shape, a NaN or infinite entry or a zero quaternion raises ``ValueError``.
+
+    ## Rewards
+
+    ``-(theta + 1 |dr| + 10 |dw| + 10 |dv|)`` with ``theta`` the sign-safe attitude error angle
+    (rad) and ``|.|`` Euclidean norms (m, rad/s, m/s) of the estimate's error at the scored time;
+    weights set by ``reward_weights`` (see :mod:`fkn_bench.envs.rewards`). The estimate passed
+    to ``step`` is scored against the truth at the time of the observation it answers.
+
+    ## Starting State
+
+    The scenario draws the initial attitude (uniformly random by default), position and rates
+    from the episode seed; ``reset`` returns the observation at step 0.
+
+    ## Episode End
+
+    No termination. The episode is truncated when the last sample of the scenario's episode
+    (``n_steps``, 16000 for ``ds1``) has been observed: the step that returns it has
+    ``truncated=True``, and its estimate is not scored.
+
+    ## Arguments
+
+    ```python
+    gym.make("AstrobeeTumble-v0", scenario="ds1", expose_truth=False, reward_weights=None,
+             render_mode=None, **overrides)
+    ```
+
+    * ``scenario``: registered name (``fkn-bench scenarios`` lists them) or a ``Scenario``.
+    * ``**overrides``: any scenario field, e.g. ``noise_scale=5.0``, ``measurement_every=10``,
+      ``dropout=0.2``, ``sign_flip_probability=0.5``, ``dynamics="free"``.
+    * ``expose_truth``: put the true 13-dim state in ``info["truth"]`` (never in the observation).
+    * ``reward_weights``: mapping with keys ``attitude``, ``position``, ``omega``, ``velocity``.
+    * ``render_mode``: ``None`` or ``"ansi"`` (a one-line text summary).
+
+    ## Seeding
+
+    ``reset(seed=s)`` generates exactly episode ``s`` of the scenario (the same data as
+    ``fkn_bench.envs.generate_episodes(scenario, [s])``); an unseeded ``reset`` draws the next
+    episode seed from ``self.np_random``.
+    """
+
+    metadata = {"render_modes": ["ansi"], "render_fps": 10}
+
+    def __init__(
+        self,
+        scenario: str | Scenario = "ds1",
+        *,
+        expose_truth: bool = False,
+        reward_weights: Mapping[str, float] | None = None,
+        render_mode: str | None = None,
+        chunk_size: int = 512,
+        **overrides: Any,
+    ) -> None:
+        self.scenario: Scenario = get_scenario(scenario, **overrides)
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']} (got {render_mode!r})")
+        if int(chunk_size) < 1:
+            raise ValueError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
+        self.render_mode = render_mode
+        self.expose_truth = bool(expose_truth)
+        self.reward_weights = _check_weights(reward_weights)
+        self.observation_space = observation_space(self.scenario.n_steps, self.scenario.dt)
+        self.action_space = action_space()
+        self._chunk_size = int(chunk_size)
+        self._stream: EpisodeStream | None = None
+        self._index = 0
+        self.episode_seed: int | None = None
+
+    # ------------------------------------------------------------------ episode data
+    def _load_chunk(self) -> None:
+        assert self._stream is not None
+        self._chunk_start = self._stream.index
+        times, truth, meas, valid = self._stream.advance(self._chunk_size)
+        self._times, self._truth, self._meas, self._valid = times, truth[0], meas[0], valid[0]
+
+    def _observation(self) -> dict[str, Any]:
+        i = self._index - self._chunk_start
+        return {
+            "pose": self._meas[i].copy().view(MeasuredPose),
+            "valid": np.int64(self._valid[i]),
+            "time": np.array(self._times[i]),
+        }
+
+    def _info(self) -> dict[str, Any]:
+        info: dict[str, Any] = {"step": self._index, "episode_seed": self.episode_seed}
+        if self.expose_truth:
+            info["truth"] = self._truth[self._index - self._chunk_start].copy()
+        return info
+
+    # ------------------------------------------------------------------ Gymnasium API
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
+        super().reset(seed=seed)
+        if seed is not None:
+            if seed < 0:
+                raise ValueError(f"seed must be a non-negative integer (got {seed})")
+            self.episode_seed = int(seed)
+        else:
+            self.episode_seed = int(self.np_random.integers(EPISODE_SEED_BOUND))
+        self._stream = EpisodeStream(self.scenario, [self.episode_seed])
+        self._index = 0
+        self._load_chunk()
+        return self._observation(), self._info()
+
+    def step(self, action: ArrayF) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        if self._stream is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        if self._index >= self.scenario.n_steps - 1:
+            raise gym.error.ResetNeeded("the episode was truncated; call reset() before step()")
+        estimate = validate_actions(action)
+        truth = self._truth[self._index - self._chunk_start]
+        reward = -float(estimate_cost(truth[None], estimate[None], self.reward_weights)[0])
+        self._index += 1
+        if self._index - self._chunk_start >= len(self._times):
+            self._load_chunk()
+        truncated = self._index == self.scenario.n_steps - 1
+        return self._observation(), reward, False, truncated, self._info()
+
+    def render(self) -> str | None:
+        if self.render_mode != "ansi" or self._stream is None:
+            return None
+        i = self._index - self._chunk_start
+        pose = self._meas[i]
+        shown = "missing" if not self._valid[i] else np.array2string(pose, precision=3)
+        return f"{self.scenario.name} seed={self.episode_seed} step={self._index} t={self._times[i]:.1f}s pose={shown}"
+
+
+def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:
+    if weights is None:
+        return dict(DEFAULT_WEIGHTS)
+    unknown = set(weights) - set(DEFAULT_WEIGHTS)
+    if unknown:
+        raise ValueError(f"unknown reward weight(s) {sorted(unknown)}; valid keys: {sorted(DEFAULT_WEIGHTS)}")
+    merged = {**DEFAULT_WEIGHTS, **{k: float(v) for k, v in weights.items()}}
+    for key, value in merged.items():
+        if not np.isfinite(value) or value < 0:
+            raise ValueError(f"reward weight '{key}' must be a finite number >= 0 (got {value})")
+    return merged

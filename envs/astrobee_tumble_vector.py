@@ -1,0 +1,167 @@
+"""Batched ``AstrobeeTumble-v0`` for ``gym.make_vec(..., vectorization_mode="vector_entry_point")``."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.error import ResetNeeded
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+
+from fkn_bench.envs.astrobee_tumble import EPISODE_SEED_BOUND, _check_weights
+from fkn_bench.envs.episodes import EpisodeStream
+from fkn_bench.envs.rewards import estimate_cost
+from fkn_bench.envs.spaces import MeasuredPose, action_space, observation_space, pose_space, validate_actions
+from fkn_bench.scenarios import Scenario, get_scenario
+from fkn_bench.types import ArrayF
+
+__all__ = ["AstrobeeTumbleVectorEnv"]
+
+
+class AstrobeeTumbleVectorEnv(VectorEnv):
+    """``num_envs`` Astrobee episodes stepped together with numpy arrays.
+
+    Observations, actions and rewards are those of
+    :class:`~fkn_bench.envs.astrobee_tumble.AstrobeeTumbleEnv` with a leading ``num_envs`` axis
+    (``pose (N, 7)``, ``valid (N,)``, ``time (N,)``; actions ``(N, 13)``). Sub-environment ``i``
+    of ``reset(seed=s)`` is exactly ``AstrobeeTumbleEnv`` reset with ``seed=s + i`` (or the
+    ``i``-th seed of a list), including the episodes that follow through autoreset, which use
+    Gymnasium's next-step mode: the step after a truncation ignores its actions and returns the
+    first observation of the next episode with reward 0. All sub-environments share the
+    scenario, so their episodes end together. ``info`` carries ``step``, ``episode_seed`` and,
+    with ``expose_truth=True``, ``truth (N, 13)``, each with its ``_key`` mask.
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str | Scenario = "ds1",
+        *,
+        expose_truth: bool = False,
+        reward_weights: Mapping[str, float] | None = None,
+        render_mode: str | None = None,
+        chunk_size: int = 512,
+        **overrides: Any,
+    ) -> None:
+        if not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
+        if render_mode is not None:
+            raise ValueError("AstrobeeTumbleVectorEnv supports no render mode")
+        if int(chunk_size) < 1:
+            raise ValueError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
+        self.num_envs = num_envs
+        self.scenario: Scenario = get_scenario(scenario, **overrides)
+        self.expose_truth = bool(expose_truth)
+        self.reward_weights = _check_weights(reward_weights)
+        self.render_mode = None
+        n_steps, dt = self.scenario.n_steps, self.scenario.dt
+        self.single_observation_space = observation_space(n_steps, dt)
+        self.single_action_space = action_space()
+        self.observation_space = spaces.Dict(
+            {
+                "pose": pose_space(num_envs),
+                "valid": spaces.MultiDiscrete(np.full(num_envs, 2)),
+                "time": spaces.Box(low=0.0, high=float(n_steps * dt), shape=(num_envs,), dtype=np.float64),
+            }
+        )
+        single = self.single_action_space
+        self.action_space = spaces.Box(
+            low=np.tile(single.low, (num_envs, 1)), high=np.tile(single.high, (num_envs, 1)), dtype=np.float64
+        )
+        self._chunk_size = int(chunk_size)
+        self._rngs: list[np.random.Generator] = []
+        self._stream: EpisodeStream | None = None
+        self._index = 0
+        self._needs_autoreset = False
+        self.episode_seeds = np.zeros(num_envs, dtype=np.int64)
+
+    # ------------------------------------------------------------------ episode data
+    def _start_episodes(self, seeds: Sequence[int]) -> None:
+        self.episode_seeds = np.asarray(seeds, dtype=np.int64)
+        self._stream = EpisodeStream(self.scenario, [int(s) for s in seeds])
+        self._index = 0
+        self._load_chunk()
+
+    def _load_chunk(self) -> None:
+        assert self._stream is not None
+        self._chunk_start = self._stream.index
+        self._times, self._truth, self._meas, self._valid = self._stream.advance(self._chunk_size)
+
+    def _observation(self) -> dict[str, Any]:
+        i = self._index - self._chunk_start
+        n = self.num_envs
+        return {
+            "pose": self._meas[:, i].copy().view(MeasuredPose),
+            "valid": self._valid[:, i].astype(np.int64),
+            "time": np.full(n, self._times[i]),
+        }
+
+    def _info(self) -> dict[str, Any]:
+        everywhere = np.ones(self.num_envs, dtype=bool)
+        info: dict[str, Any] = {
+            "step": np.full(self.num_envs, self._index, dtype=np.int64),
+            "_step": everywhere,
+            "episode_seed": self.episode_seeds.copy(),
+            "_episode_seed": everywhere.copy(),
+        }
+        if self.expose_truth:
+            info["truth"] = self._truth[:, self._index - self._chunk_start].copy()
+            info["_truth"] = everywhere.copy()
+        return info
+
+    # ------------------------------------------------------------------ Gymnasium API
+    def reset(
+        self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, Any], dict[str, Any]]:
+        if options and "reset_mask" in options:
+            raise NotImplementedError(
+                "AstrobeeTumbleVectorEnv resets all sub-environments together (their episodes end together)"
+            )
+        if isinstance(seed, (int, np.integer)):
+            seeds: list[int | None] = [int(seed) + i for i in range(self.num_envs)]
+        elif seed is None:
+            seeds = [None] * self.num_envs
+        else:
+            seeds = [None if s is None else int(s) for s in seed]
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"expected {self.num_envs} seeds (got {len(seeds)})")
+        if any(s is not None and s < 0 for s in seeds):
+            raise ValueError(f"seeds must be non-negative integers (got {seed!r})")
+        super().reset(seed=seeds[0])
+        if seed is not None or not self._rngs:
+            self._rngs = [seeding.np_random(s)[0] for s in seeds]
+        episode = [
+            s if s is not None else int(rng.integers(EPISODE_SEED_BOUND)) for s, rng in zip(seeds, self._rngs)
+        ]
+        self._start_episodes(episode)
+        self._needs_autoreset = False
+        return self._observation(), self._info()
+
+    def step(self, actions: ArrayF) -> tuple[dict[str, Any], ArrayF, ArrayF, ArrayF, dict[str, Any]]:
+        if self._stream is None:
+            raise ResetNeeded("call reset() before step()")
+        n = self.num_envs
+        if self._needs_autoreset:
+            self._start_episodes([int(rng.integers(EPISODE_SEED_BOUND)) for rng in self._rngs])
+            self._needs_autoreset = False
+            return self._observation(), np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), self._info()
+        estimates = validate_actions(actions, batch=n)
+        truth = self._truth[:, self._index - self._chunk_start]
+        rewards = -estimate_cost(truth, estimates, self.reward_weights)
+        self._index += 1
+        if self._index - self._chunk_start >= len(self._times):
+            self._load_chunk()
+        truncated = self._index == self.scenario.n_steps - 1
+        self._needs_autoreset = truncated
+        return (
+            self._observation(),
+            rewards,
+            np.zeros(n, dtype=bool),
+            np.full(n, truncated),
+            self._info(),
+        )

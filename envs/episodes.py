@@ -1,0 +1,174 @@
+"""Episodes: ground truth plus measurements of a scenario for a batch of seeds.
+
+:func:`generate_episodes` returns whole episodes (or one split of them) as numpy arrays, batch
+first; :class:`EpisodeStream` yields the same data chunk by chunk for the environments. Both give
+identical values for the same scenario and seeds, whatever the chunk sizes or batch composition.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from fkn_bench.envs.dynamics import ForcedRotation, FreeTumble
+from fkn_bench.envs.measurements import MeasurementGenerator, stream
+from fkn_bench.geometry import quaternion as quat
+from fkn_bench.scenarios import SPLITS, Scenario, get_scenario
+from fkn_bench.types import ArrayB, ArrayF
+
+__all__ = ["Episodes", "EpisodeStream", "generate_episodes", "initial_states"]
+
+
+@dataclass(frozen=True, eq=False)
+class Episodes:
+    """A batch of episode segments (all the same length).
+
+    Attributes:
+        scenario: the generating configuration.
+        seeds: episode seed of each batch row, ``(B,)``.
+        start: global step index of the first sample (0, or the start of a split).
+        times: sample times ``(T,)``, s, counted from the episode start.
+        truth: true states ``(B, T, 13)``.
+        measurements: measured poses ``(B, T, 7)``, NaN where missing.
+        valid: measurement validity ``(B, T)``.
+    """
+
+    scenario: Scenario
+    seeds: tuple[int, ...]
+    start: int
+    times: ArrayF
+    truth: ArrayF
+    measurements: ArrayF
+    valid: ArrayB
+
+    @property
+    def batch_size(self) -> int:
+        return self.truth.shape[0]
+
+    @property
+    def n_steps(self) -> int:
+        return self.truth.shape[1]
+
+    def window(self, start: int, stop: int) -> Episodes:
+        """Steps ``[start, stop)`` relative to this segment."""
+        return Episodes(
+            scenario=self.scenario,
+            seeds=self.seeds,
+            start=self.start + start,
+            times=self.times[start:stop],
+            truth=self.truth[:, start:stop],
+            measurements=self.measurements[:, start:stop],
+            valid=self.valid[:, start:stop],
+        )
+
+    def split(self, name: str) -> Episodes:
+        """The named split (``train``, ``val``, ``test`` or ``full``) of full-length episodes."""
+        if self.start != 0 or self.n_steps != self.scenario.n_steps:
+            raise ValueError("split() needs full-length episodes (generate with split='full')")
+        if name not in SPLITS:
+            raise ValueError(f"unknown split {name!r}; valid splits: {', '.join(SPLITS)}")
+        start, stop = self.scenario.split_bounds()[name]
+        return self.window(start, stop)
+
+
+def initial_states(scenario: Scenario, seeds: Sequence[int]) -> tuple[ArrayF, ArrayF, ArrayF]:
+    """Initial attitude ``(B, 4)``, position ``(B, 3)`` and velocity ``(B, 3)`` per seed."""
+    attitudes, positions = [], []
+    for seed in seeds:
+        q_rng = stream(seed, "attitude0")
+        attitudes.append(
+            np.array(scenario.attitude0) if scenario.attitude0 is not None else quat.random_uniform(q_rng)
+        )
+        offset = stream(seed, "position0").standard_normal(3)
+        positions.append(np.array(scenario.position0) + scenario.position0_std * offset)
+    velocity = np.tile(np.array(scenario.velocity0), (len(seeds), 1))
+    return np.array(attitudes).reshape(-1, 4), np.array(positions).reshape(-1, 3), velocity
+
+
+class EpisodeStream:
+    """Generates a batch of episodes chunk by chunk (``advance(n)``), for the environments.
+
+    Args:
+        scenario: the configuration.
+        seeds: one non-negative integer seed per episode.
+    """
+
+    def __init__(self, scenario: Scenario, seeds: Sequence[int]) -> None:
+        self.scenario = scenario
+        self.seeds = tuple(int(s) for s in seeds)
+        self._q0, self._r0, self._v0 = initial_states(scenario, self.seeds)
+        self._rotation = self._make_rotation()
+        self._measurements = MeasurementGenerator(scenario, self.seeds)
+        self.index = 0
+
+    def _make_rotation(self) -> ForcedRotation | FreeTumble:
+        sc = self.scenario
+        omega = np.tile(np.array(sc.omega0), (len(self.seeds), 1))
+        if sc.dynamics == "forced":
+            return ForcedRotation(self._q0, omega, sc.dt)
+        return FreeTumble(self._q0, omega, sc.inertia, sc.dt, sc.free_substeps)
+
+    def seek(self, index: int) -> None:
+        """Continue from step ``index``: O(1) for forced rotation; free tumbling integrates
+        forward from the current step (or from the start when seeking backwards)."""
+        index = int(index)
+        if not 0 <= index <= self.scenario.n_steps:
+            raise ValueError(f"step index must be in [0, {self.scenario.n_steps}] (got {index})")
+        if isinstance(self._rotation, ForcedRotation):
+            self._rotation.seek(index)
+        else:
+            if index < self.index:
+                self._rotation = self._make_rotation()
+                self.index = 0
+            while self.index < index:
+                n = min(4096, index - self.index)
+                self._rotation.advance(n)
+                self.index += n
+        self.index = index
+
+    def advance(self, n: int) -> tuple[ArrayF, ArrayF, ArrayF, ArrayB]:
+        """The next ``n`` steps (clipped at the episode end).
+
+        Returns:
+            ``(times (n,), truth (B, n, 13), measurements (B, n, 7), valid (B, n))``.
+        """
+        n = max(0, min(int(n), self.scenario.n_steps - self.index))
+        times = np.arange(self.index, self.index + n) * self.scenario.dt
+        q, omega = self._rotation.advance(n)
+        batch = len(self.seeds)
+        truth = np.empty((batch, n, 13))
+        truth[..., 0:4] = q
+        truth[..., 4:7] = self._r0[:, None, :] + self._v0[:, None, :] * times[None, :, None]
+        truth[..., 7:10] = omega
+        truth[..., 10:13] = self._v0[:, None, :]
+        measurements, valid = self._measurements.generate(truth[..., :7], self.index)
+        self.index += n
+        return times, truth, measurements, valid
+
+
+def generate_episodes(
+    scenario: str | Scenario, seeds: int | Sequence[int], *, split: str = "full"
+) -> Episodes:
+    """Generate whole episodes for ``seeds`` (an int ``N`` means seeds ``0 .. N-1``).
+
+    Args:
+        scenario: a registered name or a :class:`Scenario`.
+        seeds: episode seeds, or their number.
+        split: ``full`` (default), ``train``, ``val`` or ``test``.
+
+    Returns:
+        :class:`Episodes` with batch axis first.
+    """
+    scenario = get_scenario(scenario)
+    if split not in SPLITS:
+        raise ValueError(f"unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
+    seed_list = list(range(seeds)) if isinstance(seeds, (int, np.integer)) else [int(s) for s in seeds]
+    if not seed_list:
+        raise ValueError("at least one seed is required")
+    start, stop = scenario.split_bounds()[split]
+    source = EpisodeStream(scenario, seed_list)
+    source.seek(start)
+    times, truth, measurements, valid = source.advance(stop - start)
+    return Episodes(scenario, tuple(seed_list), start, times, truth, measurements, valid)

@@ -1,0 +1,136 @@
+"""Observation and action spaces of the Astrobee environments, and validation of actions.
+
+A missing measurement is a pose of seven NaN. Two pieces make that first-class in Gymnasium:
+
+* :class:`PoseBox`, a ``Box`` whose ``contains`` also accepts an all-NaN pose (a missing
+  measurement), so the passive checker does not flag valid observations;
+* :class:`MeasuredPose`, the float64 ``ndarray`` subclass the environments return for poses: it
+  behaves as a plain array except that two missing (NaN) entries compare equal under ``==``,
+  ``np.allclose``, ``np.isclose`` and ``np.array_equal``. Gymnasium's ``check_env`` compares the
+  observations of two identically seeded runs with ``np.allclose`` and ``==``; with plain NaN,
+  every missing measurement would read as non-determinism.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from fkn_bench.types import STATE_DIM, STATE_NAMES, ArrayF
+
+__all__ = [
+    "MeasuredPose",
+    "PoseBox",
+    "POSITION_LIMIT",
+    "RATE_LIMIT",
+    "pose_space",
+    "observation_space",
+    "action_space",
+    "validate_actions",
+]
+
+POSITION_LIMIT = 1.0e3
+"""Bound of position observations and estimates, m (the ISS is about 110 m across)."""
+RATE_LIMIT = 10.0
+"""Bound of angular-rate (rad/s) and velocity (m/s) estimates."""
+
+_NAN_EQUAL_FUNCTIONS = {np.isclose, np.allclose, np.array_equal}
+
+
+class MeasuredPose(np.ndarray):
+    """A float64 pose array where NaN marks a missing measurement (see module docstring)."""
+
+    def __eq__(self, other: Any) -> Any:  # type: ignore[override]
+        mine, theirs = np.asarray(self), np.asarray(other)
+        return np.equal(mine, theirs) | (np.isnan(mine) & np.isnan(theirs))
+
+    def __ne__(self, other: Any) -> Any:  # type: ignore[override]
+        return ~self.__eq__(other)
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def __array_function__(self, func: Any, types: Any, args: Any, kwargs: Any) -> Any:
+        if func in _NAN_EQUAL_FUNCTIONS:
+            kwargs = {**kwargs, "equal_nan": True}
+        return super().__array_function__(func, types, args, kwargs)
+
+
+class PoseBox(spaces.Box):
+    """A ``Box`` of poses ``[qw, qx, qy, qz, rx, ry, rz]`` (last axis) in which a pose of all
+    NaN, a missing measurement, is also a member."""
+
+    def contains(self, x: Any) -> bool:
+        if not isinstance(x, np.ndarray):
+            try:
+                x = np.asarray(x, dtype=self.dtype)
+            except (ValueError, TypeError):
+                return False
+        if x.shape != self.shape:
+            return False
+        missing = np.isnan(x).all(axis=-1, keepdims=True)
+        return super().contains(np.where(missing, 0.0, x).astype(self.dtype))
+
+    def __repr__(self) -> str:
+        return f"PoseBox({self.shape}, {self.dtype}, NaN rows = missing)"
+
+
+def _pose_bounds() -> tuple[ArrayF, ArrayF]:
+    high = np.array([1.0] * 4 + [POSITION_LIMIT] * 3)
+    return -high, high
+
+
+def pose_space(batch: int | None = None) -> PoseBox:
+    """Space of one pose ``(7,)`` or of a batch ``(batch, 7)``."""
+    low, high = _pose_bounds()
+    if batch is not None:
+        low, high = np.tile(low, (batch, 1)), np.tile(high, (batch, 1))
+    return PoseBox(low=low, high=high, dtype=np.float64)
+
+
+def observation_space(n_steps: int, dt: float) -> spaces.Dict:
+    """The single-environment observation space: pose, validity flag and time (s)."""
+    return spaces.Dict(
+        {
+            "pose": pose_space(),
+            "valid": spaces.Discrete(2),
+            "time": spaces.Box(low=0.0, high=float(n_steps * dt), shape=(), dtype=np.float64),
+        }
+    )
+
+
+def action_space() -> spaces.Box:
+    """The single-environment action space: a 13-dim state estimate in SI units.
+
+    The quaternion need not be unit (it is normalised for scoring); bounds are descriptive
+    (1 for quaternion components, :data:`POSITION_LIMIT` m, :data:`RATE_LIMIT` rad/s and m/s).
+    """
+    high = np.array([1.0] * 4 + [POSITION_LIMIT] * 3 + [RATE_LIMIT] * 6)
+    return spaces.Box(low=-high, high=high, dtype=np.float64)
+
+
+def validate_actions(actions: Any, batch: int | None = None) -> ArrayF:
+    """Return ``actions`` as float64 ``(13,)`` (or ``(batch, 13)``) or raise ``ValueError``.
+
+    Rejects wrong shapes, NaN or infinite entries and quaternions of (near) zero norm, naming
+    the offending component.
+    """
+    expected = (STATE_DIM,) if batch is None else (batch, STATE_DIM)
+    try:
+        array = np.asarray(actions, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"action must be a float array of shape {expected}") from None
+    if array.shape != expected:
+        raise ValueError(f"action must have shape {expected} (got {array.shape})")
+    finite = np.isfinite(array)
+    if not finite.all():
+        bad = np.argwhere(~finite)[0]
+        where = f"action[{', '.join(str(int(i)) for i in bad)}]"
+        raise ValueError(
+            f"action must be finite: {where} ({STATE_NAMES[int(bad[-1])]}) is {array[tuple(bad)]}"
+        )
+    norm2 = np.sum(array[..., :4] ** 2, axis=-1)
+    if np.any(norm2 < 1e-12):
+        raise ValueError("action quaternion action[..., 0:4] has zero norm; cannot score the attitude")
+    return array

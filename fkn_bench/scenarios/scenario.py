@@ -1,0 +1,218 @@
+"""The :class:`Scenario` configuration: dynamics, measurement model, schedule and splits.
+
+A scenario is a complete, immutable description of how episodes are generated. It knows nothing
+about estimators or scoring. Field values are SI units (rad, rad/s, m, m/s, s, kg m^2).
+
+Seed policy (common random numbers): the episode for integer ``seed`` is drawn from independent
+random streams keyed by ``(seed, stream name)`` only, never by the scenario. Two scenarios that
+differ only in, say, noise scale or dropout therefore share the same ground truth and the same
+standard-normal noise draws for the same seed; enabling sign flips changes nothing but signs.
+The paper's single recording is ``dataset_seed`` (0): its train and validation splits are used for
+training, and the test split of seeds ``0 .. N-1`` for evaluation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+__all__ = ["Scenario", "ConfigError", "ASTROBEE_INERTIA", "ASTROBEE_MASS", "SPLITS"]
+
+ASTROBEE_INERTIA: tuple[float, float, float] = (0.153428, 0.142714, 0.162303)
+"""Astrobee flight GNC principal moments of inertia, kg m^2 (nasa/astrobee,
+``astrobee/config/worlds/iss.config``)."""
+ASTROBEE_MASS = 9.5838
+"""Astrobee flight GNC mass, kg (same source)."""
+
+SPLITS: tuple[str, ...] = ("train", "val", "test", "full")
+
+
+class ConfigError(ValueError):
+    """An invalid configuration value; the message names the field and its allowed range."""
+
+
+def _check(condition: bool, name: str, allowed: str, value: Any) -> None:
+    if not condition:
+        raise ConfigError(f"scenario field '{name}' must be {allowed} (got {value!r})")
+
+
+def _is_finite_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _vector(value: Any, name: str, length: int) -> tuple[float, ...]:
+    try:
+        items = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ConfigError(
+            f"scenario field '{name}' must be a sequence of {length} finite numbers (got {value!r})"
+        ) from None
+    _check(
+        len(items) == length and all(math.isfinite(v) for v in items),
+        name,
+        f"a sequence of {length} finite numbers",
+        value,
+    )
+    return items
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A named, validated episode configuration.
+
+    Dynamics
+        ``dynamics``: ``"forced"`` keeps the world-frame angular velocity constant at ``omega0``
+        (the paper's thruster-forced rotation; attitude by the exact quaternion exponential) and
+        ``"free"`` integrates the torque-free rigid body with principal moments ``inertia``
+        (Euler's equations and quaternion kinematics, RK4 with ``free_substeps`` sub-steps per
+        sample), starting from world-frame rate ``omega0``.
+        ``attitude0``: initial attitude (wxyz); ``None`` draws a uniformly random one per seed.
+        ``position0`` (m) plus per-axis Gaussian spread ``position0_std`` and constant
+        ``velocity0`` (m/s) give the translation.
+    Sampling
+        ``dt`` (s) between samples, ``n_steps`` samples per episode, and the train/val/test
+        fractions ``split`` (contiguous, in that order).
+    Measurements
+        Position noise N(0, (``noise_scale`` * ``sigma_position``)^2) per axis (m); attitude
+        noise as an error rotation ``exp(e/2) (x) q`` with e ~ N(0, (``noise_scale`` *
+        ``sigma_attitude``)^2 I3) (rad). A measurement exists at steps ``k`` with
+        ``k % measurement_every == 0``, is then dropped with probability ``dropout``, and runs of
+        ``burst_length`` missing steps start at any step with probability ``burst_rate``.
+        A fraction ``outlier_fraction`` of the surviving measurements is replaced by gross errors
+        (uniformly random attitude, position offset N(0, ``outlier_position_sigma``^2) per axis)
+        and each measured quaternion is negated with probability ``sign_flip_probability``.
+    Bookkeeping
+        ``dataset_seed`` is the seed of the training data set; ``model_family`` names the
+        committed learned model that applies to this scenario (``"ds1"`` or ``"ds2"``).
+    """
+
+    name: str
+    description: str = ""
+    dynamics: Literal["forced", "free"] = "forced"
+    omega0: tuple[float, float, float] = (0.02, 0.04, 0.06)
+    inertia: tuple[float, float, float] = ASTROBEE_INERTIA
+    attitude0: tuple[float, float, float, float] | None = None
+    position0: tuple[float, float, float] = (10.9, -6.7, 4.9)
+    position0_std: float = 0.0
+    velocity0: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    dt: float = 0.1
+    n_steps: int = 16000
+    split: tuple[float, float, float] = (0.8, 0.1, 0.1)
+    sigma_position: float = 0.1
+    sigma_attitude: float = 0.1
+    noise_scale: float = 1.0
+    measurement_every: int = 10
+    dropout: float = 0.0
+    burst_rate: float = 0.0
+    burst_length: int = 0
+    outlier_fraction: float = 0.0
+    outlier_position_sigma: float = 1.0
+    sign_flip_probability: float = 0.0
+    free_substeps: int = 1
+    dataset_seed: int = 0
+    model_family: str = "ds1"
+    tags: tuple[str, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        _check(isinstance(self.name, str) and self.name != "", "name", "a non-empty string", self.name)
+        _check(self.dynamics in ("forced", "free"), "dynamics", "'forced' or 'free'", self.dynamics)
+        set_(self, "omega0", _vector(self.omega0, "omega0", 3))
+        inertia = _vector(self.inertia, "inertia", 3)
+        _check(all(v > 0 for v in inertia), "inertia", "three positive moments (kg m^2)", self.inertia)
+        a, b, c = sorted(inertia)
+        _check(c <= a + b, "inertia", "physical: each moment <= sum of the other two", self.inertia)
+        set_(self, "inertia", inertia)
+        if self.attitude0 is not None:
+            q = _vector(self.attitude0, "attitude0", 4)
+            norm = math.sqrt(sum(v * v for v in q))
+            _check(norm > 1e-9, "attitude0", "a non-zero quaternion (wxyz) or None", self.attitude0)
+            set_(self, "attitude0", tuple(v / norm for v in q))
+        set_(self, "position0", _vector(self.position0, "position0", 3))
+        set_(self, "velocity0", _vector(self.velocity0, "velocity0", 3))
+        for name in ("position0_std", "sigma_position", "sigma_attitude", "noise_scale",
+                     "outlier_position_sigma"):
+            value = getattr(self, name)
+            _check(_is_finite_number(value) and value >= 0, name, "a finite number >= 0", value)
+            set_(self, name, float(value))
+        _check(_is_finite_number(self.dt) and self.dt > 0, "dt", "a finite number > 0 (s)", self.dt)
+        set_(self, "dt", float(self.dt))
+        for name, low in (("n_steps", 2), ("measurement_every", 1), ("burst_length", 0),
+                          ("free_substeps", 1), ("dataset_seed", 0)):
+            value = getattr(self, name)
+            _check(isinstance(value, int) and not isinstance(value, bool) and value >= low,
+                   name, f"an integer >= {low}", value)
+        for name in ("dropout", "burst_rate", "outlier_fraction", "sign_flip_probability"):
+            value = getattr(self, name)
+            _check(_is_finite_number(value) and 0.0 <= value <= 1.0, name, "a number in [0, 1]", value)
+            set_(self, name, float(value))
+        _check(not (self.dropout == 1.0), "dropout", "a number in [0, 1) (1 removes every measurement)",
+               self.dropout)
+        split = _vector(self.split, "split", 3)
+        _check(all(v > 0 for v in split) and abs(sum(split) - 1.0) < 1e-9, "split",
+               "three positive fractions (train, val, test) summing to 1", self.split)
+        set_(self, "split", split)
+        bounds = self.split_bounds()
+        _check(all(stop - start >= 2 for start, stop in bounds.values()), "split",
+               "fractions giving every split at least 2 samples", self.split)
+        set_(self, "tags", tuple(str(t) for t in self.tags))
+
+    # ------------------------------------------------------------------ derived values
+    @property
+    def sigma_position_effective(self) -> float:
+        """Position noise standard deviation actually applied, m."""
+        return self.noise_scale * self.sigma_position
+
+    @property
+    def sigma_attitude_effective(self) -> float:
+        """Attitude noise standard deviation actually applied, rad per axis."""
+        return self.noise_scale * self.sigma_attitude
+
+    def split_bounds(self) -> dict[str, tuple[int, int]]:
+        """Half-open step ranges ``[start, stop)`` of the train, val, test and full splits."""
+        n = self.n_steps
+        train_end = int(round(self.split[0] * n))
+        val_end = int(round((self.split[0] + self.split[1]) * n))
+        return {"train": (0, train_end), "val": (train_end, val_end), "test": (val_end, n), "full": (0, n)}
+
+    # ------------------------------------------------------------------ conversions
+    def replace(self, **changes: Any) -> Scenario:
+        """A copy with ``changes`` applied (validated); unknown field names raise ConfigError."""
+        known = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(changes) - known)
+        if unknown:
+            raise ConfigError(
+                f"unknown scenario field(s) {', '.join(unknown)}; valid fields: {', '.join(sorted(known))}"
+            )
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-compatible dict (tuples become lists)."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            out[f.name] = list(value) if isinstance(value, tuple) else value
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Scenario:
+        """Build from a dict such as :meth:`to_dict` output or a TOML table."""
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ConfigError(
+                f"unknown scenario field(s) {', '.join(unknown)}; valid fields: {', '.join(sorted(known))}"
+            )
+        if "name" not in data:
+            raise ConfigError("scenario field 'name' is required")
+        return cls(**dict(data))
+
+    def config_hash(self) -> str:
+        """Short SHA-256 of the generating configuration (name, description and tags excluded)."""
+        payload = {k: v for k, v in self.to_dict().items() if k not in ("name", "description", "tags")}
+        return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
