@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -9,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 
 from fkn_bench.envs.episodes import EpisodeStream
-from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, estimate_cost
+from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, estimate_cost_scalar
 from fkn_bench.envs.spaces import MeasuredPose, action_space, observation_space, validate_actions
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.types import ArrayF
@@ -123,6 +124,7 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
         self._chunk_start = self._stream.index
         times, truth, meas, valid = self._stream.advance(self._chunk_size)
         self._times, self._truth, self._meas, self._valid = times, truth[0], meas[0], valid[0]
+        self._truth_rows = self._truth.tolist()  # Python floats for the fast reward path
 
     def _observation(self) -> dict[str, Any]:
         i = self._index - self._chunk_start
@@ -159,9 +161,14 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
             raise gym.error.ResetNeeded("call reset() before step()")
         if self._index >= self.scenario.n_steps - 1:
             raise gym.error.ResetNeeded("the episode was truncated; call reset() before step()")
-        estimate = validate_actions(action)
-        truth = self._truth[self._index - self._chunk_start]
-        reward = -float(estimate_cost(truth[None], estimate[None], self.reward_weights)[0])
+        if type(action) is np.ndarray and action.shape == (13,) and action.dtype == np.float64:
+            values = action.tolist()
+            if not all(map(math.isfinite, values)) or sum(v * v for v in values[:4]) < 1e-12:
+                validate_actions(action)  # raises with a message naming the problem
+        else:
+            values = validate_actions(action).tolist()
+        truth = self._truth_rows[self._index - self._chunk_start]
+        reward = -estimate_cost_scalar(truth, values, self.reward_weights)
         self._index += 1
         if self._index - self._chunk_start >= len(self._times):
             self._load_chunk()

@@ -132,20 +132,22 @@ class EpisodeStream:
         """The next ``n`` steps (clipped at the episode end).
 
         Returns:
-            ``(times (n,), truth (B, n, 13), measurements (B, n, 7), valid (B, n))``.
+            ``(times (n,), truth (B, n, 13), measurements (B, n, 7), valid (B, n))``; the two
+            state arrays are views of component-major buffers (not C-contiguous).
         """
         n = max(0, min(int(n), self.scenario.n_steps - self.index))
         times = np.arange(self.index, self.index + n) * self.scenario.dt
         q, omega = self._rotation.advance(n)
-        batch = len(self.seeds)
-        truth = np.empty((batch, n, 13))
-        truth[..., 0:4] = q
-        truth[..., 4:7] = self._r0[:, None, :] + self._v0[:, None, :] * times[None, :, None]
-        truth[..., 7:10] = omega
-        truth[..., 10:13] = self._v0[:, None, :]
-        measurements, valid = self._measurements.generate(truth[..., :7], self.index)
+        # component-major buffer (B, 13, n): long inner loops; returned as a (B, n, 13) view
+        truth = np.empty((len(self.seeds), 13, n))
+        truth[:, 0:4] = q
+        np.multiply(self._v0[:, :, None], times[None, None, :], out=truth[:, 4:7])
+        truth[:, 4:7] += self._r0[:, :, None]
+        truth[:, 7:10] = omega
+        truth[:, 10:13] = self._v0[:, :, None]
+        measurements, valid = self._measurements.generate(truth[:, :7], self.index)
         self.index += n
-        return times, truth, measurements, valid
+        return times, truth.transpose(0, 2, 1), measurements.transpose(0, 2, 1), valid
 
 
 def generate_episodes(
@@ -171,4 +173,12 @@ def generate_episodes(
     source = EpisodeStream(scenario, seed_list)
     source.seek(start)
     times, truth, measurements, valid = source.advance(stop - start)
-    return Episodes(scenario, tuple(seed_list), start, times, truth, measurements, valid)
+    return Episodes(
+        scenario,
+        tuple(seed_list),
+        start,
+        times,
+        np.ascontiguousarray(truth),
+        np.ascontiguousarray(measurements),
+        valid,
+    )

@@ -2,12 +2,16 @@
 outliers and quaternion sign flips.
 
 Random numbers come from independent streams keyed by ``(episode seed, stream name, block)``
-where a block is :data:`BLOCK` consecutive steps (see :func:`stream`). Hence
+where a block is :data:`BLOCK` consecutive steps (see :func:`stream`). The position and attitude
+noise streams hold one draw per *scheduled* measurement step (``k % measurement_every == 0``),
+the others one draw per step. Hence
 
 * every effect has its own stream: a measurement that survives dropout has the value it would
   have had without dropout, and a sign flip changes nothing but the sign;
 * any step range can be generated on its own (random access, e.g. only the test split), and
-  generating in chunks of any size gives the same values as generating in one piece.
+  generating in chunks of any size gives the same values as generating in one piece;
+* scenarios with the same measurement schedule see the same noise draws for the same seed
+  (common random numbers), whatever their noise scale, dropout, outliers or sign flips.
 
 Noise model (FlexKalmanNet, section 4.1): position ``r + n`` with ``n ~ N(0, s_r^2 I3)``;
 attitude ``exp(e / 2) (x) q`` with ``e ~ N(0, s_theta^2 I3)`` a world-frame error rotation.
@@ -46,6 +50,7 @@ BLOCK = 4096
 """Steps per random-stream block."""
 
 # per-step draw shape and method of each measurement stream
+_SCHEDULED = ("position_noise", "attitude_noise")
 _DRAWS: dict[str, tuple[str, tuple[int, ...]]] = {
     "position_noise": ("standard_normal", (3,)),
     "attitude_noise": ("standard_normal", (3,)),
@@ -89,72 +94,97 @@ class MeasurementGenerator:
         if sc.sign_flip_probability > 0:
             self._active.append("sign_flip")
 
+    def _block_steps(self, name: str, block: int) -> ArrayF:
+        """Global steps that own one draw each in ``block`` of stream ``name``."""
+        lo, hi = block * BLOCK, (block + 1) * BLOCK
+        if name in _SCHEDULED:
+            k = self._scenario.measurement_every
+            return np.arange(-(-lo // k) * k, hi, k)
+        return np.arange(lo, hi)
+
     def _block(self, name: str, block: int) -> ArrayF:
         cached = self._cache.get(name)
         if cached is not None and cached[0] == block:
             return cached[1]
         method, shape = _DRAWS[name]
-        out = np.empty((len(self._seeds), BLOCK, *shape))
+        count = len(self._block_steps(name, block))
+        out = np.empty((len(self._seeds), count, *shape))
         for row, seed in enumerate(self._seeds):
             getattr(stream(seed, name, block), method)(out=out[row])
         self._cache[name] = (block, out)
         return out
 
-    def draws(self, name: str, start: int, stop: int) -> ArrayF:
-        """Raw draws of stream ``name`` for global steps ``[start, stop)``: ``(B, n, ...)``."""
-        method, shape = _DRAWS[name]
-        parts = []
-        first, last = start // BLOCK, (stop - 1) // BLOCK
-        for block in range(first, last + 1):
-            lo = max(start, block * BLOCK) - block * BLOCK
-            hi = min(stop, (block + 1) * BLOCK) - block * BLOCK
-            parts.append(self._block(name, block)[:, lo:hi])
-        if not parts:
+    def draws(self, name: str, steps: ArrayF) -> ArrayF:
+        """Draws of stream ``name`` for the sorted global ``steps`` (which must own draws:
+        scheduled steps for the noise streams): ``(B, len(steps), ...)``."""
+        _, shape = _DRAWS[name]
+        if len(steps) == 0:
             return np.empty((len(self._seeds), 0, *shape))
+        parts = []
+        blocks = steps // BLOCK
+        for block in range(int(blocks[0]), int(blocks[-1]) + 1):
+            wanted = steps[blocks == block]
+            if len(wanted) == 0:
+                continue
+            owners = self._block_steps(name, block)
+            index = np.searchsorted(owners, wanted)
+            parts.append(self._block(name, block)[:, index])
         return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
 
     def _burst_gaps(self, start: int, stop: int) -> ArrayB:
         """True where a burst gap covers the step (a gap started in the last ``L`` steps)."""
         sc = self._scenario
         lookback = max(0, start - sc.burst_length + 1)
-        u = self.draws("burst", lookback, stop)
         steps = np.arange(lookback, stop)
+        u = self.draws("burst", steps)
         starts = np.where(u < sc.burst_rate, steps[None, :].astype(float), -np.inf)
         last_start = np.maximum.accumulate(starts, axis=1)[:, start - lookback :]
         return np.arange(start, stop)[None, :] - last_start < sc.burst_length
 
     def generate(self, truth_pose: ArrayF, start: int) -> tuple[ArrayF, ArrayB]:
-        """Measurements of true poses ``truth_pose (B, n, 7)`` at global steps ``start ..``.
+        """Measurements of true poses at global steps ``start ..``, component-major.
+
+        Args:
+            truth_pose: ``(B, 7, n)`` true ``[q, r]`` of the next ``n`` steps.
+            start: global step index of the first of them.
 
         Returns:
-            ``(measurements, valid)``: ``(B, n, 7)`` with NaN rows where missing, and ``(B, n)``.
+            ``(measurements, valid)``: ``(B, 7, n)`` with NaN where missing, and ``(B, n)``.
         """
         sc = self._scenario
-        batch, n, _ = truth_pose.shape
+        batch, _, n = truth_pose.shape
         stop = start + n
         steps = np.arange(start, stop)
-
-        out = np.empty((batch, n, 7))
-        e = self.draws("attitude_noise", start, stop) * sc.sigma_attitude_effective
-        out[..., :4] = quat.multiply(quat.from_rotation_vector(e), truth_pose[..., :4])
-        np.multiply(self.draws("position_noise", start, stop), sc.sigma_position_effective, out=out[..., 4:])
-        out[..., 4:] += truth_pose[..., 4:7]
-
-        valid = np.empty((batch, n), dtype=bool)
-        valid[:] = steps % sc.measurement_every == 0
+        scheduled = steps[steps % sc.measurement_every == 0]
+        columns = scheduled - start
+        valid = np.zeros((batch, n), dtype=bool)
+        valid[:, columns] = True
         if "dropout" in self._active:
-            valid &= self.draws("dropout", start, stop) >= sc.dropout
+            valid &= self.draws("dropout", steps) >= sc.dropout
         if "burst" in self._active:
             valid &= ~self._burst_gaps(start, stop)
+
+        # noisy poses at the scheduled steps only: (B, m, 7)
+        truth_at = truth_pose[:, :, columns].transpose(0, 2, 1)
+        pose = np.empty((batch, len(columns), 7))
+        e = self.draws("attitude_noise", scheduled)
+        e *= sc.sigma_attitude_effective
+        quat.multiply(quat.from_rotation_vector(e), truth_at[..., :4], out=pose[..., :4])
+        r = self.draws("position_noise", scheduled)
+        r *= sc.sigma_position_effective
+        np.add(truth_at[..., 4:7], r, out=pose[..., 4:])
         if "outlier" in self._active:
-            is_outlier = valid & (self.draws("outlier", start, stop) < sc.outlier_fraction)
-            random_q = self.draws("outlier_attitude", start, stop)
-            random_q = random_q / np.linalg.norm(random_q, axis=-1, keepdims=True)
-            offset = sc.outlier_position_sigma * self.draws("outlier_position", start, stop)
-            out[..., :4] = np.where(is_outlier[..., None], random_q, out[..., :4])
-            out[..., 4:] += np.where(is_outlier[..., None], offset, 0.0)
+            is_outlier = valid[:, columns] & (self.draws("outlier", scheduled) < sc.outlier_fraction)
+            random_q = self.draws("outlier_attitude", scheduled)
+            random_q /= np.linalg.norm(random_q, axis=-1, keepdims=True)
+            offset = sc.outlier_position_sigma * self.draws("outlier_position", scheduled)
+            pose[..., :4] = np.where(is_outlier[..., None], random_q, pose[..., :4])
+            pose[..., 4:] += np.where(is_outlier[..., None], offset, 0.0)
         if "sign_flip" in self._active:
-            flip = self.draws("sign_flip", start, stop) < sc.sign_flip_probability
-            out[..., :4] *= np.where(flip, -1.0, 1.0)[..., None]
-        out[~valid] = np.nan
+            flip = self.draws("sign_flip", scheduled) < sc.sign_flip_probability
+            pose[..., :4] *= np.where(flip, -1.0, 1.0)[..., None]
+
+        out = np.full((batch, 7, n), np.nan)
+        kept = valid[:, columns]
+        out[:, :, columns] = np.where(kept[..., None], pose, np.nan).transpose(0, 2, 1)
         return out, valid

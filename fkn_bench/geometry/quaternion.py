@@ -38,19 +38,26 @@ __all__ = [
 IDENTITY: ArrayF = np.array([1.0, 0.0, 0.0, 0.0])
 
 
-def multiply(p: ArrayF, q: ArrayF) -> ArrayF:
-    """Hamilton product ``p (x) q`` of ``(..., 4)`` arrays (broadcasting)."""
-    pw, px, py, pz = np.moveaxis(np.asarray(p, dtype=float), -1, 0)
-    qw, qx, qy, qz = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
-    return np.stack(
-        [
-            pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-        ],
-        axis=-1,
-    )
+def multiply(p: ArrayF, q: ArrayF, out: ArrayF | None = None, *, axis: int = -1) -> ArrayF:
+    """Hamilton product ``p (x) q`` of quaternion arrays (broadcasting).
+
+    Args:
+        p, q: quaternions with their 4 components along ``axis`` (default: last).
+        out: optional array receiving the result (must not overlap ``p`` or ``q``).
+        axis: the component axis of ``p``, ``q`` and the result.
+    """
+    pw, px, py, pz = np.moveaxis(np.asarray(p, dtype=float), axis, 0)
+    qw, qx, qy, qz = np.moveaxis(np.asarray(q, dtype=float), axis, 0)
+    if out is None:
+        shape = list(np.broadcast_shapes(pw.shape, qw.shape))
+        shape.insert(axis % (len(shape) + 1), 4)
+        out = np.empty(shape)
+    ow, ox, oy, oz = np.moveaxis(out, axis, 0)
+    ow[...] = pw * qw - px * qx - py * qy - pz * qz
+    ox[...] = pw * qx + px * qw + py * qz - pz * qy
+    oy[...] = pw * qy - px * qz + py * qw + pz * qx
+    oz[...] = pw * qz + px * qy - py * qx + pz * qw
+    return out
 
 
 def conjugate(q: ArrayF) -> ArrayF:

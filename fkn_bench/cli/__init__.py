@@ -1,0 +1,56 @@
+"""The ``fkn-bench`` command line. Each subcommand lives in its own module of this package and
+exposes ``add_parser(subparsers)``, which registers the subcommand and sets ``handler``.
+
+Exit codes: 0 success, 1 failure while running, 2 invalid usage (unknown estimator or scenario,
+bad option values, unreadable input files).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+
+__all__ = ["main", "UsageError", "COMMANDS"]
+
+COMMANDS: tuple[str, ...] = ("scenarios", "simulate")
+"""Subcommand modules, in the order ``--help`` lists them."""
+
+
+class UsageError(Exception):
+    """Invalid command-line input; printed without a traceback, exit code 2."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from fkn_bench import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="fkn-bench",
+        description="Benchmark learned and adaptive Kalman filters on a tumbling Astrobee.",
+    )
+    parser.add_argument("--version", action="version", version=f"fkn-bench {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        importlib.import_module(f"fkn_bench.cli.{name}").add_parser(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``fkn-bench`` console script; returns the exit code."""
+    from fkn_bench.scenarios import ConfigError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.handler(args) or 0)
+    except (UsageError, ConfigError) as exc:
+        print(f"fkn-bench {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"fkn-bench {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

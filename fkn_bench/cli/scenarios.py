@@ -1,0 +1,42 @@
+"""``fkn-bench scenarios``: list the registered scenarios, or show one in full."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+
+__all__ = ["add_parser"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser("scenarios", help="list the named scenarios", description=__doc__)
+    parser.add_argument("name", nargs="?", help="show this scenario's full configuration")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    add_scenario_file_option(parser)
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fkn_bench.scenarios import get_scenario, list_scenarios
+
+    load_scenario_files(args)
+    if args.name:
+        scenario = get_scenario(args.name)
+        data = scenario.to_dict() | {"config_hash": scenario.config_hash()}
+        if args.json:
+            print(json.dumps(data, indent=2))
+        else:
+            width = max(len(k) for k in data)
+            for key, value in data.items():
+                print(f"{key:<{width}}  {value}")
+        return 0
+    scenarios = list_scenarios()
+    if args.json:
+        print(json.dumps([s.to_dict() for s in scenarios], indent=2))
+        return 0
+    width = max(len(s.name) for s in scenarios)
+    for s in scenarios:
+        print(f"{s.name:<{width}}  {s.description}")
+    return 0
