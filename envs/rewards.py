@@ -8,7 +8,9 @@ errors of a good filter on ds1 (about 0.05 rad, 0.03 m, 0.002 rad/s, 0.002 m/s) 
 
 The angle uses ``|a - b| = 2 sin(theta/4)`` and ``|a + b| = 2 cos(theta/4)`` for unit
 quaternions with ``a . b >= 0``: ``theta = 4 atan2(min |a -+ b|, max |a -+ b|)``, accurate at
-small angles and indifferent to sign.
+small angles and indifferent to sign. Both quaternions are normalised the same way, so an
+estimate equal to the truth (or to its negative) scores exactly 0, even where the true
+quaternion is unit only to rounding.
 
 Two implementations with the same operation order: :func:`estimate_cost` (numpy, batched) and
 :func:`estimate_cost_scalar` (Python floats, for the single environment's fast path). They agree
@@ -30,11 +32,13 @@ DEFAULT_WEIGHTS: Mapping[str, float] = {"attitude": 1.0, "position": 1.0, "omega
 
 
 def attitude_error_angle(q_true: ArrayF, q_est: ArrayF) -> ArrayF:
-    """Rotation angle (rad) between attitudes ``(N, 4)``; ``q_est`` need not be unit."""
+    """Rotation angle (rad) between attitudes ``(N, 4)``; neither need be exactly unit."""
     e0, e1, e2, e3 = q_est[:, 0], q_est[:, 1], q_est[:, 2], q_est[:, 3]
     t0, t1, t2, t3 = q_true[:, 0], q_true[:, 1], q_true[:, 2], q_true[:, 3]
     norm = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
     u0, u1, u2, u3 = e0 / norm, e1 / norm, e2 / norm, e3 / norm
+    norm = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2 + t3 * t3)
+    t0, t1, t2, t3 = t0 / norm, t1 / norm, t2 / norm, t3 / norm
     m0, m1, m2, m3 = u0 - t0, u1 - t1, u2 - t2, u3 - t3
     p0, p1, p2, p3 = u0 + t0, u1 + t1, u2 + t2, u3 + t3
     minus = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2 + m3 * m3)
@@ -66,6 +70,8 @@ def estimate_cost_scalar(
     t0, t1, t2, t3 = truth[0], truth[1], truth[2], truth[3]
     norm = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
     u0, u1, u2, u3 = e0 / norm, e1 / norm, e2 / norm, e3 / norm
+    norm = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2 + t3 * t3)
+    t0, t1, t2, t3 = t0 / norm, t1 / norm, t2 / norm, t3 / norm
     m0, m1, m2, m3 = u0 - t0, u1 - t1, u2 - t2, u3 - t3
     p0, p1, p2, p3 = u0 + t0, u1 + t1, u2 + t2, u3 + t3
     minus = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2 + m3 * m3)

@@ -62,9 +62,12 @@ def episode_summary(scenario_name: str, seed: int, split: str) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    load_scenario_files(args)
+    from fkn_bench.cli import UsageError
     from fkn_bench.scenarios import get_scenario
 
+    if args.seed < 0:
+        raise UsageError(f"--seed must be a non-negative integer (got {args.seed})")
+    load_scenario_files(args)
     get_scenario(args.scenario)  # unknown names exit with code 2 and the list
     summary = episode_summary(args.scenario, args.seed, args.split)
     if args.json:

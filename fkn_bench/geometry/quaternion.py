@@ -52,7 +52,9 @@ def multiply(p: ArrayF, q: ArrayF, out: ArrayF | None = None, *, axis: int = -1)
         shape = list(np.broadcast_shapes(pw.shape, qw.shape))
         shape.insert(axis % (len(shape) + 1), 4)
         out = np.empty(shape)
-    ow, ox, oy, oz = np.moveaxis(out, axis, 0)
+    components = np.moveaxis(out, axis, 0)
+    # index with [i, ...]: a view even for a single quaternion (plain iteration gives scalars)
+    ow, ox, oy, oz = (components[i, ...] for i in range(4))
     ow[...] = pw * qw - px * qx - py * qy - pz * qz
     ox[...] = pw * qx + px * qw + py * qz - pz * qy
     oy[...] = pw * qy - px * qz + py * qw + pz * qx
@@ -98,8 +100,9 @@ def to_rotation_vector(q: ArrayF) -> ArrayF:
     angle = 2.0 * np.arctan2(n, w)
     small = n < 1e-9
     safe_n = np.where(small, 1.0, n)
+    safe_w = np.where(small, w, 1.0)  # w = 0 (a half-turn) must not divide by zero below
     # series of 2 atan2(n, w) / n for small n: 2/w (1 - n^2 / (3 w^2))
-    scale = np.where(small, 2.0 / w * (1.0 - n**2 / (3.0 * w**2)), angle / safe_n)
+    scale = np.where(small, 2.0 / safe_w * (1.0 - n**2 / (3.0 * safe_w**2)), angle / safe_n)
     return scale * vec
 
 

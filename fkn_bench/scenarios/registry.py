@@ -76,19 +76,21 @@ def get_scenario(scenario: str | Scenario, **overrides: Any) -> Scenario:
     return base.replace(**overrides) if overrides else base
 
 
-def _from_table(name: str, table: Mapping[str, Any]) -> Scenario:
+def _from_table(name: str, table: Mapping[str, Any], earlier: Mapping[str, Scenario]) -> Scenario:
     data = dict(table)
     base_name = data.pop("base", None)
     data.setdefault("name", name)
     if base_name is None:
         return Scenario.from_dict(data)
-    return get_scenario(str(base_name)).replace(**data)
+    base = earlier.get(str(base_name)) or get_scenario(str(base_name))
+    return base.replace(**data)
 
 
 def load_scenarios(path: str | Path, *, register: bool = True) -> list[Scenario]:
     """Read scenarios from a TOML file (``[scenario.NAME]`` tables, see module docstring).
 
-    Returns them and, unless ``register=False``, registers them (replacing same-named ones).
+    A ``base`` may name a registered scenario or one defined earlier in the same file. Returns
+    them and, unless ``register=False``, registers them (replacing same-named ones).
     """
     path = Path(path)
     try:
@@ -101,15 +103,17 @@ def load_scenarios(path: str | Path, *, register: bool = True) -> list[Scenario]
     tables = document.get("scenario")
     if not isinstance(tables, dict) or not tables:
         raise ConfigError(f"scenario file {path} has no [scenario.NAME] tables")
-    scenarios = []
+    scenarios: list[Scenario] = []
+    loaded: dict[str, Scenario] = {}  # possible bases for the tables that follow
     for name, table in tables.items():
         if not isinstance(table, dict):
             raise ConfigError(f"{path}: [scenario.{name}] must be a table")
         try:
-            scenario = _from_table(name, table)
+            scenario = _from_table(name, table, loaded)
         except ConfigError as exc:
             raise ConfigError(f"{path}: [scenario.{name}]: {exc}") from None
         scenarios.append(scenario)
+        loaded[scenario.name] = scenario
     if register:
         for scenario in scenarios:
             register_scenario(scenario, overwrite=True)

@@ -1,0 +1,236 @@
+"""The common interface of the filter variants and the recursion they share.
+
+Every variant (EKF, UKF, multiplicative EKF) is a :class:`KalmanFilter`: it supplies
+``predict`` and ``update`` for one step of a batch, and :meth:`KalmanFilter.run` runs the
+recursion over a whole batch of sequences. The same call runs, and trains, any variant:
+
+    result = variant.run(noise, measurements, mask, dt=0.1)   # (B, T, 7), (B, T) -> (B, T, 13)
+
+Conventions of :meth:`KalmanFilter.run`:
+
+* Step ``t`` predicts from ``t - 1`` (not at ``t = 0``) and then updates with measurement ``t``
+  when ``mask[:, t]`` is true; a step without a measurement is predict-only.
+* Without an explicit ``initial`` state, each sequence initialises at its first usable
+  measurement (state from the model's ``initial_state``, covariance ``noise.initial``) and that
+  measurement is not used again in an update; before it, the sequence reports the model's prior
+  state propagated by the model.
+* Inputs are cleaned once by the model's ``sanitize`` (non-finite or unusable measurements are
+  dropped from the mask: the documented rule is "skip the update"), so no NaN reaches the
+  arithmetic, neither forward nor backward.
+* Covariances are symmetrised after every update (``(P + P^T) / 2``).
+
+Everything is a differentiable torch operation; gradients flow into every tensor of ``noise``
+(and ``initial``). float64 by default: the dtype of ``measurements`` decides.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor
+
+from fkn_bench.filters.models import StateSpaceModel
+from fkn_bench.filters.parameters import NoiseLayout, NoiseParameters
+
+__all__ = ["KalmanFilter", "FilterResult", "FilterState"]
+
+
+@dataclass(frozen=True)
+class FilterState:
+    """A batch of Gaussian filter states at one time.
+
+    Attributes:
+        mean: ``(B, n)`` state means.
+        covariance: ``(B, k, k)`` covariances (``k = n`` for additive filters, the error-state
+            dimension for the multiplicative EKF).
+    """
+
+    mean: Tensor
+    covariance: Tensor
+
+
+@dataclass(frozen=True)
+class FilterResult:
+    """Output of :meth:`KalmanFilter.run` (batch first).
+
+    Attributes:
+        means: ``(B, T, n)`` posterior means.
+        covariances: ``(B, T, k, k)`` posterior covariances, or None when not stored.
+        innovations: ``(B, T, m)`` innovations ``z - h(x-)`` (zero where no update).
+        innovation_covariances: ``(B, T, m, m)`` their covariances ``S`` (identity where no update).
+        updated: ``(B, T)`` True where a measurement update happened.
+        initialised: ``(B, T)`` True from each sequence's initialisation on.
+        final: the state after the last step (to continue filtering).
+    """
+
+    means: Tensor
+    covariances: Tensor | None
+    innovations: Tensor | None
+    innovation_covariances: Tensor | None
+    updated: Tensor
+    initialised: Tensor
+    final: FilterState
+
+
+def _select(condition: Tensor, a: Tensor, b: Tensor) -> Tensor:
+    """``where(condition, a, b)`` with ``condition (B,)`` broadcast over trailing axes."""
+    return torch.where(condition.view(-1, *([1] * (a.dim() - 1))), a, b)
+
+
+class KalmanFilter(ABC):
+    """A filter variant: one step's ``predict`` and ``update`` on a batch, and the recursion.
+
+    Subclasses set ``name``, ``model`` (a :class:`~fkn_bench.filters.models.StateSpaceModel`) and
+    ``layout`` (the :class:`NoiseLayout` of their ``Q``, ``R`` and ``P0``).
+    """
+
+    name: str
+    model: StateSpaceModel
+    layout: NoiseLayout
+
+    @property
+    def covariance_dim(self) -> int:
+        """Dimension ``k`` of the covariance the filter carries."""
+        return self.model.state_dim
+
+    @property
+    def innovation_dim(self) -> int:
+        return self.model.measurement_dim
+
+    @abstractmethod
+    def predict(self, state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
+        """One prediction over ``dt`` seconds with process noise ``Q`` ``(B or 1, k, k)``."""
+
+    @abstractmethod
+    def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
+        """One measurement update of every batch row with ``z (B, m)``.
+
+        Returns the posterior state, the innovation ``(B, m)`` and its covariance ``(B, m, m)``.
+        """
+
+    def initial_state(self, z: Tensor, initial_covariance: Tensor) -> FilterState:
+        """State initialised from measurements ``z (B, m)``."""
+        mean = self.model.initial_state(z)
+        return FilterState(mean, initial_covariance.expand(mean.shape[0], -1, -1))
+
+    def prior(self, batch: int, initial_covariance: Tensor, dtype: torch.dtype) -> FilterState:
+        """State reported before a sequence's first measurement."""
+        return FilterState(self.model.prior_state(batch, dtype), initial_covariance.expand(batch, -1, -1))
+
+    def run(
+        self,
+        noise: NoiseParameters,
+        measurements: Tensor,
+        mask: Tensor,
+        *,
+        dt: float,
+        initial: FilterState | None = None,
+        store_covariances: bool = True,
+        store_innovations: bool = True,
+    ) -> FilterResult:
+        """Filter a batch of sequences (see module docstring).
+
+        Args:
+            noise: ``Q``, ``R``, ``P0`` with leading axes ``()``, ``(B,)`` or ``(B, T)``.
+            measurements: ``(B, T, m)``; entries outside ``mask`` are ignored (may be NaN).
+            mask: ``(B, T)`` bool, True where a measurement exists.
+            dt: step length, s.
+            initial: start every sequence from this state at ``t = 0`` instead of initialising
+                from its first measurement.
+            store_covariances, store_innovations: keep per-step covariances / innovations.
+        """
+        if measurements.dim() != 3 or measurements.shape[-1] != self.model.measurement_dim:
+            raise ValueError(
+                f"measurements must have shape (B, T, {self.model.measurement_dim}) (got {tuple(measurements.shape)})"
+            )
+        if mask.shape != measurements.shape[:2]:
+            raise ValueError(f"mask must have shape {tuple(measurements.shape[:2])} (got {tuple(mask.shape)})")
+        batch, steps, _ = measurements.shape
+        dtype = measurements.dtype
+        if not dtype.is_floating_point:
+            raise ValueError(f"measurements must be floating point (got {dtype})")
+        if steps == 0:
+            raise ValueError("measurements hold no time steps (T = 0)")
+        noise = noise.to(dtype)
+        time_varying = noise.time_varying
+        z_all, usable = self.model.sanitize(measurements, mask.bool())
+
+        any_usable = usable.any(0).tolist()
+        all_usable = usable.all(0).tolist()
+        if initial is None:
+            has_any = usable.any(1)
+            first = torch.where(has_any, usable.to(torch.int8).argmax(1), torch.full_like(has_any, -1, dtype=torch.long))
+            init_steps = set(first[has_any].tolist())
+            noise0 = noise.at_step(0) if time_varying else noise
+            state = self.prior(batch, noise0.initial, dtype)
+            initialised = torch.zeros(batch, dtype=torch.bool)
+        else:
+            first = torch.full((batch,), -1, dtype=torch.long)
+            init_steps = set()
+            state = FilterState(initial.mean.to(dtype), initial.covariance.to(dtype))
+            initialised = torch.ones(batch, dtype=torch.bool)
+
+        # outputs go into preallocated time-major buffers (one contiguous block per step), returned
+        # as (B, T, ...) views: keeping a list of per-step tensors alive would fragment the heap and
+        # make every step's temporaries fresh memory, which page-faults
+        m, k = self.innovation_dim, self.covariance_dim
+        means = torch.empty(steps, batch, self.model.state_dim, dtype=dtype)
+        covariances = torch.empty(steps, batch, k, k, dtype=dtype) if store_covariances else None
+        innovations = torch.zeros(steps, batch, m, dtype=dtype) if store_innovations else None
+        innovation_covs = torch.empty(steps, batch, m, m, dtype=dtype) if store_innovations else None
+        updated_steps = torch.zeros(steps, batch, dtype=torch.bool)
+        initialised_steps = torch.zeros(steps, batch, dtype=torch.bool)
+        no_innovation = torch.zeros(batch, m, dtype=dtype)
+        unit_covariance = torch.eye(m, dtype=dtype).expand(batch, m, m)
+        for t in range(steps):
+            step_noise = noise.at_step(t) if time_varying else noise
+            if t > 0:
+                state = self.predict(state, step_noise.process, dt)
+            update_rows = usable[:, t]
+            if t in init_steps:
+                now = first == t
+                fresh = self.initial_state(z_all[:, t], step_noise.initial)
+                state = FilterState(_select(now, fresh.mean, state.mean), _select(now, fresh.covariance, state.covariance))
+                initialised = initialised | now
+                update_rows = update_rows & ~now
+                do_update = bool(update_rows.any())
+                every_row = False
+            else:
+                do_update = any_usable[t]
+                every_row = all_usable[t]
+            nu, S = no_innovation, unit_covariance
+            if do_update:
+                posterior, nu_t, S_t = self.update(state, z_all[:, t], step_noise.measurement)
+                if every_row:
+                    state, nu, S = posterior, nu_t, S_t
+                else:
+                    state = FilterState(
+                        _select(update_rows, posterior.mean, state.mean),
+                        _select(update_rows, posterior.covariance, state.covariance),
+                    )
+                    nu, S = _select(update_rows, nu_t, nu), _select(update_rows, S_t, S)
+                P = state.covariance
+                state = FilterState(state.mean, P.add(P.transpose(1, 2)).mul_(0.5))
+            else:
+                update_rows = torch.zeros_like(update_rows)
+            means[t] = state.mean
+            if covariances is not None:
+                covariances[t] = state.covariance
+            if innovations is not None and innovation_covs is not None:
+                if do_update:
+                    innovations[t] = nu
+                innovation_covs[t] = S
+            updated_steps[t] = update_rows
+            initialised_steps[t] = initialised
+        batch_first = lambda buffer: None if buffer is None else buffer.transpose(0, 1)  # noqa: E731
+        return FilterResult(
+            means=batch_first(means),
+            covariances=batch_first(covariances),
+            innovations=batch_first(innovations),
+            innovation_covariances=batch_first(innovation_covs),
+            updated=batch_first(updated_steps),
+            initialised=batch_first(initialised_steps),
+            final=state,
+        )

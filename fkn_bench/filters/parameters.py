@@ -1,0 +1,285 @@
+"""Filter parameters: noise covariances as values, and declarations of which are learnable.
+
+* :class:`NoiseParameters` holds what a filter consumes: process noise ``Q``, measurement noise
+  ``R`` and initial covariance ``P0`` as covariance matrices (torch tensors). Leading axes:
+  ``()`` shared by every sequence, ``(B,)`` one per sequence, or ``(B, T)`` one per step
+  (time-varying, e.g. FlexKalmanNet's adaptive mode).
+* :class:`NoiseLayout` names the components of ``Q``, ``R`` and ``P0`` of a filter variant, with
+  units and defaults (the paper's manual tuning, FlexKalmanNet section 4.3).
+* :class:`ParameterSet` declares which entries are learnable (diagonal standard deviations,
+  full Cholesky factors) and maps an unconstrained vector ``(..., size)`` through a positivity map
+  (``log``: ``s = exp(u)``, or ``softplus``) to :class:`NoiseParameters`; it converts to and
+  from a plain, JSON-compatible dict with units.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import torch
+import torch.nn.functional as functional
+from torch import Tensor
+
+__all__ = [
+    "NoiseParameters",
+    "NoiseLayout",
+    "ParameterSet",
+    "Positivity",
+    "LEARNABLE_ENTRIES",
+]
+
+Positivity = Literal["log", "softplus"]
+
+LEARNABLE_ENTRIES: tuple[str, ...] = ("q_std", "r_std", "p0_std", "q_chol", "r_chol")
+"""Names a :class:`ParameterSet` can learn: diagonal standard deviations of ``Q``, ``R`` and
+``P0``, or full lower-triangular Cholesky factors of ``Q`` or ``R``."""
+
+
+@dataclass(frozen=True)
+class NoiseParameters:
+    """Covariances consumed by a filter (see module docstring for the leading axes).
+
+    Attributes:
+        process: ``Q`` ``(..., nq, nq)``.
+        measurement: ``R`` ``(..., m, m)``.
+        initial: ``P0`` ``(..., n, n)`` used when a filter initialises from a measurement.
+    """
+
+    process: Tensor
+    measurement: Tensor
+    initial: Tensor
+
+    @classmethod
+    def from_std(
+        cls,
+        q_std: Tensor | Sequence[float],
+        r_std: Tensor | Sequence[float],
+        p0_std: Tensor | Sequence[float],
+        *,
+        dtype: torch.dtype = torch.float64,
+    ) -> NoiseParameters:
+        """Diagonal covariances from standard deviations (``(..., k)`` each)."""
+
+        def diag(std: Tensor | Sequence[float]) -> Tensor:
+            t = torch.as_tensor(std, dtype=dtype)
+            return torch.diag_embed(t * t)
+
+        return cls(diag(q_std), diag(r_std), diag(p0_std))
+
+    def to(self, dtype: torch.dtype) -> NoiseParameters:
+        return NoiseParameters(self.process.to(dtype), self.measurement.to(dtype), self.initial.to(dtype))
+
+    def at_step(self, t: int) -> NoiseParameters:
+        """The parameters of step ``t`` when they are time-varying (``(B, T, k, k)``)."""
+        pick = lambda m: m[:, t] if m.dim() == 4 else m  # noqa: E731
+        return NoiseParameters(pick(self.process), pick(self.measurement), pick(self.initial))
+
+    @property
+    def time_varying(self) -> bool:
+        return any(m.dim() == 4 for m in (self.process, self.measurement, self.initial))
+
+
+@dataclass(frozen=True)
+class NoiseLayout:
+    """Component names, units and default standard deviations of a variant's ``Q``, ``R``, ``P0``."""
+
+    q_labels: tuple[str, ...]
+    q_units: tuple[str, ...]
+    q_default: tuple[float, ...]
+    r_labels: tuple[str, ...]
+    r_units: tuple[str, ...]
+    r_default: tuple[float, ...]
+    p0_labels: tuple[str, ...]
+    p0_units: tuple[str, ...]
+    p0_default: tuple[float, ...]
+
+    def labels(self, entry: str) -> tuple[str, ...]:
+        return {"q": self.q_labels, "r": self.r_labels, "p0": self.p0_labels}[entry.split("_")[0]]
+
+    def units(self, entry: str) -> tuple[str, ...]:
+        return {"q": self.q_units, "r": self.r_units, "p0": self.p0_units}[entry.split("_")[0]]
+
+    def default(self, entry: str) -> tuple[float, ...]:
+        return {"q": self.q_default, "r": self.r_default, "p0": self.p0_default}[entry.split("_")[0]]
+
+    def default_noise(self, dtype: torch.dtype = torch.float64) -> NoiseParameters:
+        return NoiseParameters.from_std(self.q_default, self.r_default, self.p0_default, dtype=dtype)
+
+
+def _inverse_positivity(value: Tensor, positivity: Positivity) -> Tensor:
+    if positivity == "log":
+        return value.log()
+    # softplus^-1(y) = y + log(-expm1(-y)), stable for large y
+    return value + torch.log(-torch.expm1(-value))
+
+
+def _positive(raw: Tensor, positivity: Positivity) -> Tensor:
+    return raw.exp() if positivity == "log" else functional.softplus(raw)
+
+
+@dataclass(frozen=True)
+class _Entry:
+    name: str
+    size: int
+    dim: int
+
+
+@dataclass
+class ParameterSet:
+    """Which noise parameters are learnable, and the map from an unconstrained vector to them.
+
+    Args:
+        layout: the variant's :class:`NoiseLayout`.
+        learn: entries to learn, from :data:`LEARNABLE_ENTRIES` (default: the paper's 20 diagonal
+            standard deviations ``("q_std", "r_std")``). ``q_chol`` replaces ``q_std`` (and
+            ``r_chol`` replaces ``r_std``) by a full lower-triangular Cholesky factor whose
+            diagonal goes through the positivity map.
+        positivity: ``"log"`` (``std = exp(u)``, default) or ``"softplus"``.
+        fixed: standard deviations of the entries that are not learned (default: the layout's
+            defaults), as ``{"q_std": [...], "r_std": [...], "p0_std": [...]}``.
+    """
+
+    layout: NoiseLayout
+    learn: tuple[str, ...] = ("q_std", "r_std")
+    positivity: Positivity = "log"
+    fixed: Mapping[str, Sequence[float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.learn = tuple(self.learn)
+        unknown = [e for e in self.learn if e not in LEARNABLE_ENTRIES]
+        if unknown:
+            raise ValueError(f"unknown learnable entries {unknown}; valid: {list(LEARNABLE_ENTRIES)}")
+        if len(set(self.learn)) != len(self.learn):
+            raise ValueError(f"learnable entries repeated: {list(self.learn)}")
+        for a, b in (("q_std", "q_chol"), ("r_std", "r_chol")):
+            if a in self.learn and b in self.learn:
+                raise ValueError(f"learn either '{a}' or '{b}', not both")
+        if self.positivity not in ("log", "softplus"):
+            raise ValueError(f"positivity must be 'log' or 'softplus' (got {self.positivity!r})")
+        fixed = {}
+        for name in ("q_std", "r_std", "p0_std"):
+            values = tuple(float(v) for v in self.fixed.get(name, self.layout.default(name)))
+            if len(values) != len(self.layout.default(name)):
+                raise ValueError(f"fixed '{name}' needs {len(self.layout.default(name))} values (got {len(values)})")
+            if not all(math.isfinite(v) and v > 0 for v in values):
+                raise ValueError(f"fixed '{name}' must be finite and > 0 (got {values})")
+            fixed[name] = values
+        self.fixed = fixed
+        self._entries = []
+        for name in self.learn:
+            dim = len(self.layout.default(name))
+            size = dim * (dim + 1) // 2 if name.endswith("_chol") else dim
+            self._entries.append(_Entry(name, size, dim))
+
+    # ------------------------------------------------------------------ sizes and names
+    @property
+    def size(self) -> int:
+        """Number of unconstrained values (the paper's default: 20)."""
+        return sum(e.size for e in self._entries)
+
+    def names(self) -> list[str]:
+        """One name per unconstrained value, e.g. ``sigma_Q_qw`` or ``L_R_rx_qw``."""
+        out: list[str] = []
+        for e in self._entries:
+            labels = self.layout.labels(e.name)
+            tag = e.name.split("_")[0].upper()
+            if e.name.endswith("_std"):
+                out += [f"sigma_{tag}_{label}" for label in labels]
+            else:
+                rows, cols = torch.tril_indices(e.dim, e.dim).tolist()
+                out += [f"L_{tag}_{labels[i]}_{labels[j]}" for i, j in zip(rows, cols)]
+        return out
+
+    # ------------------------------------------------------------------ maps
+    def _cholesky(self, raw: Tensor, dim: int) -> Tensor:
+        rows, cols = torch.tril_indices(dim, dim, device=raw.device)
+        diagonal = rows == cols
+        values = torch.where(diagonal, _positive(raw, self.positivity), raw)
+        factor = raw.new_zeros(*raw.shape[:-1], dim, dim)
+        factor[..., rows, cols] = values
+        return factor
+
+    def to_noise(self, raw: Tensor) -> NoiseParameters:
+        """Map unconstrained values ``(..., size)`` to :class:`NoiseParameters` (same leading axes)."""
+        if raw.shape[-1] != self.size:
+            raise ValueError(f"expected {self.size} unconstrained values in the last axis (got {raw.shape[-1]})")
+        lead = raw.shape[:-1]
+        matrices: dict[str, Tensor] = {}
+        offset = 0
+        for e in self._entries:
+            chunk = raw[..., offset : offset + e.size]
+            offset += e.size
+            if e.name.endswith("_std"):
+                std = _positive(chunk, self.positivity)
+                matrices[e.name[:-4]] = torch.diag_embed(std * std)
+            else:
+                factor = self._cholesky(chunk, e.dim)
+                matrices[e.name[:-5]] = factor @ factor.transpose(-1, -2)
+        for name in ("q", "r", "p0"):
+            if name not in matrices:
+                std = raw.new_tensor(self.fixed[f"{name}_std"])
+                matrices[name] = torch.diag_embed(std * std).expand(*lead, len(std), len(std))
+        return NoiseParameters(matrices["q"], matrices["r"], matrices["p0"])
+
+    def initial_values(self, dtype: torch.dtype = torch.float64, **std: Sequence[float]) -> Tensor:
+        """Unconstrained vector ``(size,)`` for given standard deviations (default: ``fixed``);
+        a Cholesky entry starts diagonal."""
+        parts = []
+        for e in self._entries:
+            key = e.name[:-5] + "_std" if e.name.endswith("_chol") else e.name
+            values = torch.as_tensor(std.get(key, self.fixed[key]), dtype=dtype)
+            u = _inverse_positivity(values, self.positivity)
+            if e.name.endswith("_std"):
+                parts.append(u)
+            else:
+                rows, cols = torch.tril_indices(e.dim, e.dim)
+                parts.append(torch.where(rows == cols, u[rows], torch.zeros((), dtype=dtype)))
+        return torch.cat(parts) if parts else torch.zeros(0, dtype=dtype)
+
+    # ------------------------------------------------------------------ plain dicts
+    def to_dict(self, raw: Tensor) -> dict[str, Any]:
+        """JSON-compatible description of the values of ``raw (size,)``: per entry the labels,
+        units and standard deviations (or the Cholesky factor rows)."""
+        raw = raw.detach().to(torch.float64).reshape(-1)
+        if raw.numel() != self.size:
+            raise ValueError(f"expected {self.size} values (got {raw.numel()})")
+        out: dict[str, Any] = {"positivity": self.positivity, "learned": list(self.learn), "entries": {}}
+        offset = 0
+        for e in self._entries:
+            chunk = raw[offset : offset + e.size]
+            offset += e.size
+            entry: dict[str, Any] = {"labels": list(self.layout.labels(e.name)), "units": list(self.layout.units(e.name))}
+            if e.name.endswith("_std"):
+                entry["std"] = _positive(chunk, self.positivity).tolist()
+            else:
+                entry["cholesky"] = self._cholesky(chunk, e.dim).tolist()
+            out["entries"][e.name] = entry
+        out["fixed"] = {k: list(v) for k, v in self.fixed.items() if k not in self.learn}
+        return out
+
+    def from_dict(self, data: Mapping[str, Any], dtype: torch.dtype = torch.float64) -> Tensor:
+        """Unconstrained vector for a dict written by :meth:`to_dict` (labels are checked)."""
+        entries = data.get("entries", {})
+        parts = []
+        for e in self._entries:
+            if e.name not in entries:
+                raise ValueError(f"parameter dict has no entry '{e.name}' (has {sorted(entries)})")
+            entry = entries[e.name]
+            if list(entry.get("labels", [])) != list(self.layout.labels(e.name)):
+                raise ValueError(f"entry '{e.name}' labels {entry.get('labels')} do not match {list(self.layout.labels(e.name))}")
+            if e.name.endswith("_std"):
+                values = torch.as_tensor(entry["std"], dtype=dtype)
+                if values.shape != (e.dim,) or not bool(torch.all(values > 0)):
+                    raise ValueError(f"entry '{e.name}' needs {e.dim} positive standard deviations")
+                parts.append(_inverse_positivity(values, self.positivity))
+            else:
+                factor = torch.as_tensor(entry["cholesky"], dtype=dtype)
+                rows, cols = torch.tril_indices(e.dim, e.dim)
+                lower = factor[rows, cols]
+                if not bool(torch.all(factor.diagonal() > 0)):
+                    raise ValueError(f"entry '{e.name}' needs a positive Cholesky diagonal")
+                parts.append(torch.where(rows == cols, _inverse_positivity(lower.clamp_min(1e-300), self.positivity), lower))
+        return torch.cat(parts) if parts else torch.zeros(0, dtype=dtype)
