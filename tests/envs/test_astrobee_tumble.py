@@ -32,7 +32,8 @@ def _run(env: gym.Env, seed: int, n_steps: int, actions=None) -> dict[str, list]
         truth = info["truth"]
         action = truth if actions is None else actions(k, truth)
         obs, reward, terminated, truncated, info = env.step(action)
-        for key, value in zip(("obs", "info", "reward", "terminated", "truncated"), (obs, info, reward, terminated, truncated)):
+        outputs = {"obs": obs, "info": info, "reward": reward, "terminated": terminated, "truncated": truncated}
+        for key, value in outputs.items():
             record[key].append(value)
     return record
 
@@ -93,8 +94,12 @@ def test_observation_layout() -> None:
 
 @pytest.mark.parametrize(
     ("scenario", "overrides"),
-    [("ds1", {"n_steps": 1200}), ("ds2", {"noise_scale": 5.0, "measurement_every": 10, "dropout": 0.2, "n_steps": 700}),
-     ("tumble-fast", {"n_steps": 300, "measurement_every": 3}), ("ds1-flips", {"n_steps": 600, "measurement_every": 1})],
+    [
+        ("ds1", {"n_steps": 1200}),
+        ("ds2", {"noise_scale": 5.0, "measurement_every": 10, "dropout": 0.2, "n_steps": 700}),
+        ("tumble-fast", {"n_steps": 300, "measurement_every": 3}),
+        ("ds1-flips", {"n_steps": 600, "measurement_every": 1}),
+    ],
 )
 def test_episode_equals_generate_episodes(scenario: str, overrides: dict) -> None:
     env = gym.make(ENV_ID, scenario=scenario, expose_truth=True, **overrides)
@@ -122,7 +127,8 @@ def test_reset_is_deterministic() -> None:
     first, second, again = _run(a, 3, 200, actions), _run(b, 3, 200, actions), _run(a, 3, 200, actions)
     for other in (second, again):
         assert other["reward"] == first["reward"]
-        np.testing.assert_array_equal(np.array([o["pose"] for o in other["obs"]]), np.array([o["pose"] for o in first["obs"]]))
+        poses = np.array([o["pose"] for o in other["obs"]])
+        np.testing.assert_array_equal(poses, np.array([o["pose"] for o in first["obs"]]))
     different = _run(a, 4, 200, actions)
     assert different["reward"] != first["reward"]
 

@@ -104,7 +104,9 @@ def test_scenarios_tumble_with_astrobee_inertia(full_tumbles: dict) -> None:
         np.testing.assert_array_equal(truth[:, 7:10], w[:1000])
 
 
-@pytest.mark.parametrize(("key", "rate"), [("ds1-rate", DS1_RATE), ("ds2-rate", DS2_RATE), ("ds1-rate-identity", DS1_RATE)])
+@pytest.mark.parametrize(
+    ("key", "rate"), [("ds1-rate", DS1_RATE), ("ds2-rate", DS2_RATE), ("ds1-rate-identity", DS1_RATE)]
+)
 def test_free_tumble_conserves_energy_and_momentum(full_tumbles: dict, key: str, rate: tuple) -> None:
     q, w = full_tumbles[key]
     assert len(q) == 16000

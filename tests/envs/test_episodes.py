@@ -84,7 +84,9 @@ def test_chunked_free_tumble_equals_one_piece() -> None:
     np.testing.assert_array_equal(valid, whole.valid)
 
 
-@pytest.mark.parametrize("scenario", [BUSY.replace(n_steps=16000), get_scenario("tumble-fast", n_steps=1500)], ids=["busy", "free"])
+@pytest.mark.parametrize(
+    "scenario", [BUSY.replace(n_steps=16000), get_scenario("tumble-fast", n_steps=1500)], ids=["busy", "free"]
+)
 def test_split_equals_slice_of_full_episode(scenario) -> None:
     seeds = [0, 3]
     full = generate_episodes(scenario, seeds)

@@ -141,6 +141,10 @@ def test_burst_gaps() -> None:
     runs = [run for row in episodes.valid for run in _missing_runs(row)]
     # every gap lasts at least burst_length steps (only the episode end may cut one short)
     assert all(n >= length or start + n == 100_000 for start, n in runs)
+    # a lone burst (no other start within it) is exactly burst_length long: the most common case
+    complete = [n for start, n in runs if start + n < 100_000]
+    assert min(complete) == length
+    assert np.bincount(complete).argmax() == length
     # a gap begins where a burst starts with no start in the L steps before: rate (1 - rate)^L
     expected_runs = episodes.valid.size * rate * (1 - rate) ** length
     assert len(runs) == pytest.approx(expected_runs, abs=4 * np.sqrt(expected_runs))

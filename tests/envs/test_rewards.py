@@ -52,7 +52,9 @@ def test_cost_matches_independent_formula() -> None:
     np.testing.assert_allclose(estimate_cost(truth, estimate), expected, rtol=1e-12, atol=1e-12)
 
 
-@pytest.mark.parametrize("weights", [DEFAULT_WEIGHTS, {"attitude": 0.3, "position": 7.0, "omega": 1e-3, "velocity": 2.5}])
+@pytest.mark.parametrize(
+    "weights", [DEFAULT_WEIGHTS, {"attitude": 0.3, "position": 7.0, "omega": 1e-3, "velocity": 2.5}]
+)
 def test_batched_and_scalar_agree_bit_for_bit(weights: dict) -> None:
     rng = np.random.default_rng(1)
     truth, estimate = _random_states(rng, 3000)

@@ -213,7 +213,8 @@ def test_theta_matrix() -> None:
     expected = [[-qx, -qy, -qz], [qw, qz, -qy], [-qz, qw, qx], [qy, -qx, qw]]
     np.testing.assert_array_equal(quat.theta_matrix([qw, qx, qy, qz]), expected)
     # orthonormal columns, orthogonal to q
-    np.testing.assert_allclose(np.einsum("nij,nik->njk", theta, theta), np.broadcast_to(np.eye(3), (300, 3, 3)), atol=1e-15)
+    gram = np.einsum("nij,nik->njk", theta, theta)
+    np.testing.assert_allclose(gram, np.broadcast_to(np.eye(3), (300, 3, 3)), atol=1e-15)
     np.testing.assert_allclose(np.einsum("nij,ni->nj", theta, q), 0.0, atol=1e-15)
 
 

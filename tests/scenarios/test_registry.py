@@ -196,7 +196,10 @@ def test_bad_toml(tmp_path: Path) -> None:
         ("title = 'nothing here'\n", "no \\[scenario.NAME\\] tables"),
         ("[scenario]\n", "no \\[scenario.NAME\\] tables"),
         ("[scenario]\nx = 3\n", "\\[scenario.x\\] must be a table"),
-        ('[scenario.bad]\nbase = "ds1"\ndropout = 2.0\n', "\\[scenario.bad\\]: scenario field 'dropout' must be a number in \\[0, 1\\]"),
+        (
+            '[scenario.bad]\nbase = "ds1"\ndropout = 2.0\n',
+            "\\[scenario.bad\\]: scenario field 'dropout' must be a number in \\[0, 1\\]",
+        ),
         ('[scenario.bad]\nbase = "ds1"\nnoise = 2.0\n', "\\[scenario.bad\\]: unknown scenario field\\(s\\) noise"),
         ('[scenario.bad]\nbase = "ds9"\n', "\\[scenario.bad\\]: unknown scenario 'ds9'; valid scenarios: ds1, ds2"),
         ('[scenario.bad]\nmeasurement_every = 0\n', "'measurement_every' must be an integer >= 1"),
