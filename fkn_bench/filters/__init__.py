@@ -2,10 +2,17 @@
 
 from fkn_bench.filters.base import FilterResult, FilterState, KalmanFilter
 from fkn_bench.filters.ekf import ExtendedKalmanFilter
+from fkn_bench.filters.mekf import MEKF_MANUAL_LAYOUT, MultiplicativeEKF
 from fkn_bench.filters.models import LinearGaussianModel, PoseTwistModel, StateSpaceModel
 from fkn_bench.filters.parameters import NoiseLayout, NoiseParameters, ParameterSet
+from fkn_bench.filters.ukf import UnscentedKalmanFilter
 
 __all__ = [
+    "MEKF_MANUAL_LAYOUT",
+    "MultiplicativeEKF",
+    "UnscentedKalmanFilter",
+    "VARIANTS",
+    "make_filter",
     "ExtendedKalmanFilter",
     "FilterResult",
     "FilterState",
@@ -17,3 +24,19 @@ __all__ = [
     "PoseTwistModel",
     "StateSpaceModel",
 ]
+
+VARIANTS: dict[str, type[KalmanFilter]] = {
+    "ekf": ExtendedKalmanFilter,
+    "ukf": UnscentedKalmanFilter,
+    "mekf": MultiplicativeEKF,
+}
+"""Filter variants by name: interchangeable behind :class:`KalmanFilter`."""
+
+
+def make_filter(name: str, **options: object) -> KalmanFilter:
+    """Build a filter variant by name (``ekf``, ``ukf`` or ``mekf``)."""
+    try:
+        cls = VARIANTS[name]
+    except KeyError:
+        raise ValueError(f"unknown filter variant {name!r}; valid variants: {', '.join(VARIANTS)}") from None
+    return cls(**options)  # type: ignore[arg-type]

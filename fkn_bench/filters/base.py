@@ -60,6 +60,7 @@ class FilterResult:
         covariances: ``(B, T, k, k)`` posterior covariances, or None when not stored.
         innovations: ``(B, T, m)`` innovations ``z - h(x-)`` (zero where no update).
         innovation_covariances: ``(B, T, m, m)`` their covariances ``S`` (identity where no update).
+        prior_means: ``(B, T, n)`` predicted means ``x-`` (stored with the innovations).
         updated: ``(B, T)`` True where a measurement update happened.
         initialised: ``(B, T)`` True from each sequence's initialisation on.
         final: the state after the last step (to continue filtering).
@@ -69,6 +70,7 @@ class FilterResult:
     covariances: Tensor | None
     innovations: Tensor | None
     innovation_covariances: Tensor | None
+    prior_means: Tensor | None
     updated: Tensor
     initialised: Tensor
     final: FilterState
@@ -180,6 +182,7 @@ class KalmanFilter(ABC):
         covariances = torch.empty(steps, batch, k, k, dtype=dtype) if store_covariances else None
         innovations = torch.zeros(steps, batch, m, dtype=dtype) if store_innovations else None
         innovation_covs = torch.empty(steps, batch, m, m, dtype=dtype) if store_innovations else None
+        prior_means = torch.empty(steps, batch, self.model.state_dim, dtype=dtype) if store_innovations else None
         updated_steps = torch.zeros(steps, batch, dtype=torch.bool)
         initialised_steps = torch.zeros(steps, batch, dtype=torch.bool)
         no_innovation = torch.zeros(batch, m, dtype=dtype)
@@ -188,6 +191,8 @@ class KalmanFilter(ABC):
             step_noise = noise.at_step(t) if time_varying else noise
             if t > 0:
                 state = self.predict(state, step_noise.process, dt)
+            if prior_means is not None:
+                prior_means[t] = state.mean
             update_rows = usable[:, t]
             if t in init_steps:
                 now = first == t
@@ -230,6 +235,7 @@ class KalmanFilter(ABC):
             covariances=batch_first(covariances),
             innovations=batch_first(innovations),
             innovation_covariances=batch_first(innovation_covs),
+            prior_means=batch_first(prior_means),
             updated=batch_first(updated_steps),
             initialised=batch_first(initialised_steps),
             final=state,

@@ -18,7 +18,7 @@ from torch import Tensor
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
 
-__all__ = ["ExtendedKalmanFilter", "joseph_update"]
+__all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
 
 
 def joseph_update(
@@ -96,16 +96,21 @@ class ExtendedKalmanFilter(KalmanFilter):
         return FilterState(mean, torch.baddbmm(Q, FP, F.transpose(1, 2)))
 
     def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
-        model = self.model
-        x, P = state.mean, state.covariance
-        z = model.align(z, x)
-        if model.observed is not None:
-            nu = z - x[:, model.observed]
-            x_post, P_post, S = joseph_update(
-                x, P, nu, measurement_noise, observed=model.observed, normalize=model.normalize
-            )
-        else:
-            H = model.H.to(x.dtype)
-            nu = z - x @ H.T
-            x_post, P_post, S = joseph_update(x, P, nu, measurement_noise, H=H, normalize=model.normalize)
-        return FilterState(x_post, P_post), nu, S
+        return linear_measurement_update(self.model, state, z, measurement_noise)
+
+
+def linear_measurement_update(
+    model: StateSpaceModel, state: FilterState, z: Tensor, measurement_noise: Tensor
+) -> tuple[FilterState, Tensor, Tensor]:
+    """Kalman update for a model that measures linearly (``y = H x``), with the model's
+    measurement alignment and state normalisation; shared by the EKF and the UKF."""
+    x, P = state.mean, state.covariance
+    z = model.align(z, x)
+    if model.observed is not None:
+        nu = z - x[:, model.observed]
+        x_post, P_post, S = joseph_update(x, P, nu, measurement_noise, observed=model.observed, normalize=model.normalize)
+    else:
+        H = model.H.to(x.dtype)
+        nu = z - x @ H.T
+        x_post, P_post, S = joseph_update(x, P, nu, measurement_noise, H=H, normalize=model.normalize)
+    return FilterState(x_post, P_post), nu, S

@@ -1,0 +1,256 @@
+"""The estimator API that every estimator of the project implements.
+
+Two ways to use an estimator:
+
+* batch: ``estimate(measurements, mask, dt) -> Estimates`` on whole sequences, batch first
+  (``(B, T, 7)`` measurements, ``(B, T)`` validity);
+* online: ``reset(dt=...)`` then ``step(observation) -> Estimate`` once per time step, e.g. in the
+  Gymnasium loop (``env.step(estimate.mean)``).
+
+Both give the same numbers for the same inputs (tested to 1e-12 for the built-in filters).
+Conventions (see :mod:`fkn_bench.types`): states ``[q(wxyz), r, w(world), v]``, SI units;
+covariances of the 13-dim state and of the 12-dim error ``[dtheta, dr, dw, dv]`` (world-frame
+attitude error); innovations as 6-dim pose residuals ``[dtheta, dr]`` so that NIS compares across
+filter variants. Each sequence initialises at its first usable measurement (attitude and position
+from it, rates zero, the estimator's documented ``P0``); before it, the estimate is the prior
+(identity attitude, zeros) with ``initialised = False``.
+
+Persistence: :meth:`Estimator.save` writes a JSON document (atomically) with ``format``,
+``format_version``, the estimator ``name`` and its ``config``; :func:`load_estimator` reads it back
+through the registry and refuses unknown formats or versions with a message that says so.
+"""
+
+from __future__ import annotations
+
+import functools
+from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
+from fkn_bench.io import read_json, write_json_atomic
+from fkn_bench.types import ArrayB, ArrayF
+
+__all__ = [
+    "Estimate",
+    "Estimates",
+    "Estimator",
+    "ESTIMATOR_FORMAT",
+    "ESTIMATOR_FORMAT_VERSION",
+    "EstimatorFileError",
+    "check_batch_inputs",
+    "parse_observation",
+    "read_estimator_document",
+]
+
+ESTIMATOR_FORMAT = "fkn-bench-estimator"
+ESTIMATOR_FORMAT_VERSION = 1
+
+
+class EstimatorFileError(ValueError):
+    """A saved estimator that cannot be read: missing, corrupt, or of an unknown format/version."""
+
+
+@dataclass(frozen=True, eq=False)
+class Estimate:
+    """One online estimate (an immutable value; its arrays are read-only).
+
+    Attributes:
+        time: time of the estimate, s.
+        mean: ``(13,)`` state estimate (unit quaternion).
+        native_covariance: the covariance the filter carries: ``(13, 13)`` of the state for
+            additive filters, ``(12, 12)`` of the error for the multiplicative EKF.
+        initialised: False before the first usable measurement.
+        updated: True when this step used a measurement.
+    Properties ``covariance`` (13x13 state) and ``error_covariance`` (12x12 error
+    ``[dtheta, dr, dw, dv]``) convert on first access.
+    """
+
+    time: float
+    mean: ArrayF
+    native_covariance: ArrayF
+    initialised: bool
+    updated: bool
+
+    def __post_init__(self) -> None:
+        for array in (self.mean, self.native_covariance):
+            array.flags.writeable = False
+
+    @functools.cached_property
+    def covariance(self) -> ArrayF:
+        if self.native_covariance.shape == (13, 13):
+            return self.native_covariance
+        return state_covariance_from_error(self.mean[:4], self.native_covariance)
+
+    @functools.cached_property
+    def error_covariance(self) -> ArrayF:
+        if self.native_covariance.shape == (12, 12):
+            return self.native_covariance
+        return error_covariance_from_state(self.mean[:4], self.native_covariance)
+
+
+@dataclass(frozen=True, eq=False)
+class Estimates:
+    """Batch estimates, batch first (numpy, float64).
+
+    Attributes:
+        means: ``(B, T, 13)``.
+        covariances: ``(B, T, 13, 13)`` or None.
+        error_covariances: ``(B, T, 12, 12)`` or None.
+        innovations: ``(B, T, 6)`` pose innovations ``[dtheta, dr]`` (rad, m) where
+            ``innovation_mask`` is True, or None.
+        innovation_covariances: ``(B, T, 6, 6)`` or None.
+        innovation_mask: ``(B, T)`` True where a measurement update happened.
+        initialised: ``(B, T)`` True from each sequence's initialisation on.
+        extras: estimator-specific arrays (e.g. adapted noise), keyed by name.
+    """
+
+    means: ArrayF
+    covariances: ArrayF | None = None
+    error_covariances: ArrayF | None = None
+    innovations: ArrayF | None = None
+    innovation_covariances: ArrayF | None = None
+    innovation_mask: ArrayB | None = None
+    initialised: ArrayB | None = None
+    extras: Mapping[str, ArrayF] = field(default_factory=dict)
+
+    @property
+    def batch_size(self) -> int:
+        return self.means.shape[0]
+
+    @property
+    def n_steps(self) -> int:
+        return self.means.shape[1]
+
+
+def check_batch_inputs(measurements: Any, mask: Any, dt: Any) -> tuple[ArrayF, ArrayB, float]:
+    """Validate ``estimate()`` inputs: ``(B, T, 7)`` float measurements, ``(B, T)`` mask, ``dt > 0``.
+
+    Returns float64 measurements, a bool mask and ``dt`` as float; raises ``ValueError`` naming
+    the problem (wrong shapes, empty sequences, a non-finite or non-positive ``dt``). Entries
+    outside the mask may hold anything (NaN included); non-finite entries inside it are handled
+    by the documented rule of the filters (the update is skipped).
+    """
+    try:
+        z = np.asarray(measurements, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError("measurements must be a float array of shape (B, T, 7)") from None
+    if z.ndim != 3 or z.shape[-1] != 7:
+        hint = " (use measurements[None] for a single sequence)" if z.ndim == 2 else ""
+        raise ValueError(f"measurements must have shape (B, T, 7) (got {z.shape}){hint}")
+    if z.shape[0] == 0 or z.shape[1] == 0:
+        raise ValueError(f"measurements hold no sequences or no time steps (shape {z.shape})")
+    m = np.asarray(mask)
+    if m.shape != z.shape[:2]:
+        raise ValueError(f"mask must have shape {z.shape[:2]} to match the measurements (got {m.shape})")
+    if m.dtype != np.bool_:
+        if not np.isin(m, (0, 1)).all():
+            raise ValueError("mask must be boolean (or 0/1)")
+        m = m.astype(bool)
+    try:
+        step = float(dt)
+    except (TypeError, ValueError):
+        raise ValueError(f"dt must be a number (got {dt!r})") from None
+    if not np.isfinite(step) or step <= 0:
+        raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
+    return z, m, step
+
+
+def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
+    """Measurement ``(7,)`` (None when missing) and time (None when absent) of an observation.
+
+    Accepts a Gymnasium observation dict (``pose``, ``valid``, ``time``) or a ``(7,)`` array
+    (all NaN when missing). Raises ``ValueError`` for anything else.
+    """
+    if isinstance(observation, Mapping):
+        if "pose" not in observation:
+            raise ValueError(f"observation dict needs a 'pose' entry (has {sorted(observation)})")
+        pose = np.asarray(observation["pose"], dtype=float)
+        valid = bool(observation.get("valid", True))
+        time = observation.get("time")
+        time = None if time is None else float(np.asarray(time))
+    else:
+        pose = np.asarray(observation, dtype=float)
+        valid, time = True, None
+    if pose.shape != (7,):
+        raise ValueError(f"a pose observation must have shape (7,) (got {pose.shape})")
+    if not valid or np.all(np.isnan(pose)):
+        return None, time
+    return pose, time
+
+
+class Estimator(ABC):
+    """Base class of estimators (see module docstring).
+
+    Subclasses set ``name`` and ``description`` and implement :meth:`estimate`, :meth:`reset`,
+    :meth:`step` and :meth:`to_config`; estimators with learned or tuned values override
+    :meth:`save` and :meth:`load` when a JSON config cannot hold them.
+    """
+
+    name: str = "estimator"
+    description: str = ""
+
+    @abstractmethod
+    def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
+        """Filter whole sequences: ``measurements (B, T, 7)``, ``mask (B, T)`` -> :class:`Estimates`."""
+
+    @abstractmethod
+    def reset(self, *, dt: float) -> None:
+        """Start a new online sequence with time step ``dt`` (s)."""
+
+    @abstractmethod
+    def step(self, observation: Any) -> Estimate:
+        """Consume one observation (see :func:`parse_observation`) and return the estimate."""
+
+    @abstractmethod
+    def to_config(self) -> dict[str, Any]:
+        """JSON-compatible configuration from which :meth:`from_config` rebuilds the estimator."""
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any]) -> Estimator:
+        """Rebuild from :meth:`to_config` output."""
+        return cls(**dict(config))
+
+    def save(self, path: str | Path) -> Path:
+        """Write the estimator as JSON (atomically) and return the path."""
+        document = {
+            "format": ESTIMATOR_FORMAT,
+            "format_version": ESTIMATOR_FORMAT_VERSION,
+            "name": self.name,
+            "config": self.to_config(),
+        }
+        return write_json_atomic(path, document)
+
+    @classmethod
+    def load(cls, path: str | Path) -> Estimator:
+        """Read an estimator written by :meth:`save` (see :func:`read_estimator_document`)."""
+        document = read_estimator_document(path)
+        return cls.from_config(document["config"])
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}(name={self.name!r})"
+
+
+def read_estimator_document(path: str | Path) -> dict[str, Any]:
+    """Read and check a saved estimator document; raises :class:`EstimatorFileError`."""
+    path = Path(path)
+    try:
+        document = read_json(path)
+    except (OSError, ValueError) as exc:
+        raise EstimatorFileError(f"cannot read estimator file {path}: {exc}") from None
+    if not isinstance(document, dict) or document.get("format") != ESTIMATOR_FORMAT:
+        raise EstimatorFileError(f"{path} is not an fkn-bench estimator file (no format '{ESTIMATOR_FORMAT}')")
+    version = document.get("format_version")
+    if version != ESTIMATOR_FORMAT_VERSION:
+        raise EstimatorFileError(
+            f"{path} has estimator format version {version!r}; this fkn-bench reads version "
+            f"{ESTIMATOR_FORMAT_VERSION} (re-save it with a matching fkn-bench)"
+        )
+    if not isinstance(document.get("config"), dict) or not isinstance(document.get("name"), str):
+        raise EstimatorFileError(f"{path} lacks the estimator 'name' or 'config'")
+    return document
+

@@ -1,0 +1,87 @@
+"""Unscented Kalman filter, batched and differentiable, on the same models and noise layout.
+
+Prediction by the unscented transform with the scaled sigma points of van der Merwe (2004,
+"Sigma-point Kalman filters for probabilistic inference in dynamic state-space models", PhD
+thesis, ch. 3): ``2n + 1`` points ``x``, ``x +- sqrt(n + lambda) L_i`` with ``L L^T = P`` and
+``lambda = alpha^2 (n + kappa) - n``; weights ``Wm0 = lambda / (n + lambda)``,
+``Wc0 = Wm0 + 1 - alpha^2 + beta``, ``Wi = 1 / (2 (n + lambda))``. Defaults ``alpha = 1``,
+``beta = 2``, ``kappa = 0`` keep every mean weight non-negative.
+
+Both models here measure linearly (``y = H x``); for a linear measurement the unscented
+measurement update equals the Kalman update exactly, so the update reuses the EKF's Joseph form
+(with the quaternion renormalisation and projection of the model).
+
+The posterior covariance of the pose model is singular along the quaternion (the projection
+removes that direction); when a Cholesky factor fails, the factor of ``P + jitter I`` is used
+for those rows, with ``jitter = sqrt(eps) * mean(diag(P))``.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+
+from fkn_bench.filters.base import FilterState, KalmanFilter
+from fkn_bench.filters.ekf import linear_measurement_update
+from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
+
+__all__ = ["UnscentedKalmanFilter", "sigma_point_weights"]
+
+
+def sigma_point_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, Tensor, Tensor]:
+    """``(scale, Wm, Wc)``: the spread ``sqrt(n + lambda)`` and the ``2n + 1`` weights."""
+    lam = alpha**2 * (n + kappa) - n
+    if n + lam <= 0:
+        raise ValueError(f"alpha^2 (n + kappa) must be > 0 (got alpha={alpha}, kappa={kappa}, n={n})")
+    wm = torch.full((2 * n + 1,), 1.0 / (2.0 * (n + lam)), dtype=torch.float64)
+    wc = wm.clone()
+    wm[0] = lam / (n + lam)
+    wc[0] = lam / (n + lam) + 1.0 - alpha**2 + beta
+    return (n + lam) ** 0.5, wm, wc
+
+
+def _safe_cholesky(P: Tensor) -> Tensor:
+    L, info = torch.linalg.cholesky_ex(P)
+    failed = info != 0
+    if bool(failed.any()):
+        eps = torch.finfo(P.dtype).eps
+        jitter = eps**0.5 * P.diagonal(dim1=1, dim2=2).mean(1).clamp_min(eps)
+        eye = torch.eye(P.shape[-1], dtype=P.dtype)
+        L_jittered = torch.linalg.cholesky_ex(P + jitter[:, None, None] * eye)[0]
+        L = torch.where(failed[:, None, None], L_jittered, L)
+    return L
+
+
+class UnscentedKalmanFilter(KalmanFilter):
+    """UKF over any :class:`~fkn_bench.filters.models.StateSpaceModel` with a linear measurement.
+
+    Keyword-only arguments:
+        model: the state-space model (default :class:`PoseTwistModel`).
+        alpha, beta, kappa: sigma-point parameters (see module docstring).
+    """
+
+    name = "ukf"
+
+    def __init__(
+        self, *, model: StateSpaceModel | None = None, alpha: float = 1.0, beta: float = 2.0, kappa: float = 0.0
+    ) -> None:
+        self.model = model if model is not None else PoseTwistModel()
+        self.layout = self.model.layout
+        self.alpha, self.beta, self.kappa = float(alpha), float(beta), float(kappa)
+        self._scale, self._wm, self._wc = sigma_point_weights(self.model.state_dim, self.alpha, self.beta, self.kappa)
+
+    def predict(self, state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
+        x, P = state.mean, state.covariance
+        batch, n = x.shape
+        L = _safe_cholesky(P) * self._scale
+        spread = L.transpose(1, 2)  # rows are the columns of L
+        points = torch.cat((x[:, None, :], x[:, None, :] + spread, x[:, None, :] - spread), dim=1)
+        moved = self.model.predict(points.reshape(-1, n), dt).reshape(batch, 2 * n + 1, n)
+        wm, wc = self._wm.to(x.dtype), self._wc.to(x.dtype)
+        mean = torch.einsum("p,bpn->bn", wm, moved)
+        deviation = moved - mean[:, None, :]
+        covariance = torch.einsum("bpi,p,bpj->bij", deviation, wc, deviation) + process_noise
+        return FilterState(mean, covariance)
+
+    def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
+        return linear_measurement_update(self.model, state, z, measurement_noise)
