@@ -217,10 +217,12 @@ class Estimator(ABC):
 
     def save(self, path: str | Path) -> Path:
         """Write the estimator as JSON (atomically) and return the path."""
+        cls = type(self)
         document = {
             "format": ESTIMATOR_FORMAT,
             "format_version": ESTIMATOR_FORMAT_VERSION,
             "name": self.name,
+            "class": f"{cls.__module__}:{cls.__qualname__}",
             "config": self.to_config(),
         }
         return write_json_atomic(path, document)

@@ -78,6 +78,11 @@ class StateSpaceModel:
         """
         return x, None, None
 
+    def null_direction(self, x: Tensor) -> Tensor | None:
+        """Unit direction ``(B, n)`` that :meth:`normalize`'s projection removes from the
+        covariance (``None``: none), so that square-root filters can regularise along it."""
+        return None
+
     def initial_state(self, z: Tensor) -> Tensor:
         """State ``(B, n)`` initialised from measurements ``(B, m)``."""
         raise NotImplementedError
@@ -165,6 +170,10 @@ class PoseTwistModel(StateSpaceModel):
         unit = q / norm
         N = (self._eye4(x.dtype) - unit[:, :, None] * unit[:, None, :]) / norm[:, :, None]
         return torch.cat((unit, x[:, 4:]), dim=1), slice(0, 4), N
+
+    def null_direction(self, x: Tensor) -> Tensor | None:
+        q = x[:, :4]
+        return torch.cat((q / q.norm(dim=1, keepdim=True), torch.zeros_like(x[:, 4:])), dim=1)
 
     def initial_state(self, z: Tensor) -> Tensor:
         zeros = torch.zeros(z.shape[0], 6, dtype=z.dtype)

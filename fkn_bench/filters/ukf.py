@@ -12,8 +12,10 @@ measurement update equals the Kalman update exactly, so the update reuses the EK
 (with the quaternion renormalisation and projection of the model).
 
 The posterior covariance of the pose model is singular along the quaternion (the projection
-removes that direction); when a Cholesky factor fails, the factor of ``P + jitter I`` is used
-for those rows, with ``jitter = sqrt(eps) * mean(diag(P))``.
+removes that direction, which the model names through ``null_direction``). The sigma points are
+then drawn from ``P + eps_n e e^T`` with ``e`` that unit direction and ``eps_n = 1e-10 max diag(P)``:
+full rank for the Cholesky factor, and the tangent-space spread unchanged. A Cholesky failure
+that remains (it should not) falls back to ``P + sqrt(eps) mean(diag(P)) I`` for that row.
 """
 
 from __future__ import annotations
@@ -73,6 +75,10 @@ class UnscentedKalmanFilter(KalmanFilter):
     def predict(self, state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
         x, P = state.mean, state.covariance
         batch, n = x.shape
+        direction = self.model.null_direction(x)
+        if direction is not None:
+            eps = 1e-10 * P.diagonal(dim1=1, dim2=2).amax(1)
+            P = P + eps[:, None, None] * (direction[:, :, None] * direction[:, None, :])
         L = _safe_cholesky(P) * self._scale
         spread = L.transpose(1, 2)  # rows are the columns of L
         points = torch.cat((x[:, None, :], x[:, None, :] + spread, x[:, None, :] - spread), dim=1)

@@ -1,0 +1,151 @@
+"""The estimator registry: names to factories, for the CLI, the harness and third parties.
+
+Register your own estimator in one of two ways:
+
+* in code, before running the harness::
+
+      from fkn_bench.estimators import register_estimator
+      register_estimator("my-filter", MyFilter.for_scenario, description="...")
+
+* from an installed package, with an entry point in the group ``fkn_bench.estimators`` whose
+  name is the estimator name and whose object is the factory::
+
+      [project.entry-points."fkn_bench.estimators"]
+      my-filter = "my_package.estimators:make_my_filter"
+
+A factory is called as ``factory(scenario=scenario, **options)`` where ``scenario`` is the
+:class:`~fkn_bench.scenarios.Scenario` being evaluated (estimators that do not need it ignore
+it) and returns an :class:`~fkn_bench.estimators.base.Estimator`.
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.metadata
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from fkn_bench.estimators.base import Estimator, EstimatorFileError, read_estimator_document
+from fkn_bench.scenarios import Scenario
+
+__all__ = [
+    "EstimatorFactory",
+    "EstimatorSpec",
+    "UnknownEstimatorError",
+    "register_estimator",
+    "make_estimator",
+    "estimator_names",
+    "estimator_specs",
+    "load_estimator",
+    "ENTRY_POINT_GROUP",
+]
+
+ENTRY_POINT_GROUP = "fkn_bench.estimators"
+
+EstimatorFactory = Callable[..., Estimator]
+
+# modules whose import registers the built-in estimators (imported lazily: they pull in torch)
+_BUILTIN_MODULES: tuple[str, ...] = ("fkn_bench.estimators.builtin",)
+
+
+class UnknownEstimatorError(KeyError):
+    """An estimator name that is not registered; the message lists the valid names."""
+
+    def __str__(self) -> str:  # KeyError quotes its message; keep it readable
+        return str(self.args[0])
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """A registered estimator: its name, factory, one-line description and whether
+    ``fkn-bench train`` can fit it."""
+
+    name: str
+    factory: EstimatorFactory
+    description: str = ""
+    trainable: bool = False
+
+
+_REGISTRY: dict[str, EstimatorSpec] = {}
+_LOADED = False
+
+
+def register_estimator(
+    name: str, factory: EstimatorFactory, *, description: str = "", trainable: bool = False, overwrite: bool = False
+) -> EstimatorSpec:
+    """Register ``factory`` under ``name`` (see module docstring) and return its spec."""
+    if not isinstance(name, str) or not name or any(c.isspace() for c in name):
+        raise ValueError(f"estimator name must be a non-empty string without spaces (got {name!r})")
+    if not callable(factory):
+        raise TypeError(f"factory for estimator {name!r} must be callable")
+    if name in _REGISTRY and not overwrite:
+        raise ValueError(f"estimator {name!r} is already registered (pass overwrite=True to replace it)")
+    spec = EstimatorSpec(name, factory, description, trainable)
+    _REGISTRY[name] = spec
+    return spec
+
+
+def _ensure_loaded() -> None:
+    global _LOADED
+    if _LOADED:
+        return
+    _LOADED = True
+    for module in _BUILTIN_MODULES:
+        importlib.import_module(module)
+    for entry_point in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if entry_point.name in _REGISTRY:
+            continue
+        try:
+            factory = entry_point.load()
+        except Exception as exc:  # a broken plugin must not break the built-ins
+            warnings.warn(f"could not load estimator entry point {entry_point.name!r}: {exc}", stacklevel=2)
+            continue
+        register_estimator(entry_point.name, factory, description=f"plugin {entry_point.value}")
+
+
+def estimator_specs() -> list[EstimatorSpec]:
+    """Registered estimators, built-ins first."""
+    _ensure_loaded()
+    return list(_REGISTRY.values())
+
+
+def estimator_names() -> list[str]:
+    """Registered estimator names, built-ins first."""
+    return [spec.name for spec in estimator_specs()]
+
+
+def _spec(name: str) -> EstimatorSpec:
+    _ensure_loaded()
+    try:
+        return _REGISTRY[name]
+    except KeyError:
+        raise UnknownEstimatorError(f"unknown estimator {name!r}; valid estimators: {', '.join(_REGISTRY)}") from None
+
+
+def make_estimator(name: str, *, scenario: Scenario | None = None, **options: Any) -> Estimator:
+    """Build the estimator registered as ``name`` for ``scenario`` (options go to its factory)."""
+    estimator = _spec(name).factory(scenario=scenario, **options)
+    if not isinstance(estimator, Estimator):
+        raise TypeError(f"factory of estimator {name!r} returned {type(estimator).__name__}, not an Estimator")
+    return estimator
+
+
+def load_estimator(path: str | Path) -> Estimator:
+    """Load an estimator saved with :meth:`Estimator.save` (its class is recorded in the file)."""
+    document = read_estimator_document(path)
+    target = document.get("class")
+    if not isinstance(target, str) or ":" not in target:
+        raise EstimatorFileError(f"{path} does not record the estimator class ('class': 'module:Name')")
+    module_name, _, qualname = target.partition(":")
+    try:
+        obj: Any = importlib.import_module(module_name)
+        for part in qualname.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as exc:
+        raise EstimatorFileError(f"{path}: cannot import estimator class {target} ({exc})") from None
+    if not (isinstance(obj, type) and issubclass(obj, Estimator)):
+        raise EstimatorFileError(f"{path}: {target} is not an Estimator class")
+    return obj.load(path)
