@@ -73,13 +73,15 @@ def filter_result_to_estimates(result: FilterResult, variant: KalmanFilter) -> E
 
 
 class KalmanEstimator(Estimator):
-    """A filter variant with constant noise standard deviations.
+    """A filter variant with constant noise parameters.
 
     Keyword-only arguments:
         variant: ``"ekf"``, ``"ukf"`` or ``"mekf"``.
         q_std, r_std, p0_std: standard deviations in the variant's layout (default: its manual
             tuning; see :data:`fkn_bench.filters.models.PAPER_MANUAL_LAYOUT` and
             :data:`fkn_bench.filters.MEKF_MANUAL_LAYOUT`).
+        q_cov, r_cov, p0_cov: full covariance matrices instead (symmetric positive definite);
+            give either the standard deviations or the matrix of an entry, not both.
         name, description: registry name and one-line description.
     """
 
@@ -90,6 +92,9 @@ class KalmanEstimator(Estimator):
         q_std: Sequence[float] | None = None,
         r_std: Sequence[float] | None = None,
         p0_std: Sequence[float] | None = None,
+        q_cov: Sequence[Sequence[float]] | None = None,
+        r_cov: Sequence[Sequence[float]] | None = None,
+        p0_cov: Sequence[Sequence[float]] | None = None,
         name: str = "kalman",
         description: str = "",
     ) -> None:
@@ -98,14 +103,39 @@ class KalmanEstimator(Estimator):
         self.variant_name = variant
         self.filter = make_filter(variant)
         layout = self.filter.layout
-        self.q_std = self._check_std("q_std", q_std, layout.q_default)
-        self.r_std = self._check_std("r_std", r_std, layout.r_default)
-        self.p0_std = self._check_std("p0_std", p0_std, layout.p0_default)
+        matrices = []
+        self._given: dict[str, str] = {}
+        for entry, std, cov, default in (
+            ("q", q_std, q_cov, layout.q_default),
+            ("r", r_std, r_cov, layout.r_default),
+            ("p0", p0_std, p0_cov, layout.p0_default),
+        ):
+            if std is not None and cov is not None:
+                raise ValueError(f"give either {entry}_std or {entry}_cov, not both")
+            if cov is not None:
+                matrices.append(self._check_cov(f"{entry}_cov", cov, len(default)))
+                self._given[entry] = "cov"
+            else:
+                matrices.append(np.diag(np.square(self._check_std(f"{entry}_std", std, default))))
+                self._given[entry] = "std"
+        self._numpy_noise = tuple(matrices)
         self.name = name
         self.description = description
         self._dt: float | None = None
         self._online: _OnlineState | None = None
-        self._numpy_noise = tuple(np.diag(np.square(s)) for s in (self.q_std, self.r_std, self.p0_std))
+
+    @property
+    def q_std(self) -> ArrayF:
+        """Standard deviations of ``Q`` (square roots of its diagonal)."""
+        return np.sqrt(np.diag(self._numpy_noise[0]))
+
+    @property
+    def r_std(self) -> ArrayF:
+        return np.sqrt(np.diag(self._numpy_noise[1]))
+
+    @property
+    def p0_std(self) -> ArrayF:
+        return np.sqrt(np.diag(self._numpy_noise[2]))
 
     @staticmethod
     def _check_std(name: str, values: Sequence[float] | None, default: Sequence[float]) -> ArrayF:
@@ -116,10 +146,21 @@ class KalmanEstimator(Estimator):
             raise ValueError(f"{name} values must be finite and > 0 (got {array.tolist()})")
         return array
 
+    @staticmethod
+    def _check_cov(name: str, values: Sequence[Sequence[float]], dim: int) -> ArrayF:
+        array = np.array(values, dtype=float)
+        if array.shape != (dim, dim):
+            raise ValueError(f"{name} must be a {dim}x{dim} matrix (got shape {array.shape})")
+        if not np.all(np.isfinite(array)) or not np.allclose(array, array.T, rtol=1e-10, atol=1e-14):
+            raise ValueError(f"{name} must be finite and symmetric")
+        if np.linalg.eigvalsh(0.5 * (array + array.T)).min() <= 0:
+            raise ValueError(f"{name} must be positive definite")
+        return 0.5 * (array + array.T)
+
     # ------------------------------------------------------------------ batch
     def noise_parameters(self) -> NoiseParameters:
         """The constant ``Q``, ``R``, ``P0`` as torch tensors."""
-        return NoiseParameters.from_std(self.q_std, self.r_std, self.p0_std)
+        return NoiseParameters(*(torch.from_numpy(m.copy()) for m in self._numpy_noise))
 
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)
@@ -129,9 +170,13 @@ class KalmanEstimator(Estimator):
 
     # ------------------------------------------------------------------ online
     def reset(self, *, dt: float) -> None:
-        if not np.isfinite(dt) or dt <= 0:
+        try:
+            step = float(dt)
+        except (TypeError, ValueError):
+            raise ValueError(f"dt must be a number (got {dt!r})") from None
+        if not np.isfinite(step) or step <= 0:
             raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
-        self._dt = float(dt)
+        self._dt = step
         self._online = None
 
     def _predict(self, x: ArrayF, P: ArrayF, dt: float) -> tuple[ArrayF, ArrayF]:
@@ -188,18 +233,19 @@ class KalmanEstimator(Estimator):
 
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:
-        return {
-            "variant": self.variant_name,
-            "q_std": self.q_std.tolist(),
-            "r_std": self.r_std.tolist(),
-            "p0_std": self.p0_std.tolist(),
-            "name": self.name,
-            "description": self.description,
-        }
+        config: dict[str, Any] = {"variant": self.variant_name}
+        for index, entry in enumerate(("q", "r", "p0")):
+            matrix = self._numpy_noise[index]
+            if self._given[entry] == "cov":
+                config[f"{entry}_cov"] = matrix.tolist()
+            else:
+                config[f"{entry}_std"] = np.sqrt(np.diag(matrix)).tolist()
+        config.update(name=self.name, description=self.description)
+        return config
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> KalmanEstimator:
-        known = {"variant", "q_std", "r_std", "p0_std", "name", "description"}
+        known = {"variant", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "name", "description"}
         unknown = sorted(set(config) - known)
         if unknown:
             raise ValueError(f"unknown KalmanEstimator config keys {unknown}; valid: {sorted(known)}")

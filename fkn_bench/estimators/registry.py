@@ -38,6 +38,7 @@ __all__ = [
     "register_estimator",
     "make_estimator",
     "estimator_names",
+    "estimator_spec",
     "estimator_specs",
     "load_estimator",
     "ENTRY_POINT_GROUP",
@@ -48,7 +49,7 @@ ENTRY_POINT_GROUP = "fkn_bench.estimators"
 EstimatorFactory = Callable[..., Estimator]
 
 # modules whose import registers the built-in estimators (imported lazily: they pull in torch)
-_BUILTIN_MODULES: tuple[str, ...] = ("fkn_bench.estimators.builtin",)
+_BUILTIN_MODULES: tuple[str, ...] = ("fkn_bench.estimators.builtin", "fkn_bench.flexkalmannet.registration")
 
 
 class UnknownEstimatorError(KeyError):
@@ -60,13 +61,18 @@ class UnknownEstimatorError(KeyError):
 
 @dataclass(frozen=True)
 class EstimatorSpec:
-    """A registered estimator: its name, factory, one-line description and whether
-    ``fkn-bench train`` can fit it."""
+    """A registered estimator: its name, factory, one-line description, and for estimators
+    that ``fkn-bench train`` can fit, the training function
+    ``train(scenario, *, out, options, resume, progress) -> summary dict``."""
 
     name: str
     factory: EstimatorFactory
     description: str = ""
-    trainable: bool = False
+    train: Callable[..., dict[str, Any]] | None = None
+
+    @property
+    def trainable(self) -> bool:
+        return self.train is not None
 
 
 _REGISTRY: dict[str, EstimatorSpec] = {}
@@ -74,16 +80,24 @@ _LOADED = False
 
 
 def register_estimator(
-    name: str, factory: EstimatorFactory, *, description: str = "", trainable: bool = False, overwrite: bool = False
+    name: str,
+    factory: EstimatorFactory,
+    *,
+    description: str = "",
+    train: Callable[..., dict[str, Any]] | None = None,
+    overwrite: bool = False,
 ) -> EstimatorSpec:
-    """Register ``factory`` under ``name`` (see module docstring) and return its spec."""
+    """Register ``factory`` under ``name`` (see module docstring) and return its spec; ``train``
+    makes it trainable by ``fkn-bench train``."""
     if not isinstance(name, str) or not name or any(c.isspace() for c in name):
         raise ValueError(f"estimator name must be a non-empty string without spaces (got {name!r})")
     if not callable(factory):
         raise TypeError(f"factory for estimator {name!r} must be callable")
     if name in _REGISTRY and not overwrite:
         raise ValueError(f"estimator {name!r} is already registered (pass overwrite=True to replace it)")
-    spec = EstimatorSpec(name, factory, description, trainable)
+    if train is not None and not callable(train):
+        raise TypeError(f"train function for estimator {name!r} must be callable")
+    spec = EstimatorSpec(name, factory, description, train)
     _REGISTRY[name] = spec
     return spec
 
@@ -125,8 +139,14 @@ def _spec(name: str) -> EstimatorSpec:
         raise UnknownEstimatorError(f"unknown estimator {name!r}; valid estimators: {', '.join(_REGISTRY)}") from None
 
 
-def make_estimator(name: str, *, scenario: Scenario | None = None, **options: Any) -> Estimator:
-    """Build the estimator registered as ``name`` for ``scenario`` (options go to its factory)."""
+def estimator_spec(name: str) -> EstimatorSpec:
+    """The registered spec of ``name`` (raises :class:`UnknownEstimatorError`)."""
+    return _spec(name)
+
+
+def make_estimator(name: str, /, *, scenario: Scenario | None = None, **options: Any) -> Estimator:
+    """Build the estimator registered as ``name`` for ``scenario`` (options go to its factory,
+    ``name=`` included: the registry name is positional-only so that it can be renamed)."""
     estimator = _spec(name).factory(scenario=scenario, **options)
     if not isinstance(estimator, Estimator):
         raise TypeError(f"factory of estimator {name!r} returned {type(estimator).__name__}, not an Estimator")

@@ -1,0 +1,1 @@
+"""Baseline estimators and the committed learned-parameter files (``fkn_bench.baselines``)."""

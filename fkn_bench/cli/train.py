@@ -1,0 +1,116 @@
+"""``fkn-bench train``: fit a trainable estimator (FlexKalmanNet, the tuned baselines) to a scenario.
+
+Writes a checkpoint, the training history (CSV), the two training figures (PNG) and the learned
+parameters (JSON) into ``--out`` (default ``runs/<estimator>-<scenario>``); ``--write-artifact``
+also installs the parameters as the committed artefact the estimator runs from by default
+(``baselines/params/<estimator>-<family>.json``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from fkn_bench.cli import UsageError
+from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+
+__all__ = ["add_parser", "parse_options"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "train", help="train FlexKalmanNet or a tuned baseline", description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--estimator", default="flexkalmannet", help="trainable estimator (default: flexkalmannet)")
+    parser.add_argument("--scenario", default="ds1", help="training scenario (default: ds1)")
+    parser.add_argument("--filter", dest="variant", choices=("ekf", "ukf", "mekf"), help="filter variant")
+    parser.add_argument("--objective", choices=("supervised", "nll"), help="training objective")
+    parser.add_argument("--config", metavar="TOML", help="configuration file (options below override it)")
+    parser.add_argument("--epochs", type=int, help="maximum epochs")
+    parser.add_argument("--lr", type=float, help="learning rate")
+    parser.add_argument("--seed", type=int, help="random seed")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE",
+        help="any other config field, e.g. --set hidden=256 --set learn=q_std,r_std (repeatable)",
+    )
+    parser.add_argument("--out", type=Path, help="output directory (default: runs/<estimator>-<scenario>)")
+    parser.add_argument("--resume", action="store_true", help="continue from the checkpoint in --out")
+    parser.add_argument("--write-artifact", action="store_true", help="install the learned parameters as the committed default")
+    parser.add_argument("--json", action="store_true", help="print the summary as one JSON document")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_scenario_file_option(parser)
+    parser.set_defaults(handler=run)
+
+
+def _value(text: str) -> Any:
+    lowered = text.strip().lower()
+    if lowered in ("none", "null"):
+        return None
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    if "," in text:
+        return [part.strip() for part in text.split(",") if part.strip()]
+    return text
+
+
+def parse_options(args: argparse.Namespace) -> dict[str, Any]:
+    """Config overrides from the named options and ``--set KEY=VALUE`` pairs."""
+    options: dict[str, Any] = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"--set expects KEY=VALUE (got {item!r})")
+        options[key.strip()] = _value(value)
+    for name in ("variant", "objective", "epochs", "lr", "seed", "config"):
+        value = getattr(args, name)
+        if value is not None:
+            options[name] = value
+    return options
+
+
+def run(args: argparse.Namespace) -> int:
+    from fkn_bench.estimators import UnknownEstimatorError, estimator_spec, estimator_specs
+    from fkn_bench.scenarios import get_scenario
+
+    load_scenario_files(args)
+    scenario = get_scenario(args.scenario)
+    try:
+        spec = estimator_spec(args.estimator)
+    except UnknownEstimatorError as exc:
+        raise UsageError(str(exc)) from None
+    if spec.train is None:
+        trainable = ", ".join(s.name for s in estimator_specs() if s.trainable)
+        raise UsageError(f"estimator {args.estimator!r} is not trainable; trainable estimators: {trainable}")
+    out = args.out if args.out is not None else Path("runs") / f"{args.estimator}-{scenario.name}"
+    try:
+        summary = spec.train(scenario, out=out, options=parse_options(args), resume=args.resume, progress=not args.no_progress)
+    except (ValueError, TypeError) as exc:
+        raise UsageError(str(exc)) from None
+    if args.write_artifact:
+        from fkn_bench.io import write_bytes_atomic
+        from fkn_bench.training.artifacts import artifact_path
+
+        target = artifact_path(args.estimator, scenario.model_family)
+        write_bytes_atomic(target, Path(summary["artifact"]).read_bytes())
+        summary["installed_artifact"] = str(target)
+    if args.json:
+        print(json.dumps(summary, indent=2, default=str))
+        return 0
+    print(f"trained {summary['estimator']} on {summary['scenario']}: {summary['epochs_run']} epochs, "
+          f"best epoch {summary['best_epoch']}, {summary['seconds']:.1f} s")
+    if "test_rmse" in summary:
+        print(f"  test 13-state RMSE {summary['test_rmse']:.5f} (test split of seed {summary.get('test_seed')})")
+    print(f"  outputs in {summary['out']} (checkpoint, history.csv, loss.png, parameters.png, parameters.json)")
+    if "installed_artifact" in summary:
+        print(f"  installed {summary['installed_artifact']}")
+    sys.stdout.flush()
+    return 0

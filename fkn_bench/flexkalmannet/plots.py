@@ -1,0 +1,59 @@
+"""The paper's two training figures: loss curves (Fig. 3) and learned parameters over epochs (Fig. 4).
+
+Headless (matplotlib's Agg backend); files written atomically.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from fkn_bench.io import atomic_path  # noqa: E402
+
+__all__ = ["plot_losses", "plot_parameters"]
+
+
+def _save(figure: plt.Figure, path: str | Path) -> Path:
+    with atomic_path(path, suffix=".png") as tmp:
+        figure.savefig(tmp, dpi=130, bbox_inches="tight", format="png")
+    plt.close(figure)
+    return Path(path)
+
+
+def plot_losses(history: pd.DataFrame, path: str | Path, *, title: str = "", best_epoch: int | None = None) -> Path:
+    """Training and validation loss per epoch (log scale), the best epoch marked."""
+    figure, axis = plt.subplots(figsize=(6.4, 3.6))
+    axis.plot(history["epoch"], history["train_loss"], label="training loss", color="tab:blue")
+    axis.plot(history["epoch"], history["val_loss"], label="validation loss", color="tab:orange")
+    if best_epoch:
+        axis.axvline(best_epoch, color="0.5", linestyle="--", linewidth=1, label=f"best epoch {best_epoch}")
+    axis.set_xlabel("epoch")
+    axis.set_ylabel("loss (13-state RMSE, or NLL)")
+    if (history[["train_loss", "val_loss"]] > 0).all().all():
+        axis.set_yscale("log")
+    axis.grid(True, alpha=0.3)
+    axis.legend()
+    axis.set_title(title)
+    return _save(figure, path)
+
+
+def plot_parameters(history: pd.DataFrame, path: str | Path, *, title: str = "") -> Path:
+    """The learned standard deviations over epochs: R in one panel, Q in the other (log scale)."""
+    figure, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharex=True)
+    for axis, tag, label in ((axes[0], "sigma_R_", "measurement noise sigma_R"), (axes[1], "sigma_Q_", "process noise sigma_Q")):
+        columns = [c for c in history.columns if c.startswith(tag)]
+        for column in columns:
+            axis.plot(history["epoch"], history[column], label=column[len(tag) :], linewidth=1.2)
+        axis.set_yscale("log")
+        axis.set_xlabel("epoch")
+        axis.set_title(label)
+        axis.grid(True, alpha=0.3)
+        if columns:
+            axis.legend(fontsize=7, ncol=2)
+    figure.suptitle(title)
+    return _save(figure, path)

@@ -1,0 +1,103 @@
+"""Learned-parameter artefacts: the small JSON files that let trained estimators run out of the box.
+
+``fkn-bench train`` writes one next to its checkpoint, and the project commits one per trained
+estimator and model family under ``baselines/params/<estimator>-<family>.json`` (installed as
+``fkn_bench.baselines``), with the provenance of the run that produced it:
+
+``format``, ``format_version``, ``estimator``, ``family`` (the scenario family it applies to,
+e.g. ds1), ``scenario`` (training scenario name and config hash), ``estimator_config`` (a
+:class:`~fkn_bench.estimators.KalmanEstimator` config: variant and noise), ``parameters``
+(the learned values with labels and units), ``training`` (config, best epoch, losses, time,
+test metrics) and ``provenance`` (package and library versions, git commit, machine, command).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import sys
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from fkn_bench.io import read_json, write_json_atomic
+
+__all__ = [
+    "ARTIFACT_FORMAT",
+    "ARTIFACT_FORMAT_VERSION",
+    "ArtifactError",
+    "artifact_path",
+    "write_artifact",
+    "read_artifact",
+    "run_provenance",
+]
+
+ARTIFACT_FORMAT = "fkn-bench-learned-parameters"
+ARTIFACT_FORMAT_VERSION = 1
+
+
+class ArtifactError(ValueError):
+    """A learned-parameter file that is missing, corrupt or of another format/version."""
+
+
+def artifact_path(estimator: str, family: str) -> Path:
+    """Where the committed artefact of ``estimator`` for model family ``family`` lives."""
+    return Path(str(resources.files("fkn_bench.baselines"))) / "params" / f"{estimator}-{family}.json"
+
+
+def run_provenance() -> dict[str, Any]:
+    """Versions, git commit, machine, command line and UTC time of this process."""
+    from fkn_bench.harness.provenance import environment
+
+    return {
+        **environment(),
+        "command": sys.argv,
+        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+
+
+def write_artifact(
+    path: str | Path,
+    *,
+    estimator: str,
+    family: str,
+    scenario: dict[str, Any],
+    estimator_config: dict[str, Any],
+    parameters: dict[str, Any],
+    training: dict[str, Any],
+    provenance: dict[str, Any] | None = None,
+) -> Path:
+    """Write an artefact (see module docstring) atomically."""
+    document = {
+        "format": ARTIFACT_FORMAT,
+        "format_version": ARTIFACT_FORMAT_VERSION,
+        "estimator": estimator,
+        "family": family,
+        "scenario": scenario,
+        "estimator_config": estimator_config,
+        "parameters": parameters,
+        "training": training,
+        "provenance": provenance if provenance is not None else run_provenance(),
+    }
+    return write_json_atomic(path, document)
+
+
+def read_artifact(path: str | Path) -> dict[str, Any]:
+    """Read and check an artefact; raises :class:`ArtifactError` naming the file and problem."""
+    path = Path(path)
+    try:
+        document = read_json(path)
+    except FileNotFoundError:
+        raise ArtifactError(f"learned-parameter file not found: {path}") from None
+    except ValueError as exc:
+        raise ArtifactError(str(exc)) from None
+    if not isinstance(document, dict) or document.get("format") != ARTIFACT_FORMAT:
+        raise ArtifactError(f"{path} is not a learned-parameter file (format '{ARTIFACT_FORMAT}' expected)")
+    if document.get("format_version") != ARTIFACT_FORMAT_VERSION:
+        raise ArtifactError(
+            f"{path} has format version {document.get('format_version')!r}; this fkn-bench reads "
+            f"version {ARTIFACT_FORMAT_VERSION}"
+        )
+    for key in ("estimator", "family", "estimator_config", "parameters"):
+        if key not in document:
+            raise ArtifactError(f"{path} lacks '{key}'")
+    return document

@@ -1,0 +1,130 @@
+"""Training data for filters trained through their recursion: windows of consecutive samples.
+
+A scenario's data set is the episode of its ``dataset_seed`` (the paper's single recording),
+split 80/10/10 into train, val and test (FlexKalmanNet section 4.1). Training uses windows of
+``window`` consecutive samples of the train split (the paper's batch of 512 consecutive samples),
+cut every ``stride`` samples; a batch is a set of windows that run through the filter in
+parallel as its batch axis. Validation runs the filter over the whole val split, as evaluation
+does over the test split.
+
+The measurement schedule of the training windows can differ from the scenario's
+(``train_measurement_every``): training with a measurement at every step and evaluating with one
+every 10 is what the paper's data allow. A different schedule is a different noise realisation
+of the same ground truth (noise draws are keyed by scheduled step, see
+:mod:`fkn_bench.envs.measurements`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from fkn_bench.scenarios import Scenario, get_scenario
+
+__all__ = ["Sequences", "TrainingData"]
+
+
+@dataclass(frozen=True, eq=False)
+class Sequences:
+    """A batch of sequences as torch tensors (batch first).
+
+    Attributes:
+        measurements: ``(B, T, 7)``, NaN where missing.
+        mask: ``(B, T)`` bool.
+        truth: ``(B, T, 13)``.
+    """
+
+    measurements: Tensor
+    mask: Tensor
+    truth: Tensor
+
+    @property
+    def batch_size(self) -> int:
+        return self.measurements.shape[0]
+
+    def select(self, index: Tensor) -> Sequences:
+        return Sequences(self.measurements[index], self.mask[index], self.truth[index])
+
+
+def _split(scenario: Scenario, split: str, every: int, dtype: torch.dtype) -> Sequences:
+    from fkn_bench.envs import generate_episodes
+
+    episode = generate_episodes(scenario.replace(measurement_every=every), [scenario.dataset_seed], split=split)
+    return Sequences(
+        torch.as_tensor(episode.measurements, dtype=dtype),
+        torch.as_tensor(episode.valid),
+        torch.as_tensor(episode.truth, dtype=dtype),
+    )
+
+
+class TrainingData:
+    """Train windows and the validation sequence of a scenario's data set.
+
+    Args:
+        scenario: name or :class:`Scenario`.
+        window: samples per training window (paper: 512).
+        stride: samples between window starts (default: ``window``, non-overlapping).
+        train_measurement_every: measurement schedule of the training windows (default: the
+            scenario's).
+        dtype: tensor dtype (float64 by default).
+    """
+
+    def __init__(
+        self,
+        scenario: str | Scenario,
+        *,
+        window: int = 512,
+        stride: int | None = None,
+        train_measurement_every: int | None = None,
+        dtype: torch.dtype = torch.float64,
+    ) -> None:
+        self.scenario = get_scenario(scenario)
+        if window < 2:
+            raise ValueError(f"window must be >= 2 samples (got {window})")
+        stride = window if stride is None else stride
+        if stride < 1:
+            raise ValueError(f"stride must be >= 1 (got {stride})")
+        self.window, self.stride = int(window), int(stride)
+        self.train_measurement_every = int(train_measurement_every or self.scenario.measurement_every)
+        self.dtype = dtype
+        train = _split(self.scenario, "train", self.train_measurement_every, dtype)
+        length = train.measurements.shape[1]
+        if length < window:
+            raise ValueError(f"the train split has {length} samples, fewer than one window of {window}")
+        starts = torch.arange(0, length - window + 1, stride)
+        index = starts[:, None] + torch.arange(window)[None, :]
+        self.train = Sequences(train.measurements[0][index], train.mask[0][index], train.truth[0][index])
+        self.train_full = train
+        self.val = _split(self.scenario, "val", self.scenario.measurement_every, dtype)
+        valid = train.mask[0]
+        positions = train.measurements[0][valid][:, 4:7]
+        self.position_mean = positions.mean(0)
+        self.position_std = positions.std(0).clamp_min(1e-9)
+
+    @property
+    def n_windows(self) -> int:
+        return self.train.batch_size
+
+    def batches(self, windows_per_batch: int, generator: torch.Generator) -> Iterator[Sequences]:
+        """Shuffled batches of training windows (the last one may be smaller)."""
+        order = torch.randperm(self.n_windows, generator=generator)
+        for start in range(0, self.n_windows, windows_per_batch):
+            yield self.train.select(order[start : start + windows_per_batch])
+
+    def describe(self) -> dict[str, object]:
+        return {
+            "scenario": self.scenario.name,
+            "config_hash": self.scenario.config_hash(),
+            "dataset_seed": self.scenario.dataset_seed,
+            "window": self.window,
+            "stride": self.stride,
+            "windows": self.n_windows,
+            "train_measurement_every": self.train_measurement_every,
+            "val_measurement_every": self.scenario.measurement_every,
+            "position_mean_m": np.round(self.position_mean.numpy(), 6).tolist(),
+            "position_std_m": np.round(self.position_std.numpy(), 6).tolist(),
+        }

@@ -1,0 +1,56 @@
+"""Training objectives through the filter recursion.
+
+* ``supervised``: mean squared error of all 13 state components against the truth, the estimated
+  quaternion compared with the true one of the same sign (FlexKalmanNet section 4.2), excluding
+  the first ``loss_cut`` steps of each sequence (the paper's loss cut, 100). Its square root is
+  the "13-state RMSE" the paper reports as training, validation and test loss.
+* ``nll``: the innovation negative log-likelihood, which needs no ground truth (REFERENCE.md;
+  e.g. Abbeel et al., "Discriminative training of Kalman filters", RSS 2005; Sarkka, Bayesian
+  Filtering and Smoothing, 2013, section 12.3): the mean over update steps after ``loss_cut`` of
+  ``1/2 [m log 2 pi + log det S_k + nu_k^T S_k^-1 nu_k]``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import torch
+from torch import Tensor
+
+from fkn_bench.filters.base import FilterResult
+
+__all__ = ["Objective", "OBJECTIVES", "aligned_state_error", "state_mse", "innovation_nll"]
+
+Objective = Literal["supervised", "nll"]
+OBJECTIVES: tuple[str, ...] = ("supervised", "nll")
+
+
+def aligned_state_error(means: Tensor, truth: Tensor) -> Tensor:
+    """``means - truth`` ``(..., 13)`` with the true quaternion's sign matched to the estimate."""
+    dot = (means[..., :4] * truth[..., :4]).sum(-1, keepdim=True)
+    q_true = torch.where(dot < 0, -truth[..., :4], truth[..., :4])
+    return torch.cat((means[..., :4] - q_true, means[..., 4:] - truth[..., 4:]), dim=-1)
+
+
+def state_mse(means: Tensor, truth: Tensor, loss_cut: int) -> Tensor:
+    """Mean squared 13-state error over steps ``loss_cut:`` of every sequence (a scalar)."""
+    if loss_cut >= means.shape[1]:
+        raise ValueError(f"loss_cut {loss_cut} leaves no steps of {means.shape[1]}")
+    return aligned_state_error(means[:, loss_cut:], truth[:, loss_cut:]).square().mean()
+
+
+def innovation_nll(result: FilterResult, loss_cut: int) -> Tensor:
+    """Mean innovation negative log-likelihood per update after ``loss_cut`` (a scalar)."""
+    if result.innovations is None or result.innovation_covariances is None:
+        raise ValueError("the innovation NLL needs a filter run with store_innovations=True")
+    used = result.updated[:, loss_cut:]
+    if not bool(used.any()):
+        raise ValueError("no measurement updates after the loss cut: the NLL is undefined")
+    nu = result.innovations[:, loss_cut:][used]
+    S = result.innovation_covariances[:, loss_cut:][used]
+    L = torch.linalg.cholesky(S)
+    whitened = torch.linalg.solve_triangular(L, nu.unsqueeze(-1), upper=False).squeeze(-1)
+    log_det = 2.0 * torch.log(torch.diagonal(L, dim1=-2, dim2=-1)).sum(-1)
+    m = nu.shape[-1]
+    return 0.5 * (m * math.log(2.0 * math.pi) + log_det + whitened.square().sum(-1)).mean()

@@ -1,0 +1,268 @@
+"""A training loop for anything that produces filter parameters, trained through the filter.
+
+:class:`NoiseModel` is the interface: ``window_raw(sequences)`` gives the unconstrained parameter
+vector(s) for a batch of sequences (``(B, size)`` constant per sequence, or ``(B, T, size)``
+time-varying) and ``deployed_raw()`` the constant vector used after training. FlexKalmanNet's
+network and the directly tuned EKF both implement it, so they share this loop: Adam,
+``ReduceLROnPlateau`` on the validation loss, early stopping after ``patience`` epochs without
+improvement, fixed seeds, the best epoch's weights restored at the end.
+
+One epoch is one pass over the training windows in shuffled batches; each batch runs through the
+filter variant (any of ekf, ukf, mekf) in parallel and takes one optimiser step. Validation runs
+the variant with the deployed parameters over the whole val split and reports the 13-state RMSE
+(supervised objective) or the innovation NLL (``nll``, which uses no ground truth for model
+selection; the RMSE is logged as a diagnostic only).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from fkn_bench.filters import KalmanFilter, ParameterSet
+from fkn_bench.runtime import torch_threads
+from fkn_bench.training.data import Sequences, TrainingData
+from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
+
+__all__ = ["NoiseModel", "TrainConfig", "Trainer", "EpochRecord"]
+
+
+class NoiseModel(nn.Module, ABC):
+    """Produces unconstrained filter parameters (see module docstring)."""
+
+    parameter_set: ParameterSet
+
+    @abstractmethod
+    def window_raw(self, sequences: Sequences) -> Tensor:
+        """Unconstrained parameters ``(B, size)`` or ``(B, T, size)`` for a batch of sequences."""
+
+    @abstractmethod
+    def deployed_raw(self) -> Tensor:
+        """The constant unconstrained parameters ``(size,)`` used after training."""
+
+
+@dataclass
+class TrainConfig:
+    """Optimisation settings (defaults from the paper's table where it has one).
+
+    Attributes:
+        objective: ``supervised`` (13-state MSE vs truth) or ``nll`` (innovation NLL).
+        epochs: maximum epochs (paper: 100).
+        patience: early stopping after this many epochs without a better validation loss (20).
+        min_improvement: relative decrease of the validation loss that counts as better
+            (1e-4, as ``ReduceLROnPlateau``'s default threshold).
+        lr: Adam learning rate (paper: 1e-5).
+        weight_decay: Adam weight decay (paper: 0).
+        windows_per_batch: windows run in parallel per optimiser step.
+        loss_cut: leading steps of every window excluded from the loss (paper: 100).
+        seed: seed of initialisation and window order (paper: 0).
+        scheduler_factor, scheduler_patience: ``ReduceLROnPlateau`` settings.
+        max_grad_norm: gradient-norm clip (None: off).
+        threads: torch threads during training.
+    """
+
+    objective: str = "supervised"
+    epochs: int = 100
+    patience: int = 20
+    min_improvement: float = 1e-4
+    lr: float = 1e-5
+    weight_decay: float = 0.0
+    windows_per_batch: int = 32
+    loss_cut: int = 100
+    seed: int = 0
+    scheduler_factor: float = 0.5
+    scheduler_patience: int = 5
+    max_grad_norm: float | None = None
+    threads: int = 1
+
+    def __post_init__(self) -> None:
+        if self.objective not in OBJECTIVES:
+            raise ValueError(f"objective must be one of {OBJECTIVES} (got {self.objective!r})")
+        for name in ("epochs", "windows_per_batch", "threads"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1 (got {getattr(self, name)!r})")
+        if self.patience < 1:
+            raise ValueError(f"patience must be >= 1 (got {self.patience!r})")
+        if not (self.lr > 0 and math.isfinite(self.lr)):
+            raise ValueError(f"lr must be a finite number > 0 (got {self.lr!r})")
+        if self.loss_cut < 0:
+            raise ValueError(f"loss_cut must be >= 0 (got {self.loss_cut!r})")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass
+class EpochRecord:
+    """One row of the training history."""
+
+    epoch: int
+    train_loss: float
+    val_loss: float
+    val_rmse: float
+    lr: float
+    seconds: float
+    parameters: dict[str, float] = field(default_factory=dict)
+
+    def flat(self) -> dict[str, float]:
+        row = {k: v for k, v in asdict(self).items() if k != "parameters"}
+        row.update(self.parameters)
+        return row
+
+
+class Trainer:
+    """Trains a :class:`NoiseModel` through ``variant`` on ``data`` (see module docstring)."""
+
+    def __init__(self, model: NoiseModel, variant: KalmanFilter, data: TrainingData, config: TrainConfig) -> None:
+        if config.loss_cut >= data.window:
+            raise ValueError(f"loss_cut ({config.loss_cut}) must be smaller than the window ({data.window})")
+        self.model, self.variant, self.data, self.config = model, variant, data, config
+        self.optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
+            self.optimizer, mode="min", factor=config.scheduler_factor, patience=config.scheduler_patience
+        )
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self.history: list[EpochRecord] = []
+        self.best_loss = math.inf
+        self.best_epoch = 0
+        self.best_state: dict[str, Tensor] = copy.deepcopy(model.state_dict())
+        self.epochs_without_improvement = 0
+
+    # ------------------------------------------------------------------ losses
+    def loss(self, sequences: Sequences, raw: Tensor) -> tuple[Tensor, Tensor | None]:
+        """Objective on ``sequences`` with parameters ``raw``; also the supervised MSE when the
+        truth is used (None for ``nll``)."""
+        noise = self.model.parameter_set.to_noise(raw)
+        nll = self.config.objective == "nll"
+        result = self.variant.run(
+            noise,
+            sequences.measurements,
+            sequences.mask,
+            dt=self.data.scenario.dt,
+            store_covariances=False,
+            store_innovations=nll,
+        )
+        mse = state_mse(result.means, sequences.truth, self.config.loss_cut)
+        if nll:
+            return innovation_nll(result, self.config.loss_cut), mse
+        return mse, mse
+
+    def validate(self) -> tuple[float, float]:
+        """``(validation loss, validation 13-state RMSE)`` with the deployed parameters."""
+        with torch.no_grad():
+            raw = self.model.deployed_raw().expand(self.data.val.batch_size, -1)
+            loss, mse = self.loss(self.data.val, raw)
+        rmse = math.sqrt(float(mse)) if mse is not None else math.nan
+        value = float(loss)
+        return (math.sqrt(value) if self.config.objective == "supervised" else value), rmse
+
+    # ------------------------------------------------------------------ epochs
+    def run_epoch(self) -> float:
+        """One pass over the training windows; returns the mean training loss (RMSE for the
+        supervised objective, NLL otherwise)."""
+        self.model.train()
+        total, count = 0.0, 0
+        for batch in self.data.batches(self.config.windows_per_batch, self.generator):
+            self.optimizer.zero_grad(set_to_none=True)
+            loss, _ = self.loss(batch, self.model.window_raw(batch))
+            if not torch.isfinite(loss):
+                raise FloatingPointError(
+                    f"non-finite training loss at epoch {len(self.history) + 1}: lower the learning rate"
+                )
+            loss.backward()
+            if self.config.max_grad_norm is not None:
+                nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm)
+            self.optimizer.step()
+            total += float(loss.detach()) * batch.batch_size
+            count += batch.batch_size
+        self.model.eval()
+        mean = total / count
+        return math.sqrt(mean) if self.config.objective == "supervised" else mean
+
+    def deployed_parameters(self) -> dict[str, float]:
+        """The deployed standard deviations by name (e.g. ``sigma_Q_qw``)."""
+        with torch.no_grad():
+            raw = self.model.deployed_raw()
+        values = self.model.parameter_set.to_dict(raw)
+        out: dict[str, float] = {}
+        for name, entry in values["entries"].items():
+            tag = name.split("_")[0].upper()
+            if "std" in entry:
+                out.update({f"sigma_{tag}_{label}": float(v) for label, v in zip(entry["labels"], entry["std"])})
+        return out
+
+    def fit(self, *, on_epoch: Callable[[Trainer, EpochRecord], None] | None = None, progress: bool = True) -> list[EpochRecord]:
+        """Train until ``epochs`` or early stopping; restores the best weights. Resumable: a
+        trainer restored with :meth:`load_state_dict` continues from its last epoch."""
+        from tqdm.auto import tqdm
+
+        start = len(self.history) + 1
+        bar = tqdm(
+            range(start, self.config.epochs + 1), desc="train", unit="epoch", disable=not progress, leave=False,
+            initial=start - 1, total=self.config.epochs,
+        )
+        with torch_threads(self.config.threads):
+            for epoch in bar:
+                began = time.perf_counter()
+                train_loss = self.run_epoch()
+                val_loss, val_rmse = self.validate()
+                self.scheduler.step(val_loss)
+                record = EpochRecord(
+                    epoch=epoch,
+                    train_loss=train_loss,
+                    val_loss=val_loss,
+                    val_rmse=val_rmse,
+                    lr=self.optimizer.param_groups[0]["lr"],
+                    seconds=time.perf_counter() - began,
+                    parameters=self.deployed_parameters(),
+                )
+                self.history.append(record)
+                margin = self.config.min_improvement * abs(self.best_loss) if math.isfinite(self.best_loss) else 0.0
+                if val_loss < self.best_loss - margin:
+                    self.best_loss, self.best_epoch = val_loss, epoch
+                    self.best_state = copy.deepcopy(self.model.state_dict())
+                    self.epochs_without_improvement = 0
+                else:
+                    self.epochs_without_improvement += 1
+                bar.set_postfix(train=f"{train_loss:.4g}", val=f"{val_loss:.4g}", lr=f"{record.lr:.1e}", best=self.best_epoch)
+                if on_epoch is not None:
+                    on_epoch(self, record)
+                if self.epochs_without_improvement >= self.config.patience:
+                    break
+        bar.close()
+        self.model.load_state_dict(self.best_state)
+        return self.history
+
+    # ------------------------------------------------------------------ resume
+    def state_dict(self) -> dict[str, Any]:
+        """Everything needed to resume: model, optimiser, scheduler, RNG, history, best."""
+        return {
+            "model": self.model.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "scheduler": self.scheduler.state_dict(),
+            "generator": self.generator.get_state(),
+            "history": [asdict(r) for r in self.history],
+            "best_loss": self.best_loss,
+            "best_epoch": self.best_epoch,
+            "best_state": self.best_state,
+            "epochs_without_improvement": self.epochs_without_improvement,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.model.load_state_dict(state["model"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.scheduler.load_state_dict(state["scheduler"])
+        self.generator.set_state(state["generator"])
+        self.history = [EpochRecord(**r) for r in state["history"]]
+        self.best_loss = float(state["best_loss"])
+        self.best_epoch = int(state["best_epoch"])
+        self.best_state = state["best_state"]
+        self.epochs_without_improvement = int(state["epochs_without_improvement"])

@@ -1,0 +1,145 @@
+"""End-to-end FlexKalmanNet training, checkpoints, artefacts and the deployed estimators (tiny
+networks and short data so the tests stay fast)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from fkn_bench.envs import generate_episodes
+from fkn_bench.estimators import make_estimator
+from fkn_bench.flexkalmannet import (
+    AdaptiveFlexKalmanNetEstimator,
+    CheckpointError,
+    FlexKalmanNetConfig,
+    FlexKalmanNetEstimator,
+    load_checkpoint,
+    train_flexkalmannet,
+)
+from fkn_bench.flexkalmannet.checkpoint import save_checkpoint
+from fkn_bench.scenarios import get_scenario
+from fkn_bench.training.artifacts import ArtifactError, read_artifact
+
+SHORT = get_scenario("ds1", n_steps=2000)
+TINY = FlexKalmanNetConfig(hidden=16, layers=2, epochs=2, window=200, samples_per_window=8, lr=1e-2, loss_cut=50, windows_per_batch=4)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory):
+    out = tmp_path_factory.mktemp("fkn")
+    return train_flexkalmannet(SHORT, TINY, out=out, progress=False)
+
+
+def test_training_writes_checkpoint_history_plots_and_artifact(trained) -> None:
+    out = trained.out
+    for name in ("checkpoint.pt", "history.csv", "loss.png", "parameters.png", "parameters.json"):
+        assert (out / name).is_file(), name
+    history = pd.read_csv(out / "history.csv")
+    assert list(history["epoch"]) == [1, 2]
+    assert {"train_loss", "val_loss", "lr", "sigma_Q_qw", "sigma_R_rz"} <= set(history.columns)
+    artifact = read_artifact(out / "parameters.json")
+    assert artifact["estimator"] == "flexkalmannet" and artifact["family"] == "ds1"
+    assert artifact["training"]["best_epoch"] == trained.best_epoch
+    assert np.isfinite(artifact["training"]["test_rmse"])
+    assert "git_commit" in artifact["provenance"] and "torch" in artifact["provenance"]
+
+
+def test_artifact_and_checkpoint_give_the_same_deployed_filter(trained) -> None:
+    from_artifact = FlexKalmanNetEstimator.from_artifact(trained.artifact)
+    from_checkpoint = FlexKalmanNetEstimator.from_checkpoint(trained.checkpoint)
+    np.testing.assert_allclose(from_artifact.q_std, from_checkpoint.q_std, rtol=1e-12)
+    np.testing.assert_allclose(from_artifact.r_std, from_checkpoint.r_std, rtol=1e-12)
+    factory = make_estimator("flexkalmannet", scenario=SHORT, parameters=str(trained.artifact))
+    np.testing.assert_allclose(factory.q_std, from_artifact.q_std)
+
+
+def test_deployed_estimator_runs_and_round_trips_through_save(trained, tmp_path: Path) -> None:
+    estimator = FlexKalmanNetEstimator.from_artifact(trained.artifact)
+    episodes = generate_episodes(SHORT, 2, split="test")
+    result = estimator.estimate(episodes.measurements, episodes.valid, SHORT.dt)
+    assert np.isfinite(result.means).all()
+    from fkn_bench.estimators import load_estimator
+
+    again = load_estimator(estimator.save(tmp_path / "fkn.json"))
+    assert isinstance(again, FlexKalmanNetEstimator)
+    np.testing.assert_array_equal(again.estimate(episodes.measurements, episodes.valid, SHORT.dt).means, result.means)
+
+
+def test_time_varying_mode_online_matches_batch(trained) -> None:
+    adaptive = AdaptiveFlexKalmanNetEstimator(checkpoint=trained.checkpoint, history=5)
+    episodes = generate_episodes(SHORT, 1, split="test")
+    batch = adaptive.estimate(episodes.measurements, episodes.valid, SHORT.dt).means[0]
+    adaptive.reset(dt=SHORT.dt)
+    online = np.array([adaptive.step({"pose": z, "valid": v}).mean for z, v in zip(episodes.measurements[0][:150], episodes.valid[0][:150])])
+    # the network runs in float32: one measurement at a time vs a batch differs in the last bits
+    np.testing.assert_allclose(online, batch[:150], atol=1e-6)
+    with pytest.raises(ValueError, match="checkpoint"):
+        make_estimator("flexkalmannet", scenario=SHORT, mode="time_varying")
+
+
+def test_resume_continues_from_the_checkpoint(trained, tmp_path: Path) -> None:
+    first = train_flexkalmannet(SHORT, TINY.replace(epochs=1), out=tmp_path, progress=False)
+    assert len(first.history) == 1
+    with pytest.raises(ValueError, match="different config"):
+        train_flexkalmannet(SHORT, TINY.replace(epochs=2, lr=0.5), out=tmp_path, resume=True, progress=False)
+    document = load_checkpoint(tmp_path / "checkpoint.pt")
+    document["config"]["epochs"] = 2
+    save_checkpoint(tmp_path / "checkpoint.pt", {k: v for k, v in document.items() if k not in ("format", "format_version")})
+    resumed = train_flexkalmannet(SHORT, TINY, out=tmp_path, resume=True, progress=False)
+    assert list(resumed.history["epoch"]) == [1, 2]
+    assert resumed.history["val_loss"].iloc[0] == first.history["val_loss"].iloc[0]
+
+
+def test_corrupt_and_foreign_checkpoints_are_refused(trained, tmp_path: Path) -> None:
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(trained.checkpoint.read_bytes()[:1000])
+    with pytest.raises(CheckpointError, match="truncated or corrupt"):
+        load_checkpoint(truncated)
+    with pytest.raises(CheckpointError, match="not found"):
+        load_checkpoint(tmp_path / "missing.pt")
+    foreign = tmp_path / "foreign.pt"
+    torch.save({"weights": torch.zeros(3)}, foreign)
+    with pytest.raises(CheckpointError, match="not a FlexKalmanNet checkpoint"):
+        load_checkpoint(foreign)
+    future = tmp_path / "future.pt"
+    torch.save({"format": "fkn-bench-flexkalmannet", "format_version": 99}, future)
+    with pytest.raises(CheckpointError, match="version 99"):
+        load_checkpoint(future)
+    document = load_checkpoint(trained.checkpoint)
+    document["config"]["hidden"] = 32  # weights no longer fit
+    mismatched = tmp_path / "mismatched.pt"
+    save_checkpoint(mismatched, {k: v for k, v in document.items() if k not in ("format", "format_version")})
+    with pytest.raises(CheckpointError, match="do not match"):
+        FlexKalmanNetEstimator.from_checkpoint(mismatched)
+
+
+def test_bad_artifacts_are_refused(tmp_path: Path) -> None:
+    path = tmp_path / "p.json"
+    path.write_text(json.dumps({"format": "something-else"}))
+    with pytest.raises(ArtifactError, match="not a learned-parameter file"):
+        FlexKalmanNetEstimator.from_artifact(path)
+    path.write_text("{not json")
+    with pytest.raises(ArtifactError, match="not valid JSON"):
+        read_artifact(path)
+
+
+def test_cli_trains_and_reports_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from fkn_bench.cli import main
+
+    code = main([
+        "train", "--estimator", "flexkalmannet", "--scenario", "ds1", "--epochs", "1", "--no-progress", "--json",
+        "--out", str(tmp_path), "--set", "hidden=8", "--set", "layers=1", "--set", "window=200",
+        "--set", "loss_cut=50", "--set", "samples_per_window=4", "--set", "windows_per_batch=64",
+    ])
+    assert code == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["epochs_run"] == 1 and Path(summary["checkpoint"]).is_file()
+    assert main(["train", "--estimator", "manual-ekf", "--no-progress"]) == 2
+    assert "not trainable" in capsys.readouterr().err
+    assert main(["train", "--estimator", "flexkalmannet", "--set", "hiddn=3", "--no-progress", "--out", str(tmp_path / "x")]) == 2
+    assert "hiddn" in capsys.readouterr().err

@@ -1,0 +1,44 @@
+"""Training windows of a scenario's data set."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from fkn_bench.envs import generate_episodes
+from fkn_bench.scenarios import get_scenario
+from fkn_bench.training import TrainingData
+
+SHORT = get_scenario("ds1", n_steps=4000)
+
+
+def test_windows_are_consecutive_samples_of_the_train_split() -> None:
+    data = TrainingData(SHORT, window=500, stride=250, train_measurement_every=1)
+    full = generate_episodes(SHORT.replace(measurement_every=1), [SHORT.dataset_seed], split="train")
+    assert data.n_windows == (3200 - 500) // 250 + 1
+    assert torch.equal(data.train.truth[1], torch.as_tensor(full.truth[0, 250:750]))
+    assert torch.equal(data.train.mask[3], torch.as_tensor(full.valid[0, 750:1250]))
+    assert bool(data.train.mask.all())  # a measurement every step
+
+
+def test_validation_uses_the_scenario_schedule_and_positions_are_normalised() -> None:
+    data = TrainingData(SHORT, window=400, train_measurement_every=1)
+    assert data.val.measurements.shape == (1, 400, 7)
+    assert data.val.mask.float().mean().item() == pytest.approx(0.1)
+    assert torch.allclose(data.position_mean, torch.tensor(SHORT.position0, dtype=torch.float64), atol=0.02)
+    assert torch.allclose(data.position_std, torch.full((3,), 0.1, dtype=torch.float64), rtol=0.1)
+
+
+def test_batches_cover_every_window_once_in_a_seeded_order() -> None:
+    data = TrainingData(SHORT, window=400, stride=200)
+    seen = [b.truth[:, 0, 4:7] for b in data.batches(4, torch.Generator().manual_seed(0))]
+    again = [b.truth[:, 0, 4:7] for b in data.batches(4, torch.Generator().manual_seed(0))]
+    assert sum(len(s) for s in seen) == data.n_windows
+    assert all(torch.equal(a, b) for a, b in zip(seen, again))
+
+
+def test_bad_windows_are_refused() -> None:
+    with pytest.raises(ValueError, match="window"):
+        TrainingData(SHORT, window=1)
+    with pytest.raises(ValueError, match="fewer than one window"):
+        TrainingData(SHORT, window=5000)
