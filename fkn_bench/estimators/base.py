@@ -229,9 +229,21 @@ class Estimator(ABC):
 
     @classmethod
     def load(cls, path: str | Path) -> Estimator:
-        """Read an estimator written by :meth:`save` (see :func:`read_estimator_document`)."""
+        """Read an estimator written by :meth:`save` (see :func:`read_estimator_document`).
+
+        Raises :class:`EstimatorFileError` when the file was saved by another class (use
+        :func:`~fkn_bench.estimators.load_estimator`, which picks the class from the file) or when
+        its config does not rebuild the estimator.
+        """
         document = read_estimator_document(path)
-        return cls.from_config(document["config"])
+        target = f"{cls.__module__}:{cls.__qualname__}"
+        saved = document.get("class", target)
+        if saved != target:
+            raise EstimatorFileError(f"{path} holds a {saved} estimator, not a {target}; load it with load_estimator()")
+        try:
+            return cls.from_config(document["config"])
+        except (TypeError, ValueError) as exc:
+            raise EstimatorFileError(f"{path}: invalid {cls.__name__} config: {exc}") from None
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"

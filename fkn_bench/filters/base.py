@@ -25,6 +25,7 @@ Everything is a differentiable torch operation; gradients flow into every tensor
 
 from __future__ import annotations
 
+import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -79,6 +80,36 @@ class FilterResult:
 def _select(condition: Tensor, a: Tensor, b: Tensor) -> Tensor:
     """``where(condition, a, b)`` with ``condition (B,)`` broadcast over trailing axes."""
     return torch.where(condition.view(-1, *([1] * (a.dim() - 1))), a, b)
+
+
+def _check_dt(dt: float) -> float:
+    try:
+        step = float(dt)
+    except (TypeError, ValueError):
+        raise ValueError(f"dt must be a number (got {dt!r})") from None
+    if not math.isfinite(step) or step <= 0:
+        raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
+    return step
+
+
+def _check_noise_shapes(noise: NoiseParameters, batch: int, steps: int, k: int, m: int) -> None:
+    """``Q``, ``P0`` must be ``(..., k, k)`` and ``R`` ``(..., m, m)`` with leading axes ``()``,
+    ``(B,)`` or ``(B, T)`` (a leading 1 broadcasts over the batch)."""
+    for name, matrix, dim in (("process", noise.process, k), ("measurement", noise.measurement, m), ("initial", noise.initial, k)):
+        shape = tuple(matrix.shape)
+        lead = shape[:-2]
+        ok = (
+            len(shape) >= 2
+            and shape[-2:] == (dim, dim)
+            and len(lead) <= 2
+            and (not lead or lead[0] in (1, batch))
+            and (len(lead) < 2 or lead[1] == steps)
+        )
+        if not ok:
+            raise ValueError(
+                f"noise.{name} must have shape ({dim}, {dim}), (B, {dim}, {dim}) or (B, T, {dim}, {dim}) "
+                f"with B = {batch}, T = {steps} (got {shape})"
+            )
 
 
 class KalmanFilter(ABC):
@@ -138,7 +169,7 @@ class KalmanFilter(ABC):
             noise: ``Q``, ``R``, ``P0`` with leading axes ``()``, ``(B,)`` or ``(B, T)``.
             measurements: ``(B, T, m)``; entries outside ``mask`` are ignored (may be NaN).
             mask: ``(B, T)`` bool, True where a measurement exists.
-            dt: step length, s.
+            dt: step length, s (finite and > 0, else ``ValueError``).
             initial: start every sequence from this state at ``t = 0`` instead of initialising
                 from its first measurement.
             store_covariances, store_innovations: keep per-step covariances / innovations.
@@ -153,8 +184,10 @@ class KalmanFilter(ABC):
         dtype = measurements.dtype
         if not dtype.is_floating_point:
             raise ValueError(f"measurements must be floating point (got {dtype})")
-        if steps == 0:
-            raise ValueError("measurements hold no time steps (T = 0)")
+        if batch == 0 or steps == 0:
+            raise ValueError(f"measurements hold no sequences or no time steps (shape {tuple(measurements.shape)})")
+        dt = _check_dt(dt)
+        _check_noise_shapes(noise, batch, steps, self.covariance_dim, self.innovation_dim)
         noise = noise.to(dtype)
         time_varying = noise.time_varying
         z_all, usable = self.model.sanitize(measurements, mask.bool())

@@ -96,10 +96,10 @@ class PoseTwistModel(StateSpaceModel):
     """FlexKalmanNet's additive-quaternion pose-and-twist model (see module docstring).
 
     Hooks: measured quaternions are renormalised, and dropped when their norm is below
-    ``min_quaternion_norm`` (documented rule: a zero quaternion carries no attitude); the
-    measured quaternion's sign is aligned with the prediction before the innovation is formed
-    (``q`` and ``-q`` are the same attitude); after an update the state quaternion is
-    renormalised and the covariance projected with the normalisation's Jacobian
+    ``min_quaternion_norm`` or not finite (documented rule: a zero quaternion carries no
+    attitude); the measured quaternion's sign is aligned with the prediction before the
+    innovation is formed (``q`` and ``-q`` are the same attitude); after an update the state
+    quaternion is renormalised and the covariance projected with the normalisation's Jacobian
     ``N = (I - q q^T) / |q|``.
     """
 
@@ -155,7 +155,8 @@ class PoseTwistModel(StateSpaceModel):
         finite = torch.isfinite(measurements).all(-1)
         z = torch.where(finite[..., None], measurements, torch.zeros_like(measurements))
         norm = z[..., :4].norm(dim=-1, keepdim=True)
-        usable = mask & finite & (norm[..., 0] >= self.min_quaternion_norm)
+        # a norm that overflows (components ~1e155 and up) leaves no usable direction either
+        usable = mask & finite & (norm[..., 0] >= self.min_quaternion_norm) & torch.isfinite(norm[..., 0])
         q = torch.where(usable[..., None], z[..., :4] / norm.clamp_min(self.min_quaternion_norm), z[..., :4])
         z = torch.cat((q, z[..., 4:]), dim=-1)
         return torch.where(usable[..., None], z, torch.zeros_like(z)), usable

@@ -105,12 +105,12 @@ def initial_state(z: ArrayF) -> ArrayF:
 
 def sanitize_measurement(z: ArrayF) -> ArrayF | None:
     """The measurement with a unit quaternion, or ``None`` when it is unusable (non-finite
-    entries, or a quaternion of norm below :data:`MIN_QUATERNION_NORM`): the documented rule is
-    to skip the update."""
+    entries, or a quaternion of norm below :data:`MIN_QUATERNION_NORM` or whose norm overflows):
+    the documented rule is to skip the update."""
     if not np.all(np.isfinite(z)):
         return None
     norm = np.sqrt(z[0] ** 2 + z[1] ** 2 + z[2] ** 2 + z[3] ** 2)
-    if norm < MIN_QUATERNION_NORM:
+    if not norm >= MIN_QUATERNION_NORM or not np.isfinite(norm):  # tiny, or |q|^2 overflowed
         return None
     out = np.array(z, dtype=float)
     out[0:4] /= norm

@@ -261,7 +261,8 @@ class ParameterSet:
         return out
 
     def from_dict(self, data: Mapping[str, Any], dtype: torch.dtype = torch.float64) -> Tensor:
-        """Unconstrained vector for a dict written by :meth:`to_dict` (labels are checked)."""
+        """Unconstrained vector for a dict written by :meth:`to_dict` (labels, and units where
+        the dict records them, are checked)."""
         entries = data.get("entries", {})
         parts = []
         for e in self._entries:
@@ -270,13 +271,17 @@ class ParameterSet:
             entry = entries[e.name]
             if list(entry.get("labels", [])) != list(self.layout.labels(e.name)):
                 raise ValueError(f"entry '{e.name}' labels {entry.get('labels')} do not match {list(self.layout.labels(e.name))}")
+            if "units" in entry and list(entry["units"]) != list(self.layout.units(e.name)):
+                raise ValueError(f"entry '{e.name}' units {entry['units']} do not match {list(self.layout.units(e.name))}")
             if e.name.endswith("_std"):
                 values = torch.as_tensor(entry["std"], dtype=dtype)
-                if values.shape != (e.dim,) or not bool(torch.all(values > 0)):
-                    raise ValueError(f"entry '{e.name}' needs {e.dim} positive standard deviations")
+                if values.shape != (e.dim,) or not bool(torch.all((values > 0) & torch.isfinite(values))):
+                    raise ValueError(f"entry '{e.name}' needs {e.dim} positive finite standard deviations")
                 parts.append(_inverse_positivity(values, self.positivity))
             else:
                 factor = torch.as_tensor(entry["cholesky"], dtype=dtype)
+                if factor.shape != (e.dim, e.dim) or not bool(torch.isfinite(factor).all()):
+                    raise ValueError(f"entry '{e.name}' needs a {e.dim}x{e.dim} finite Cholesky factor (got shape {tuple(factor.shape)})")
                 rows, cols = torch.tril_indices(e.dim, e.dim)
                 lower = factor[rows, cols]
                 if not bool(torch.all(factor.diagonal() > 0)):

@@ -13,7 +13,9 @@ measurement update equals the Kalman update exactly, so the update reuses the EK
 
 The posterior covariance of the pose model is singular along the quaternion (the projection
 removes that direction, which the model names through ``null_direction``). The sigma points are
-then drawn from ``P + eps_n e e^T`` with ``e`` that unit direction and ``eps_n = 1e-10 max diag(P)``:
+then drawn from ``P + eps_n e e^T`` with ``e`` that unit direction and
+``eps_n = max(1e-10, 100 eps_machine) max diag(P)`` (1e-10 in float64; in float32 1e-10 is below
+the rounding of a 13x13 Cholesky factorisation, which then failed at about one step in ten):
 full rank for the Cholesky factor, and the tangent-space spread unchanged. A Cholesky failure
 that remains (it should not) falls back to ``P + sqrt(eps) mean(diag(P)) I`` for that row.
 """
@@ -77,7 +79,7 @@ class UnscentedKalmanFilter(KalmanFilter):
         batch, n = x.shape
         direction = self.model.null_direction(x)
         if direction is not None:
-            eps = 1e-10 * P.diagonal(dim1=1, dim2=2).amax(1)
+            eps = max(1e-10, 100.0 * torch.finfo(P.dtype).eps) * P.diagonal(dim1=1, dim2=2).amax(1)
             P = P + eps[:, None, None] * (direction[:, :, None] * direction[:, None, :])
         L = _safe_cholesky(P) * self._scale
         spread = L.transpose(1, 2)  # rows are the columns of L

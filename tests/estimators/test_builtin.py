@@ -1,0 +1,57 @@
+"""The built-in estimators: the paper's manual tuning on each variant, and the oracle EKF."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fkn_bench.estimators import KalmanEstimator, make_estimator
+from fkn_bench.estimators.builtin import manual_estimator, oracle_ekf
+from fkn_bench.estimators.oracle import oracle_noise
+from fkn_bench.scenarios import get_scenario
+
+PAPER_Q = [0.005] * 4 + [1e-4] * 3 + [0.005] * 3 + [1e-4] * 3  # FlexKalmanNet section 4.3
+PAPER_R = [0.1] * 7
+
+
+def test_manual_ekf_and_ukf_use_the_papers_tuning() -> None:
+    for variant in ("ekf", "ukf"):
+        estimator = make_estimator(f"manual-{variant}")
+        assert isinstance(estimator, KalmanEstimator) and estimator.variant_name == variant
+        assert estimator.name == f"manual-{variant}" and variant.upper() in estimator.description
+        config = estimator.to_config()
+        assert config["q_std"] == PAPER_Q and config["r_std"] == PAPER_R
+        assert config["p0_std"] == [0.1] * 7 + [0.2] * 3 + [0.05] * 3
+
+
+def test_manual_mekf_maps_the_tuning_to_the_error_state() -> None:
+    config = make_estimator("manual-mekf").to_config()
+    assert config["variant"] == "mekf"
+    # quaternion-component std s -> attitude std 2 s (rad)
+    assert config["r_std"] == [0.2] * 3 + [0.1] * 3
+    assert config["q_std"] == [0.01] * 3 + [1e-4] * 3 + [0.005] * 3 + [1e-4] * 3
+    assert config["p0_std"] == [0.2] * 3 + [0.1] * 3 + [0.2] * 3 + [0.05] * 3
+
+
+def test_factories_take_a_scenario_and_options() -> None:
+    scenario = get_scenario("ds2")
+    estimator = make_estimator("manual-ekf", scenario=scenario, name="mine", r_std=[0.2] * 7)
+    assert estimator.name == "mine" and estimator.to_config()["r_std"] == [0.2] * 7
+    assert manual_estimator("mekf")().variant_name == "mekf"  # type: ignore[attr-defined]
+    with pytest.raises(ValueError, match="unknown filter variant"):
+        manual_estimator("pf")()
+
+
+def test_oracle_ekf_uses_the_scenarios_true_noise() -> None:
+    scenario = get_scenario("ds1-noise5x")
+    estimator = make_estimator("oracle-ekf", scenario=scenario)
+    q_std, r_std = oracle_noise(scenario)
+    config = estimator.to_config()
+    assert config["variant"] == "ekf" and estimator.name == "oracle-ekf"
+    np.testing.assert_array_equal(config["q_std"], q_std)
+    np.testing.assert_array_equal(config["r_std"], r_std)
+    assert "ds1-noise5x" in estimator.description
+    with pytest.raises(ValueError, match="oracle-ekf needs the scenario whose true noise it uses"):
+        make_estimator("oracle-ekf")
+    with pytest.raises(ValueError, match="needs the scenario"):
+        oracle_ekf()

@@ -1,0 +1,165 @@
+"""The estimator registry: built-in names, unknown names, third-party registration, entry
+points."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import sys
+import types
+import warnings
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+import pytest
+
+from fkn_bench.estimators import (
+    ENTRY_POINT_GROUP,
+    Estimate,
+    Estimates,
+    Estimator,
+    EstimatorSpec,
+    KalmanEstimator,
+    UnknownEstimatorError,
+    estimator_names,
+    estimator_specs,
+    make_estimator,
+    register_estimator,
+)
+from fkn_bench.estimators import registry
+from fkn_bench.scenarios import Scenario, get_scenario
+
+BUILTIN = ["manual-ekf", "manual-ukf", "manual-mekf", "oracle-ekf"]
+
+
+@pytest.fixture(autouse=True)
+def isolated_registry() -> Iterator[None]:
+    """Snapshot the registry (with the built-ins loaded) and restore it afterwards, so that
+    nothing registered here leaks into other tests."""
+    registry._ensure_loaded()
+    saved, loaded = dict(registry._REGISTRY), registry._LOADED
+    yield
+    registry._REGISTRY.clear()
+    registry._REGISTRY.update(saved)
+    registry._LOADED = loaded
+
+
+class Constant(Estimator):
+    """A third-party estimator: always the same state."""
+
+    name = "constant"
+
+    def __init__(self, *, scenario: Scenario | None = None, level: float = 0.0) -> None:
+        self.scenario, self.level = scenario, level
+
+    def estimate(self, measurements, mask, dt):  # noqa: ANN001, ANN201
+        means = np.zeros(np.shape(mask) + (13,))
+        means[..., 0] = 1.0
+        return Estimates(means=means)
+
+    def reset(self, *, dt: float) -> None:
+        pass
+
+    def step(self, observation: Any) -> Estimate:
+        return Estimate(time=0.0, mean=np.eye(13)[0], native_covariance=np.eye(13), initialised=True, updated=False)
+
+    def to_config(self) -> dict[str, Any]:
+        return {"level": self.level}
+
+
+def test_builtin_names_are_listed() -> None:
+    names = estimator_names()
+    assert names[:4] == BUILTIN
+    specs = {spec.name: spec for spec in estimator_specs()}
+    for name in BUILTIN:
+        assert isinstance(specs[name], EstimatorSpec) and specs[name].description
+        assert not specs[name].trainable
+    assert isinstance(make_estimator("manual-ukf"), KalmanEstimator)
+
+
+def test_unknown_name_lists_the_valid_ones() -> None:
+    with pytest.raises(UnknownEstimatorError) as info:
+        make_estimator("manual-pf")
+    message = str(info.value)
+    assert message.startswith("unknown estimator 'manual-pf'; valid estimators: ")
+    for name in BUILTIN:
+        assert name in message
+    assert isinstance(info.value, KeyError)  # a KeyError whose str() is not quoted
+    assert not message.startswith("'")
+
+
+def test_register_a_third_party_estimator() -> None:
+    spec = register_estimator("constant", Constant, description="always identity")
+    assert isinstance(spec, EstimatorSpec)
+    assert (spec.name, spec.factory, spec.description) == ("constant", Constant, "always identity")
+    assert "constant" in estimator_names() and estimator_names()[:4] == BUILTIN
+    scenario = get_scenario("ds2")
+    made = make_estimator("constant", scenario=scenario, level=3.0)
+    assert isinstance(made, Constant) and made.scenario is scenario and made.level == 3.0
+    # duplicates are refused unless asked for
+    with pytest.raises(ValueError, match=r"estimator 'constant' is already registered \(pass overwrite=True to replace it\)"):
+        register_estimator("constant", Constant)
+    with pytest.raises(ValueError, match="already registered"):
+        register_estimator("manual-ekf", Constant)
+    register_estimator("constant", lambda scenario=None, **o: Constant(level=-1.0), overwrite=True)
+    assert make_estimator("constant").level == -1.0  # type: ignore[attr-defined]
+
+
+def test_register_refuses_bad_names_and_factories() -> None:
+    for name in ("", "my filter", "tab\tname", None):
+        with pytest.raises(ValueError, match="non-empty string without spaces"):
+            register_estimator(name, Constant)  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="factory for estimator 'x' must be callable"):
+        register_estimator("x", "not callable")  # type: ignore[arg-type]
+    register_estimator("returns-dict", lambda scenario=None: {"not": "an estimator"})
+    with pytest.raises(TypeError, match="factory of estimator 'returns-dict' returned dict, not an Estimator"):
+        make_estimator("returns-dict")
+
+
+def _fake_plugin(monkeypatch: pytest.MonkeyPatch, entries: list[importlib.metadata.EntryPoint]) -> None:
+    module = types.ModuleType("fake_fkn_plugin")
+    module.make_constant = lambda scenario=None, **options: Constant(scenario=scenario, level=7.0)  # type: ignore[attr-defined]
+    monkeypatch.setitem(sys.modules, "fake_fkn_plugin", module)
+    groups: list[str] = []
+
+    def entry_points(*, group: str) -> list[importlib.metadata.EntryPoint]:
+        groups.append(group)
+        return [e for e in entries if e.group == group]
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", entry_points)
+    monkeypatch.setattr(registry, "_LOADED", False)
+    monkeypatch.setattr(registry, "_fake_groups", groups, raising=False)
+
+
+def test_entry_points_are_picked_up(monkeypatch: pytest.MonkeyPatch) -> None:
+    entries = [
+        importlib.metadata.EntryPoint("plugin-constant", "fake_fkn_plugin:make_constant", ENTRY_POINT_GROUP),
+        importlib.metadata.EntryPoint("other-group", "fake_fkn_plugin:make_constant", "some.other.group"),
+        # a plugin may not replace a built-in: skipped
+        importlib.metadata.EntryPoint("manual-ekf", "fake_fkn_plugin:make_constant", ENTRY_POINT_GROUP),
+    ]
+    _fake_plugin(monkeypatch, entries)
+    names = estimator_names()
+    assert registry._fake_groups == [ENTRY_POINT_GROUP]  # type: ignore[attr-defined]
+    assert "plugin-constant" in names and "other-group" not in names
+    made = make_estimator("plugin-constant", scenario=get_scenario("ds1"))
+    assert isinstance(made, Constant) and made.level == 7.0
+    assert isinstance(make_estimator("manual-ekf"), KalmanEstimator)
+    spec = {s.name: s for s in estimator_specs()}["plugin-constant"]
+    assert spec.description == "plugin fake_fkn_plugin:make_constant"
+    # loaded once: later calls do not query the entry points again
+    estimator_names()
+    assert registry._fake_groups == [ENTRY_POINT_GROUP]  # type: ignore[attr-defined]
+
+
+def test_a_broken_entry_point_warns_and_the_rest_loads(monkeypatch: pytest.MonkeyPatch) -> None:
+    entries = [
+        importlib.metadata.EntryPoint("broken", "no_such_plugin_module_xyz:factory", ENTRY_POINT_GROUP),
+        importlib.metadata.EntryPoint("plugin-constant", "fake_fkn_plugin:make_constant", ENTRY_POINT_GROUP),
+    ]
+    _fake_plugin(monkeypatch, entries)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        names = estimator_names()
+    assert any("could not load estimator entry point 'broken'" in str(w.message) for w in caught)
+    assert "broken" not in names and "plugin-constant" in names and names[:4] == BUILTIN

@@ -1,0 +1,142 @@
+"""fkn_bench.io: atomic writes, JSON conversion, checked reads."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from fkn_bench import io
+
+
+def _listing(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+def test_atomic_writes_create_parents_and_leave_no_temp_files(tmp_path: Path) -> None:
+    target = tmp_path / "a" / "b" / "file.txt"
+    assert io.write_text_atomic(target, "héllo\n") == target
+    assert target.read_text(encoding="utf-8") == "héllo\n"
+    io.write_bytes_atomic(target, b"\x00\x01")
+    assert target.read_bytes() == b"\x00\x01"
+    io.write_json_atomic(tmp_path / "a" / "doc.json", {"x": 1})
+    assert (tmp_path / "a" / "doc.json").read_text() == '{\n  "x": 1\n}\n'
+    assert _listing(tmp_path / "a") == ["b", "doc.json"] and _listing(tmp_path / "a" / "b") == ["file.txt"]
+
+
+def test_atomic_path_for_named_writers(tmp_path: Path) -> None:
+    target = tmp_path / "tensor.pt"
+    with io.atomic_path(target, suffix=".pt") as tmp:
+        assert tmp.parent == tmp_path and tmp.name.startswith(".tensor.pt.") and tmp.name.endswith(".pt.tmp")
+        torch.save(torch.arange(3), tmp)
+        assert not target.exists()  # only visible once complete
+    assert torch.equal(torch.load(target), torch.arange(3))
+    assert _listing(tmp_path) == ["tensor.pt"]
+
+
+def test_a_failed_write_keeps_the_old_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    target = tmp_path / "doc.json"
+    io.write_json_atomic(target, {"version": 1})
+    before = target.read_bytes()
+    # failure inside the writer
+    with pytest.raises(RuntimeError, match="writer failed"):
+        with io.atomic_path(target) as tmp:
+            tmp.write_text("half a docu")
+            raise RuntimeError("writer failed")
+    # failure while syncing to disk, after everything was written
+    def no_fsync(fd: int) -> None:
+        raise OSError("device lost")
+
+    monkeypatch.setattr(io.os, "fsync", no_fsync)
+    with pytest.raises(OSError, match="device lost"):
+        io.write_json_atomic(target, {"version": 2})
+    monkeypatch.undo()
+    # failure converting the document: nothing written at all
+    with pytest.raises(TypeError, match="cannot convert object to JSON"):
+        io.write_json_atomic(target, {"bad": object()})
+    assert target.read_bytes() == before
+    assert _listing(tmp_path) == ["doc.json"]
+
+
+def test_replace_is_atomic_for_readers(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The target is only ever replaced by os.replace of a complete, synced file."""
+    target = tmp_path / "doc.json"
+    seen: list[str] = []
+    real_replace = os.replace
+
+    def spy(src: str, dst: str) -> None:
+        seen.append(Path(src).read_text())
+        assert not target.exists() or json.loads(target.read_text()) == {"n": 1}
+        real_replace(src, dst)
+
+    io.write_json_atomic(target, {"n": 1})
+    monkeypatch.setattr(io.os, "replace", spy)
+    io.write_json_atomic(target, {"n": 2})
+    assert seen == ['{\n  "n": 2\n}\n'] and json.loads(target.read_text()) == {"n": 2}
+
+
+def test_to_jsonable() -> None:
+    value = {
+        1: np.float64(1.5),
+        "nan": math.nan,
+        "inf": -math.inf,
+        "array": np.array([[1.0, np.nan], [np.inf, 2.0]]),
+        "ints": np.arange(3, dtype=np.int32),
+        "scalar": np.int64(7),
+        "bool": np.bool_(True),
+        "tuple": (Path("/x/y"), None, "s"),
+        "tensor": torch.tensor([0.5, float("nan")]),
+        "nested": [{"a": np.float32(0.25)}],
+    }
+    out = io.to_jsonable(value)
+    assert out == {
+        "1": 1.5,
+        "nan": None,
+        "inf": None,
+        "array": [[1.0, None], [None, 2.0]],
+        "ints": [0, 1, 2],
+        "scalar": 7,
+        "bool": True,
+        "tuple": ["/x/y", None, "s"],
+        "tensor": [0.5, None],
+        "nested": [{"a": 0.25}],
+    }
+    assert type(out["scalar"]) is int and type(out["bool"]) is bool
+    json.dumps(out, allow_nan=False)  # strict JSON
+    with pytest.raises(TypeError, match="cannot convert set to JSON"):
+        io.to_jsonable({1, 2})
+
+
+def test_read_json_names_the_file(tmp_path: Path) -> None:
+    good = tmp_path / "good.json"
+    good.write_text('{"a": [1, 2]}')
+    assert io.read_json(good) == {"a": [1, 2]}
+    with pytest.raises(FileNotFoundError, match=r"file not found: .*missing\.json"):
+        io.read_json(tmp_path / "missing.json")
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"a": ')
+    with pytest.raises(ValueError, match=r"broken\.json is not valid JSON: Expecting value: line 1 column 7"):
+        io.read_json(broken)
+    binary = tmp_path / "binary.json"
+    binary.write_bytes(b"\xff\xfe{}")
+    with pytest.raises(ValueError, match=r"binary\.json is not UTF-8 text"):
+        io.read_json(binary)
+    round_trip = io.write_json_atomic(tmp_path / "rt.json", {"x": np.array([1.0, np.nan])})
+    assert io.read_json(round_trip) == {"x": [1.0, None]}
+
+
+def test_written_files_get_the_usual_permissions(tmp_path: Path) -> None:
+    """mkstemp creates 0600 files; the atomic writers give the result 0666 minus the umask."""
+    previous = os.umask(0o022)
+    try:
+        path = io.write_text_atomic(tmp_path / "shared.txt", "x")
+        assert path.stat().st_mode & 0o777 == 0o644
+        os.umask(0o077)
+        assert io.write_json_atomic(tmp_path / "private.json", {}).stat().st_mode & 0o777 == 0o600
+    finally:
+        os.umask(previous)
