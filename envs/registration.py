@@ -10,7 +10,7 @@ import gymnasium as gym
 
 __all__ = ["register_environments", "ENV_IDS"]
 
-ENV_IDS: tuple[str, ...] = ("AstrobeeTumble-v0",)
+ENV_IDS: tuple[str, ...] = ("AstrobeeTumble-v0", "AstrobeeReplay-v0")
 
 
 def register_environments() -> None:
@@ -20,5 +20,12 @@ def register_environments() -> None:
             id="AstrobeeTumble-v0",
             entry_point="fkn_bench.envs.astrobee_tumble:AstrobeeTumbleEnv",
             vector_entry_point="fkn_bench.envs.astrobee_tumble_vector:AstrobeeTumbleVectorEnv",
+            disable_env_checker=False,
+        )
+    if "AstrobeeReplay-v0" not in gym.registry:
+        # a recording replayed through the estimator loop (fkn_bench.recordings); no vector version
+        gym.register(
+            id="AstrobeeReplay-v0",
+            entry_point="fkn_bench.envs.astrobee_replay:AstrobeeReplayEnv",
             disable_env_checker=False,
         )

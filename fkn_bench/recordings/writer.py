@@ -1,0 +1,569 @@
+"""Write episodes as MCAP recordings that ROS 2 tools and Foxglove open.
+
+One file holds one episode (:func:`write_recording` for arrays, :func:`record_episode` for an
+:class:`~fkn_bench.envs.Episodes` row and its :class:`~fkn_bench.estimators.Estimates`,
+:func:`record` to generate, estimate and write in one call).
+
+Topics (:class:`RecordingTopics`; a ``namespace`` such as ``/honey`` is prepended to each), all
+with ``header.frame_id = "world"``:
+
+* ``/loc/truth/pose`` (``geometry_msgs/msg/PoseStamped``, cdr): the true pose, every step;
+* ``/loc/truth/twist`` (``geometry_msgs/msg/TwistStamped``, cdr): the true twist, every step;
+* ``/fkn_bench/measured_pose`` (``geometry_msgs/msg/PoseStamped``, cdr): the measured pose at
+  the steps that have one (missing measurements are simply absent);
+* ``/loc/pose`` (``PoseStamped``) and ``/loc/twist`` (``TwistStamped``): the estimate;
+* ``/loc/pose_with_covariance`` (``geometry_msgs/msg/PoseWithCovarianceStamped``): the
+  estimated pose with its 6x6 covariance (when the estimator gives error covariances);
+* ``/foxglove/truth_pose``, ``/foxglove/measured_pose``, ``/foxglove/estimated_pose``
+  (``foxglove.PoseInFrame``, json, schema encoding ``jsonschema``): the same poses for
+  Foxglove's 3-D panel (display frame "world").
+
+The truth and estimate topics use Astrobee's names (``loc/truth/pose``, ``loc/truth/twist``,
+``loc/pose``, ``loc/twist``; nasa/astrobee ``ff_util/ff_names.h``), so the
+replay reader and Astrobee tooling find them. Estimates are written from the step at which the
+estimator initialised (its first usable measurement) on; a ROS node publishes nothing before.
+
+Conventions at this edge (the rest of fkn-bench is scalar-first, see :mod:`fkn_bench.types`):
+
+* Quaternions are written ``x, y, z, w`` (ROS and Foxglove order), body to world, unchanged
+  otherwise (bit-exact, including their sign).
+* Every message has ``header.frame_id = "world"`` (``frame_id``). Twists are **world-frame**:
+  ``linear`` is the velocity and ``angular`` the angular velocity, both expressed in "world" (as
+  Astrobee's Gazebo truth plugin publishes ``loc/truth/twist``), not in the body frame.
+* ``PoseWithCovarianceStamped.pose.covariance`` is the row-major 6x6 covariance of
+  ``(x, y, z, rot_x, rot_y, rot_z)``: the position block and the attitude block of the estimator's
+  12-dim error covariance ``[dtheta, dr, dw, dv]`` reordered position first. The rotation part is
+  the covariance of the world-frame rotation-vector error ``dtheta`` with
+  ``q_true = exp(dtheta/2) (x) q_est`` (small rotations about the fixed "world" axes). ROS
+  documents these three parameters as rotations about the fixed X, Y and Z axes; for the small
+  errors a covariance describes the two agree to first order (small fixed-axis rotations commute
+  to first order and compose to the rotation vector).
+* Time: step ``k`` of an episode with times ``t_k`` (s) is stamped
+  ``start_epoch_ns + round(t_k * 1e9)`` ns (``header.stamp.sec`` / ``nanosec``), and that stamp is
+  also the message's MCAP ``log_time`` and ``publish_time``. The default epoch,
+  :data:`DEFAULT_START_EPOCH_NS`, is 2025-01-01T00:00:00Z (ROS treats a zero stamp as "unset").
+
+Metadata records (all values strings): ``fkn_bench.recording`` (format, conventions, topics as
+JSON), ``fkn_bench.scenario`` (each scenario field JSON-encoded, plus ``config_hash``),
+``fkn_bench.episode`` (seed, split, first step, steps), ``fkn_bench.estimator`` (name, class,
+JSON config) and ``fkn_bench.provenance`` (versions, platform, command line, git commit, time).
+
+Chunks are zstd-compressed by default (``compression``). The CDR bytes come from the vectorised
+encoder of :mod:`fkn_bench.recordings.codecs`, tested to be identical to ``mcap-ros2-support``'s,
+and the file from :class:`~fkn_bench.recordings.bulk.BulkWriter`, tested to write the same bytes
+as ``mcap``'s ``Writer`` (``engine="mcap"`` uses that one).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import platform
+import subprocess
+import sys
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from mcap.writer import LIBRARY_IDENTIFIER as MCAP_LIBRARY
+from mcap.writer import CompressionType, Writer
+
+from fkn_bench.geometry.quaternion import wxyz_to_xyzw
+from fkn_bench.io import atomic_path
+from fkn_bench.recordings.bulk import BulkWriter
+from fkn_bench.recordings.codecs import encode_pose_in_frame, encode_stamped
+from fkn_bench.recordings.schemas import FOXGLOVE_SCHEMAS, ros2_schema_text
+from fkn_bench.types import ArrayB, ArrayF
+
+__all__ = [
+    "DEFAULT_START_EPOCH_NS",
+    "RECORDING_FORMAT",
+    "RECORDING_FORMAT_VERSION",
+    "COMPRESSIONS",
+    "RecordingTopics",
+    "RecordingSummary",
+    "ros_pose_covariance",
+    "stamps_from_times",
+    "write_recording",
+    "record_episode",
+    "record",
+    "provenance",
+]
+
+DEFAULT_START_EPOCH_NS = 1_735_689_600 * 1_000_000_000
+"""Stamp of ``t = 0``: 2025-01-01T00:00:00Z, in ns since the Unix epoch."""
+
+RECORDING_FORMAT = "fkn-bench-recording"
+RECORDING_FORMAT_VERSION = 1
+
+COMPRESSIONS: dict[str, CompressionType] = {
+    "zstd": CompressionType.ZSTD,
+    "lz4": CompressionType.LZ4,
+    "none": CompressionType.NONE,
+}
+
+_COMPRESSION_NAMES = {"zstd": "zstd", "lz4": "lz4", "none": ""}
+
+_POSE = "geometry_msgs/msg/PoseStamped"
+_TWIST = "geometry_msgs/msg/TwistStamped"
+_POSE_COV = "geometry_msgs/msg/PoseWithCovarianceStamped"
+_FOXGLOVE_POSE = "foxglove.PoseInFrame"
+
+# position-first order of the ROS 6x6 pose covariance, as indices into [dtheta, dr, ...]
+_ROS_POSE_ORDER = np.array([3, 4, 5, 0, 1, 2])
+
+
+def _join(namespace: str, name: str) -> str:
+    namespace = namespace.strip("/")
+    return f"/{namespace}{name}" if namespace else name
+
+
+@dataclass(frozen=True)
+class RecordingTopics:
+    """Topic names of a recording (see the module docstring for types and contents)."""
+
+    truth_pose: str = "/loc/truth/pose"
+    truth_twist: str = "/loc/truth/twist"
+    measured_pose: str = "/fkn_bench/measured_pose"
+    estimated_pose: str = "/loc/pose"
+    estimated_twist: str = "/loc/twist"
+    estimated_pose_covariance: str = "/loc/pose_with_covariance"
+    foxglove_truth_pose: str = "/foxglove/truth_pose"
+    foxglove_measured_pose: str = "/foxglove/measured_pose"
+    foxglove_estimated_pose: str = "/foxglove/estimated_pose"
+
+    @classmethod
+    def with_namespace(cls, namespace: str = "") -> RecordingTopics:
+        """The default names under ``namespace`` (``"honey"`` -> ``/honey/loc/truth/pose``)."""
+        if not isinstance(namespace, str) or any(c.isspace() for c in namespace):
+            raise ValueError(f"namespace must be a string without spaces (got {namespace!r})")
+        return cls(**{f.name: _join(namespace, f.default) for f in fields(cls)})  # type: ignore[arg-type]
+
+    def as_dict(self) -> dict[str, str]:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+@dataclass(frozen=True)
+class RecordingSummary:
+    """What :func:`write_recording` wrote.
+
+    Attributes:
+        path: the file.
+        n_steps: episode steps.
+        message_counts: messages per topic (topics without messages are not written).
+        size_bytes: file size.
+        write_seconds: wall time of encoding and writing.
+        topics: the topic names used.
+        timings: extra wall times (``record`` adds ``generate_seconds``, ``estimate_seconds``).
+    """
+
+    path: Path
+    n_steps: int
+    message_counts: dict[str, int]
+    size_bytes: int
+    write_seconds: float
+    topics: RecordingTopics
+    timings: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def message_count(self) -> int:
+        return sum(self.message_counts.values())
+
+
+def ros_pose_covariance(error_covariance: ArrayF) -> ArrayF:
+    """ROS ``PoseWithCovariance.covariance`` rows ``(..., 36)`` from 12x12 error covariances
+    ``(..., 12, 12)`` ordered ``[dtheta, dr, dw, dv]`` (see module docstring)."""
+    P = np.asarray(error_covariance, dtype=np.float64)
+    if P.shape[-2:] != (12, 12):
+        raise ValueError(f"error covariances must have shape (..., 12, 12) (got {P.shape})")
+    block = P[..., _ROS_POSE_ORDER, :][..., :, _ROS_POSE_ORDER]
+    return block.reshape(*P.shape[:-2], 36)
+
+
+def stamps_from_times(times: ArrayF, start_epoch_ns: int = DEFAULT_START_EPOCH_NS) -> np.ndarray:
+    """Integer ns stamps ``start_epoch_ns + round(times * 1e9)`` of times in s."""
+    times = np.asarray(times, dtype=np.float64)
+    return int(start_epoch_ns) + np.round(times * 1e9).astype(np.int64)
+
+
+def _git_commit() -> str:
+    try:
+        result = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return result.stdout.strip() if result.returncode == 0 else ""
+
+
+def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
+    """The ``fkn_bench.provenance`` metadata: versions, platform, command line, git commit, time."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    def package_version(name: str) -> str:
+        try:
+            return version(name)
+        except PackageNotFoundError:
+            return ""
+
+    from fkn_bench import __version__
+
+    record = {
+        "fkn_bench_version": __version__,
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "numpy": np.__version__,
+        "mcap": package_version("mcap"),
+        "mcap_ros2_support": package_version("mcap-ros2-support"),
+        "command": json.dumps(sys.argv),
+        "git_commit": _git_commit(),
+        "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+    for key, value in (extra or {}).items():
+        record[str(key)] = value if isinstance(value, str) else json.dumps(value)
+    return record
+
+
+def _check_rows(name: str, array: Any, n: int, width: tuple[int, ...]) -> ArrayF | None:
+    if array is None:
+        return None
+    out = np.asarray(array, dtype=np.float64)
+    if out.shape != (n, *width):
+        raise ValueError(f"{name} must have shape {(n, *width)} (got {out.shape})")
+    return out
+
+
+def _check_mask(name: str, mask: Any, n: int) -> ArrayB | None:
+    if mask is None:
+        return None
+    out = np.asarray(mask)
+    if out.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},) (got {out.shape})")
+    return out.astype(bool)
+
+
+def _pose_values(states: ArrayF) -> ArrayF:
+    """ROS pose fields ``(N, 7)`` = position, quaternion xyzw of states/measurements [q, r, ...]."""
+    return np.concatenate([states[:, 4:7], wxyz_to_xyzw(states[:, 0:4])], axis=1)
+
+
+def _twist_values(states: ArrayF) -> ArrayF:
+    """ROS twist fields ``(N, 6)`` = linear (v), angular (w) of 13-dim states."""
+    return np.concatenate([states[:, 10:13], states[:, 7:10]], axis=1)
+
+
+def write_recording(
+    path: str | Path,
+    *,
+    times: ArrayF,
+    truth: ArrayF | None = None,
+    measurements: ArrayF | None = None,
+    valid: ArrayB | None = None,
+    estimates: ArrayF | None = None,
+    estimate_error_covariances: ArrayF | None = None,
+    estimate_mask: ArrayB | None = None,
+    metadata: Mapping[str, Mapping[str, str]] | None = None,
+    topics: RecordingTopics | None = None,
+    namespace: str = "",
+    frame_id: str = "world",
+    start_epoch_ns: int = DEFAULT_START_EPOCH_NS,
+    foxglove: bool = True,
+    compression: str = "zstd",
+    chunk_size: int = 4 * 1024 * 1024,
+    engine: str = "bulk",
+) -> RecordingSummary:
+    """Write one episode's arrays to an MCAP file (atomically).
+
+    Args:
+        path: output file (``.mcap``).
+        times: ``(T,)`` strictly increasing sample times, s.
+        truth: ``(T, 13)`` true states, or None.
+        measurements: ``(T, 7)`` measured poses ``[q wxyz, r]``; only rows where ``valid`` are
+            written (all rows when ``valid`` is None, NaN rows skipped).
+        valid: ``(T,)`` measurement validity.
+        estimates: ``(T, 13)`` state estimates, written where ``estimate_mask`` (default: all).
+        estimate_error_covariances: ``(T, 12, 12)`` error covariances ``[dtheta, dr, dw, dv]``
+            for ``PoseWithCovarianceStamped`` (topic skipped when None).
+        metadata: extra metadata records ``{name: {key: value}}`` (strings).
+        topics: topic names (default :class:`RecordingTopics` under ``namespace``).
+        frame_id: ``header.frame_id`` of every message.
+        start_epoch_ns: stamp of ``t = 0``, ns.
+        foxglove: also write the ``foxglove.PoseInFrame`` channels.
+        compression: chunk compression, ``"zstd"`` (default), ``"lz4"`` or ``"none"``.
+        chunk_size: uncompressed bytes per chunk.
+        engine: ``"bulk"`` (default; :class:`~fkn_bench.recordings.bulk.BulkWriter`) or
+            ``"mcap"`` (``mcap.writer.Writer``, one call per message; the same bytes, slower).
+
+    Returns:
+        A :class:`RecordingSummary`.
+    """
+    started = time.perf_counter()
+    times = np.asarray(times, dtype=np.float64)
+    if times.ndim != 1 or len(times) == 0:
+        raise ValueError(f"times must be a non-empty 1-d array (got shape {times.shape})")
+    if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+        raise ValueError("times must be finite and strictly increasing")
+    n = len(times)
+    truth = _check_rows("truth", truth, n, (13,))
+    measurements = _check_rows("measurements", measurements, n, (7,))
+    valid = _check_mask("valid", valid, n)
+    estimates = _check_rows("estimates", estimates, n, (13,))
+    covariances = _check_rows("estimate_error_covariances", estimate_error_covariances, n, (12, 12))
+    estimate_mask = _check_mask("estimate_mask", estimate_mask, n)
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)} (got {compression!r})")
+    topics = topics if topics is not None else RecordingTopics.with_namespace(namespace)
+    stamps = stamps_from_times(times, start_epoch_ns)
+    if np.any(np.diff(stamps) <= 0):
+        raise ValueError("times closer than 1 ns cannot be stamped apart")
+
+    # (topic, schema name, message encoding, stamps, payloads) in per-step publishing order
+    streams: list[tuple[str, str, str, np.ndarray, list[bytes]]] = []
+
+    def ros(topic: str, schema: str, rows: np.ndarray, values: ArrayF) -> None:
+        if len(rows):
+            streams.append((topic, schema, "cdr", stamps[rows], encode_stamped(schema, "cdr", stamps[rows], values, frame_id)))
+
+    def fox(topic: str, rows: np.ndarray, values: ArrayF) -> None:
+        if foxglove and len(rows):
+            streams.append((topic, _FOXGLOVE_POSE, "json", stamps[rows], encode_pose_in_frame(stamps[rows], frame_id, values)))
+
+    every = np.arange(n)
+    if truth is not None:
+        pose = _pose_values(truth)
+        ros(topics.truth_pose, _POSE, every, pose)
+        ros(topics.truth_twist, _TWIST, every, _twist_values(truth))
+        fox(topics.foxglove_truth_pose, every, pose)
+    if measurements is not None:
+        keep = valid if valid is not None else ~np.isnan(measurements).any(axis=1)
+        rows = np.flatnonzero(keep)
+        pose = _pose_values(measurements[rows])
+        ros(topics.measured_pose, _POSE, rows, pose)
+        fox(topics.foxglove_measured_pose, rows, pose)
+    if estimates is not None:
+        rows = every if estimate_mask is None else np.flatnonzero(estimate_mask)
+        est = estimates[rows]
+        pose = _pose_values(est)
+        ros(topics.estimated_pose, _POSE, rows, pose)
+        ros(topics.estimated_twist, _TWIST, rows, _twist_values(est))
+        if covariances is not None:
+            values = np.concatenate([pose, ros_pose_covariance(covariances[rows])], axis=1)
+            ros(topics.estimated_pose_covariance, _POSE_COV, rows, values)
+        fox(topics.foxglove_estimated_pose, rows, pose)
+
+    # interleave by stamp, keeping the stream order within a step
+    all_stamps = np.concatenate([s[3] for s in streams]) if streams else np.empty(0, np.int64)
+    stream_index = np.concatenate([np.full(len(s[3]), i) for i, s in enumerate(streams)]) if streams else np.empty(0, int)
+    order = np.lexsort((stream_index, all_stamps))
+    payloads = [p for s in streams for p in s[4]]
+
+    recording_meta = {
+        "format": RECORDING_FORMAT,
+        "format_version": str(RECORDING_FORMAT_VERSION),
+        "frame_id": frame_id,
+        "start_epoch_ns": str(int(start_epoch_ns)),
+        "n_steps": str(n),
+        "topics": json.dumps({k: v for k, v in topics.as_dict().items() if foxglove or not k.startswith("foxglove")}),
+        "time_convention": "header.stamp = log_time = publish_time = start_epoch_ns + round(t * 1e9) ns",
+        "quaternion_convention": "ROS x, y, z, w; body to world",
+        "twist_frame": f"world-frame linear and angular velocity, expressed in '{frame_id}'",
+        "covariance_convention": (
+            "row-major 6x6 of (x, y, z, rot_x, rot_y, rot_z); rotation = world-frame rotation-vector "
+            "error dtheta with q_true = exp(dtheta/2) (x) q_est"
+        ),
+    }
+    counts: dict[str, int] = {}
+    from fkn_bench import __version__
+
+    library = f"fkn-bench/{__version__}; {MCAP_LIBRARY}"
+    starts = np.cumsum([0] + [len(s[3]) for s in streams])
+    sequences = np.arange(len(all_stamps)) - starts[stream_index] if streams else np.empty(0, int)
+    with atomic_path(path, suffix=".mcap") as tmp:
+        with open(tmp, "wb") as fh:
+            if engine == "bulk":
+                writer: Any = BulkWriter(fh, chunk_size=chunk_size, compression=_COMPRESSION_NAMES[compression])
+            elif engine == "mcap":
+                writer = Writer(fh, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
+            else:
+                raise ValueError(f"engine must be 'bulk' or 'mcap' (got {engine!r})")
+            writer.start(profile="ros2", library=library)
+            writer.add_metadata("fkn_bench.recording", recording_meta)
+            for name, record in (metadata or {}).items():
+                writer.add_metadata(name, {str(k): str(v) for k, v in record.items()})
+            schema_ids: dict[str, int] = {}
+            channel_ids: list[int] = []
+            for topic, schema, encoding, _, _ in streams:
+                if schema not in schema_ids:
+                    if encoding == "cdr":
+                        schema_ids[schema] = writer.register_schema(schema, "ros2msg", ros2_schema_text(schema).encode())
+                    else:
+                        schema_ids[schema] = writer.register_schema(schema, "jsonschema", FOXGLOVE_SCHEMAS[schema])
+                channel_ids.append(writer.register_channel(topic, encoding, schema_ids[schema]))
+            channel_of = np.array(channel_ids, dtype=np.int64)[stream_index[order]] if streams else np.empty(0, int)
+            stamp_of = all_stamps[order]
+            sequence_of = sequences[order]
+            ordered_payloads = [payloads[i] for i in order.tolist()]
+            if engine == "bulk":
+                writer.add_messages(channel_of, stamp_of, stamp_of, sequence_of, ordered_payloads)
+            else:
+                add = writer.add_message
+                for c, t, q, data in zip(channel_of.tolist(), stamp_of.tolist(), sequence_of.tolist(), ordered_payloads):
+                    add(c, log_time=t, data=data, publish_time=t, sequence=q)
+            writer.finish()
+        size = tmp.stat().st_size
+    for topic, _, _, st, _ in streams:
+        counts[topic] = len(st)
+    return RecordingSummary(
+        path=Path(path),
+        n_steps=n,
+        message_counts=counts,
+        size_bytes=size,
+        write_seconds=time.perf_counter() - started,
+        topics=topics,
+    )
+
+
+def _scenario_metadata(scenario: Any) -> dict[str, str]:
+    data = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
+    data["config_hash"] = scenario.config_hash()
+    return data
+
+
+def _estimator_metadata(estimator: Any) -> dict[str, str]:
+    if isinstance(estimator, Mapping):
+        return {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in estimator.items()}
+    cls = type(estimator)
+    record = {"name": str(getattr(estimator, "name", cls.__name__)), "class": f"{cls.__module__}:{cls.__qualname__}"}
+    to_config = getattr(estimator, "to_config", None)
+    if callable(to_config):
+        from fkn_bench.io import to_jsonable
+
+        record["config"] = json.dumps(to_jsonable(to_config()))
+    return record
+
+
+def record_episode(
+    path: str | Path,
+    episodes: Any,
+    estimates: Any = None,
+    *,
+    index: int = 0,
+    estimator: Any = None,
+    split: str | None = None,
+    extra_metadata: Mapping[str, Mapping[str, str]] | None = None,
+    provenance_extra: Mapping[str, Any] | None = None,
+    **options: Any,
+) -> RecordingSummary:
+    """Record row ``index`` of ``episodes`` (an :class:`~fkn_bench.envs.Episodes`) and, when
+    given, the matching row of ``estimates`` (:class:`~fkn_bench.estimators.Estimates`).
+
+    Estimates are written where ``estimates.initialised`` is True. ``estimator`` (an
+    :class:`~fkn_bench.estimators.Estimator`, or a mapping of strings) fills the
+    ``fkn_bench.estimator`` metadata. ``options`` go to :func:`write_recording` (``topics``,
+    ``namespace``, ``frame_id``, ``start_epoch_ns``, ``foxglove``, ``compression``, ``chunk_size``).
+    """
+    if not 0 <= index < episodes.batch_size:
+        raise ValueError(f"index must be in [0, {episodes.batch_size}) (got {index})")
+    means = covariances = mask = None
+    if estimates is not None:
+        if estimates.means.shape[:2] != episodes.truth.shape[:2]:
+            raise ValueError(
+                f"estimates cover {estimates.means.shape[:2]} (batch, steps); the episodes {episodes.truth.shape[:2]}"
+            )
+        means = estimates.means[index]
+        if estimates.error_covariances is not None:
+            covariances = estimates.error_covariances[index]
+        if estimates.initialised is not None:
+            mask = estimates.initialised[index]
+    metadata: dict[str, Mapping[str, str]] = {
+        "fkn_bench.scenario": _scenario_metadata(episodes.scenario),
+        "fkn_bench.episode": {
+            "seed": str(episodes.seeds[index]),
+            "split": split or ("full" if episodes.start == 0 and episodes.n_steps == episodes.scenario.n_steps else "window"),
+            "start_step": str(episodes.start),
+            "n_steps": str(episodes.n_steps),
+            "dt": repr(episodes.scenario.dt),
+        },
+    }
+    if estimator is not None:
+        metadata["fkn_bench.estimator"] = _estimator_metadata(estimator)
+    metadata["fkn_bench.provenance"] = provenance(provenance_extra)
+    metadata.update(extra_metadata or {})
+    return write_recording(
+        path,
+        times=episodes.times,
+        truth=episodes.truth[index],
+        measurements=episodes.measurements[index],
+        valid=episodes.valid[index],
+        estimates=means,
+        estimate_error_covariances=covariances,
+        estimate_mask=mask,
+        metadata=metadata,
+        **options,
+    )
+
+
+def record(
+    path: str | Path,
+    *,
+    scenario: Any = "ds1",
+    estimator: Any = "manual-ekf",
+    seed: int = 0,
+    split: str = "full",
+    n_steps: int | None = None,
+    estimator_options: Mapping[str, Any] | None = None,
+    **options: Any,
+) -> RecordingSummary:
+    """Generate episode ``seed`` of ``scenario``, run ``estimator`` on it (batch) and record both.
+
+    Args:
+        path: output ``.mcap`` file.
+        scenario: registered name or :class:`~fkn_bench.scenarios.Scenario`.
+        estimator: registered name, an :class:`~fkn_bench.estimators.Estimator`, the path of a
+            saved estimator (``.json``), or None to record truth and measurements only.
+        seed: episode seed.
+        split: ``full`` (default), ``train``, ``val`` or ``test``.
+        n_steps: record only the first ``n_steps`` steps of the split.
+        estimator_options: keyword options for the estimator factory.
+        options: :func:`record_episode` / :func:`write_recording` options.
+
+    Returns:
+        The :class:`RecordingSummary`, with ``timings`` ``generate_seconds`` and
+        ``estimate_seconds`` added.
+    """
+    from fkn_bench.envs import generate_episodes
+    from fkn_bench.estimators import Estimator, load_estimator, make_estimator
+    from fkn_bench.scenarios import get_scenario
+
+    sc = get_scenario(scenario)
+    started = time.perf_counter()
+    episodes = generate_episodes(sc, [int(seed)], split=split)
+    if n_steps is not None:
+        if int(n_steps) < 1:
+            raise ValueError(f"n_steps must be >= 1 (got {n_steps})")
+        episodes = episodes.window(0, int(n_steps))
+    generated = time.perf_counter()
+    est_obj = None
+    estimates = None
+    if estimator is not None:
+        if isinstance(estimator, Estimator):
+            est_obj = estimator
+        elif isinstance(estimator, (str, Path)) and str(estimator).endswith(".json") and Path(estimator).is_file():
+            est_obj = load_estimator(estimator)
+        else:
+            est_obj = make_estimator(str(estimator), scenario=sc, **dict(estimator_options or {}))
+        estimates = est_obj.estimate(episodes.measurements, episodes.valid, sc.dt)
+    estimated = time.perf_counter()
+    split_label = split if n_steps is None else f"{split}[:{int(n_steps)}]"
+    summary = record_episode(path, episodes, estimates, estimator=est_obj, split=split_label, **options)
+    summary.timings.update(
+        {"generate_seconds": generated - started, "estimate_seconds": estimated - generated}
+    )
+    return summary
