@@ -24,7 +24,12 @@ from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batc
 from fkn_bench.filters import VARIANTS, FilterState, KalmanFilter, NoiseParameters, make_filter
 from fkn_bench.filters import online_ekf
 from fkn_bench.filters.base import FilterResult
-from fkn_bench.filters.pose import error_covariance_from_state, pose_innovation, state_covariance_from_error
+from fkn_bench.filters.pose import (
+    error_covariance_from_state,
+    pose_innovation,
+    state_covariance_from_error,
+    with_unit_quaternion,
+)
 from fkn_bench.runtime import torch_threads
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -43,7 +48,7 @@ class _OnlineState:
 
 def filter_result_to_estimates(result: FilterResult, variant: KalmanFilter) -> Estimates:
     """Convert a torch :class:`FilterResult` of a pose filter to numpy :class:`Estimates`."""
-    means = result.means.detach().numpy()
+    means = with_unit_quaternion(result.means.detach().numpy())
     q = means[..., :4]
     covariances = error_covariances = None
     if result.covariances is not None:
@@ -229,7 +234,9 @@ class KalmanEstimator(Estimator):
                 x, P = self._update(x, P, z)
                 updated = True
         self._online = _OnlineState(now, x, P, initialised)
-        return Estimate(time=now, mean=x.copy(), native_covariance=P.copy(), initialised=initialised, updated=updated)
+        return Estimate(
+            time=now, mean=with_unit_quaternion(x), native_covariance=P.copy(), initialised=initialised, updated=updated
+        )
 
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:

@@ -46,7 +46,7 @@ MEKF_MANUAL_LAYOUT = NoiseLayout(
     r_default=(0.2,) * 3 + (0.1,) * 3,
     p0_labels=ERROR_NAMES,
     p0_units=_ERROR_UNITS,
-    p0_default=(0.2,) * 3 + (0.1,) * 3 + (0.2,) * 3 + (0.05,) * 3,
+    p0_default=(0.2,) * 3 + (0.1,) * 3 + (0.2,) * 3 + (0.003,) * 3,
 )
 """Components (error state), units and defaults of the multiplicative EKF."""
 

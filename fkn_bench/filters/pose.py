@@ -14,7 +14,7 @@ import numpy as np
 from fkn_bench.geometry.quaternion import theta_matrix
 from fkn_bench.types import ArrayF
 
-__all__ = ["error_covariance_from_state", "state_covariance_from_error", "pose_innovation"]
+__all__ = ["error_covariance_from_state", "state_covariance_from_error", "pose_innovation", "with_unit_quaternion"]
 
 
 def _state_to_error_map(q: ArrayF) -> ArrayF:
@@ -47,3 +47,15 @@ def pose_innovation(q_prior: ArrayF, innovation: ArrayF, covariance: ArrayF) -> 
     T[..., 3:6, 4:7] = np.eye(3)
     nu = np.einsum("...ij,...j->...i", T, innovation)
     return nu, T @ covariance @ np.swapaxes(T, -1, -2)
+
+
+def with_unit_quaternion(states: ArrayF) -> ArrayF:
+    """``(..., 13)`` states with the quaternion scaled to unit norm (a copy).
+
+    The additive EKF renormalises its quaternion after each update only; over prediction-only
+    steps it drifts from unit norm by ``O((w dt)^2)`` per step (2.6e-5 over 9 steps on ds1).
+    Estimators report unit quaternions; the filter's internal state is left as the model has it.
+    """
+    out = np.array(states, dtype=float)
+    out[..., 0:4] /= np.linalg.norm(out[..., 0:4], axis=-1, keepdims=True)
+    return out

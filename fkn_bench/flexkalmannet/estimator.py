@@ -23,6 +23,7 @@ from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batc
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
 from fkn_bench.filters import FilterState, make_filter
 from fkn_bench.filters import online_ekf
+from fkn_bench.filters.pose import with_unit_quaternion
 from fkn_bench.flexkalmannet.checkpoint import model_from_checkpoint
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
@@ -160,7 +161,7 @@ class AdaptiveFlexKalmanNetEstimator(Estimator):
         self._state = (now, state, initialised)
         return Estimate(
             time=now,
-            mean=state.mean[0].numpy().copy(),
+            mean=with_unit_quaternion(state.mean[0].numpy()),
             native_covariance=state.covariance[0].numpy().copy(),
             initialised=initialised,
             updated=updated,

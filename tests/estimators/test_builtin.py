@@ -21,7 +21,7 @@ def test_manual_ekf_and_ukf_use_the_papers_tuning() -> None:
         assert estimator.name == f"manual-{variant}" and variant.upper() in estimator.description
         config = estimator.to_config()
         assert config["q_std"] == PAPER_Q and config["r_std"] == PAPER_R
-        assert config["p0_std"] == [0.1] * 7 + [0.2] * 3 + [0.05] * 3
+        assert config["p0_std"] == [0.1] * 7 + [0.2] * 3 + [0.003] * 3
 
 
 def test_manual_mekf_maps_the_tuning_to_the_error_state() -> None:
@@ -30,7 +30,7 @@ def test_manual_mekf_maps_the_tuning_to_the_error_state() -> None:
     # quaternion-component std s -> attitude std 2 s (rad)
     assert config["r_std"] == [0.2] * 3 + [0.1] * 3
     assert config["q_std"] == [0.01] * 3 + [1e-4] * 3 + [0.005] * 3 + [1e-4] * 3
-    assert config["p0_std"] == [0.2] * 3 + [0.1] * 3 + [0.2] * 3 + [0.05] * 3
+    assert config["p0_std"] == [0.2] * 3 + [0.1] * 3 + [0.2] * 3 + [0.003] * 3
 
 
 def test_factories_take_a_scenario_and_options() -> None:
