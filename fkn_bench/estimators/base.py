@@ -166,19 +166,23 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
     Accepts a Gymnasium observation dict (``pose``, ``valid``, ``time``) or a ``(7,)`` array
     (all NaN when missing). Raises ``ValueError`` for anything else.
     """
-    if isinstance(observation, Mapping):
-        if "pose" not in observation:
-            raise ValueError(f"observation dict needs a 'pose' entry (has {sorted(observation)})")
-        pose = np.asarray(observation["pose"], dtype=float)
-        valid = bool(observation.get("valid", True))
+    if isinstance(observation, dict):
+        try:
+            pose = observation["pose"]
+        except KeyError:
+            raise ValueError(f"observation dict needs a 'pose' entry (has {sorted(observation)})") from None
+        valid = observation.get("valid", True)
         time = observation.get("time")
-        time = None if time is None else float(np.asarray(time))
+        time = None if time is None else float(time)
+    elif isinstance(observation, Mapping):
+        return parse_observation(dict(observation))
     else:
-        pose = np.asarray(observation, dtype=float)
-        valid, time = True, None
+        pose, valid, time = observation, True, None
+    if type(pose) is not np.ndarray or pose.dtype != np.float64:
+        pose = np.asarray(pose, dtype=np.float64)
     if pose.shape != (7,):
         raise ValueError(f"a pose observation must have shape (7,) (got {pose.shape})")
-    if not valid or np.all(np.isnan(pose)):
+    if not valid or np.isnan(pose).all():
         return None, time
     return pose, time
 

@@ -13,6 +13,7 @@ actual length.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -233,10 +234,11 @@ class KalmanEstimator(Estimator):
             else:
                 x, P = self._update(x, P, z)
                 updated = True
+        # x and P are fresh arrays (the filter functions are pure): share P read-only
         self._online = _OnlineState(now, x, P, initialised)
-        return Estimate(
-            time=now, mean=with_unit_quaternion(x), native_covariance=P.copy(), initialised=initialised, updated=updated
-        )
+        mean = x.copy()
+        mean[0:4] /= math.sqrt(mean[0:4] @ mean[0:4])
+        return Estimate(time=now, mean=mean, native_covariance=P, initialised=initialised, updated=updated)
 
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:
