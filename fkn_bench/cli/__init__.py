@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 __all__ = ["main", "UsageError", "COMMANDS"]
 
-COMMANDS: tuple[str, ...] = ("scenarios", "simulate")
+COMMANDS: tuple[str, ...] = ("scenarios", "simulate", "run", "train", "bench", "leaderboard", "plot", "record")
 """Subcommand modules, in the order ``--help`` lists them."""
 
 

@@ -1,0 +1,51 @@
+"""``fkn-bench leaderboard``: build the leaderboards from stored results.
+
+Reads the per-cell results that ``fkn-bench run --out DIR`` wrote and writes, under ``--out``, one
+Markdown table, HTML page and CSV per scenario, an index (README.md), the per-seed CSV of record
+(results.csv) and provenance.json. The output is a pure function of the results: rebuilding from
+the same results gives byte-identical files.
+
+Regenerate the committed leaderboards from scratch (cells already stored are reused; add --rerun
+to the first command to recompute them)::
+
+    fkn-bench run --all --seeds 20 --out leaderboards/results --no-progress && fkn-bench leaderboard
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        "leaderboard",
+        help="build leaderboards (Markdown, HTML, CSV) from stored results",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--results", default="leaderboards/results", metavar="DIR",
+                        help="results directory written by fkn-bench run --out (default: leaderboards/results)")
+    parser.add_argument("--out", default="leaderboards", metavar="DIR",
+                        help="where to write the leaderboards (default: leaderboards)")
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fkn_bench.cli import UsageError
+    from fkn_bench.harness.leaderboard import write_leaderboards
+    from fkn_bench.harness.store import ResultStore, StoreError
+
+    try:
+        results = ResultStore(args.results).load()
+        paths = write_leaderboards(results, args.out)
+    except StoreError as exc:
+        raise UsageError(f"{exc} (write results with: fkn-bench run --all --out {args.results})") from None
+    except ValueError as exc:  # results that cannot be combined (mixed settings)
+        raise UsageError(str(exc)) from None
+    print(f"fkn-bench leaderboard: wrote {len(paths)} files from {len(results)} cells to {args.out}", file=sys.stderr)
+    for path in paths:
+        print(path)
+    return 0

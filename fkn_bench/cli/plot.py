@@ -1,0 +1,99 @@
+"""``fkn-bench plot``: PNG figures like the paper's, drawn headless.
+
+For one estimator, scenario and seed (the estimator is run on that seed's episode): the four state
+groups with estimate, measurement and truth; every component with its 2-sigma uncertainty band;
+the group errors over time with the settling time marked. With ``--results DIR`` (written by
+``fkn-bench run --out``) also one bar chart per scenario comparing the estimators stored there.
+
+Example::
+
+    fkn-bench plot --estimator manual-ekf --scenario ds1 --seed 0 --steps 500 --out figures \\
+        --results leaderboards/results
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    from fkn_bench.scenarios import SPLITS
+
+    parser = subparsers.add_parser(
+        "plot",
+        help="draw PNG figures of an estimator's run (and bar charts from stored results)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--estimator", metavar="NAME", help="estimator (default: the best built-in, as fkn-bench run)")
+    parser.add_argument("--scenario", default="ds1", metavar="NAME", help="scenario (default: ds1)")
+    parser.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
+    parser.add_argument("--split", default="test", choices=SPLITS, help="episode split (default: test)")
+    parser.add_argument("--steps", type=int, metavar="N", help="draw only the first N steps (default: all)")
+    parser.add_argument("--cut", type=int, default=100, metavar="STEPS", help="scored window start (default: 100)")
+    parser.add_argument("--results", metavar="DIR", help="also draw comparison bar charts from these results")
+    parser.add_argument("--out", default="figures", metavar="DIR", help="output directory (default: figures)")
+    add_scenario_file_option(parser)
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fkn_bench.cli import UsageError
+    from fkn_bench.estimators import UnknownEstimatorError
+    from fkn_bench.harness.estimators import check_estimators, default_estimator, probe_estimator
+    from fkn_bench.harness.grid import safe_name
+    from fkn_bench.harness.leaderboard import rank, scenario_order
+    from fkn_bench.harness.plots import comparison_figure, errors_figure, save_figure, states_figure, uncertainty_figure
+    from fkn_bench.harness.reference import quoted_rows
+    from fkn_bench.harness.sources import SimulatedSource
+    from fkn_bench.harness.store import ResultStore, StoreError
+    from fkn_bench.harness.summary import summarize_pair
+    from fkn_bench.harness.trace import trace
+    from fkn_bench.metrics import MetricSettings
+    from fkn_bench.scenarios import get_scenario
+
+    if args.seed < 0:
+        raise UsageError(f"--seed must be a non-negative integer (got {args.seed})")
+    if args.steps is not None and args.steps < 2:
+        raise UsageError(f"--steps must be at least 2 (got {args.steps})")
+    if args.cut < 0:
+        raise UsageError(f"--cut must be a non-negative integer (got {args.cut})")
+    load_scenario_files(args)
+    scenario = get_scenario(args.scenario)
+    try:
+        estimator = check_estimators([args.estimator])[0] if args.estimator else default_estimator([scenario])
+    except UnknownEstimatorError as exc:
+        raise UsageError(str(exc)) from None
+    availability = probe_estimator(estimator, scenario)
+    if not availability.available:
+        raise UsageError(f"estimator {estimator!r} is not available for scenario {scenario.name}: {availability.error}")
+    results = None
+    if args.results:
+        try:
+            results = ResultStore(args.results).load()
+        except StoreError as exc:
+            raise UsageError(str(exc)) from None
+
+    out = Path(args.out)
+    run_trace = trace(estimator, SimulatedSource(scenario, args.split), args.seed)
+    stem = f"{safe_name(estimator)}-{safe_name(scenario.name)}-seed{args.seed}"
+    written = [
+        save_figure(states_figure(run_trace, steps=args.steps), out / f"{stem}-states.png"),
+        save_figure(uncertainty_figure(run_trace, steps=args.steps), out / f"{stem}-uncertainty.png"),
+        save_figure(errors_figure(run_trace, settings=MetricSettings(cut=args.cut), steps=args.steps),
+                    out / f"{stem}-errors.png"),
+    ]
+    if results is not None:
+        for name in scenario_order(results.scenarios()):
+            estimators = sorted({r.estimator for r in results.records if r.scenario == name})
+            summaries = rank([summarize_pair(results, e, name) for e in estimators])
+            figure = comparison_figure(name, summaries, quoted_rows(name))
+            written.append(save_figure(figure, out / f"comparison-{safe_name(name)}.png"))
+    for path in written:
+        print(path)
+    return 0

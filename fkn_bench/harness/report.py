@@ -1,0 +1,81 @@
+"""Plain-text rendering of run summaries (the table ``fkn-bench run`` prints)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+__all__ = ["format_number", "text_table", "summary_text"]
+
+
+def format_number(value: Any, digits: int = 4) -> str:
+    """``digits`` significant digits; ``-`` for missing values; no exponent in [1e-4, 1e6)."""
+    if value is None:
+        return "-"
+    value = float(value)
+    if not math.isfinite(value):
+        return "-" if math.isnan(value) else ("inf" if value > 0 else "-inf")
+    if value == 0:
+        return "0"
+    if 1e-4 <= abs(value) < 1e6:
+        decimals = max(digits - 1 - int(math.floor(math.log10(abs(value)))), 0)
+        return f"{value:.{decimals}f}"
+    return f"{value:.{digits - 1}e}"
+
+
+def text_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
+    """A fixed-width table: first column left-aligned, the others right-aligned."""
+    widths = [max(len(str(cell)) for cell in column) for column in zip(header, *rows)]
+
+    def line(cells: Sequence[str]) -> str:
+        parts = [str(c).ljust(w) if i == 0 else str(c).rjust(w) for i, (c, w) in enumerate(zip(cells, widths))]
+        return "  ".join(parts).rstrip()
+
+    rule = "  ".join("-" * w for w in widths)
+    return "\n".join([line(header), rule, *(line(r) for r in rows)])
+
+
+def _percent(value: Any) -> str:
+    return "-" if value is None or not math.isfinite(float(value)) else f"{100 * float(value):.0f}%"
+
+
+def summary_text(summaries: Sequence[dict[str, Any]]) -> str:
+    """The run table: one line per (estimator, scenario), then a legend."""
+    header = [
+        "estimator / scenario", "seeds", "13-state RMSE", "IQR", "att deg", "pos m", "w rad/s", "v m/s",
+        "settle s", "diverged", "ANEES", "95% bounds", "in", "us/step",
+    ]
+    rows = []
+    for s in summaries:
+        stats = s["statistics"]["state_rmse"]
+        lo, hi = s["anees_bounds"]
+        rows.append([
+            f"{s['estimator']} / {s['scenario']}",
+            str(s["runs"]),
+            format_number(s["state_rmse"]),
+            f"{format_number(stats['q25'], 3)}-{format_number(stats['q75'], 3)}",
+            format_number(s["attitude_rmse_deg"], 3),
+            format_number(s["position_rmse_m"], 3),
+            format_number(s["omega_rmse_rad_s"], 3),
+            format_number(s["velocity_rmse_m_s"], 3),
+            format_number(s["settling_time_s"], 3),
+            _percent(s["diverged_fraction"]),
+            format_number(s["anees"], 3),
+            f"[{format_number(lo, 3)}, {format_number(hi, 3)}]",
+            _percent(s["nees_in_bounds_fraction"]),
+            format_number(s["us_per_step"], 3),
+        ])
+    legend = (
+        "13-state RMSE: root mean square over the 13 state components and the scored window (steps >= cut), "
+        "mean over seeds (lower is better); IQR over seeds.\n"
+        "att/pos/w/v: RMSE of the attitude angle (deg), position (m), angular rate (rad/s), velocity (m/s). "
+        "settle: mean settling time (all groups). diverged: share of seeds.\n"
+        "ANEES: average NEES (12-dim error) over seeds and steps; in: share of steps whose average over seeds "
+        "lies in the 95% chi-square bounds. us/step: online step latency."
+    )
+    errors = [f"{s['estimator']} / {s['scenario']}: {e}" for s in summaries for e in s["errors"]]
+    text = text_table(header, rows) + "\n\n" + legend
+    if errors:
+        text += "\n\nFailures:\n" + "\n".join(f"  {e}" for e in errors)
+    return text

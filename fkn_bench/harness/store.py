@@ -1,0 +1,167 @@
+"""The result store: one directory per grid, one set of files per cell, written atomically.
+
+Layout under the store's root::
+
+    cells/<estimator>/<scenario>/seeds-<first>-<last>.csv    tidy rows (exact float repr)
+    cells/<estimator>/<scenario>/seeds-<first>-<last>.npz    per-step NEES/NIS sums
+    cells/<estimator>/<scenario>/seeds-<first>-<last>.json   key, status, error, provenance
+    results.csv                                              rows of the last grid run, sorted
+    results.json                                             provenance of the last grid run
+
+Each file is written atomically (:mod:`fkn_bench.io`) and the cell's JSON last, so a cell is
+finished exactly when its JSON exists. Resume: a cell whose JSON records the same key (estimator
+and its configuration fingerprint, source and its configuration hash, seeds, metric settings,
+format version) is not computed again; failed cells count as finished (their failure is the
+result; use ``rerun`` to try again).
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from fkn_bench.harness.grid import CellSpec, safe_name
+from fkn_bench.harness.records import CellRecord, Results
+from fkn_bench.io import atomic_path, read_json, write_json_atomic, write_text_atomic
+from fkn_bench.metrics import StatisticSums
+
+__all__ = ["CELL_FORMAT", "ResultStore", "StoreError", "read_rows_csv", "rows_to_csv"]
+
+CELL_FORMAT = "fkn-bench-cell"
+
+_DTYPES = {"estimator": str, "scenario": str, "seed": np.int64, "group": str, "metric": str, "value": np.float64, "unit": str}
+
+
+class StoreError(ValueError):
+    """A results directory that cannot be read (missing, corrupt or of another format)."""
+
+
+def rows_to_csv(rows: pd.DataFrame, *, float_format: str | None = None) -> str:
+    """CSV text of tidy rows; without ``float_format`` floats are written exactly (shortest
+    round-trip repr) and NaN as an empty field."""
+    buffer = io.StringIO()
+    rows.to_csv(buffer, index=False, float_format=float_format, lineterminator="\n")
+    return buffer.getvalue()
+
+
+def read_rows_csv(path: str | Path) -> pd.DataFrame:
+    """Read tidy rows written by :func:`rows_to_csv` (exact floats; names are never NaN)."""
+    options: dict[str, Any] = {}
+    if int(pd.__version__.split(".")[0]) < 3:  # pandas 3 parses round-trip exactly by default
+        options["float_precision"] = "round_trip"
+    return pd.read_csv(path, dtype=_DTYPES, keep_default_na=False, na_values={"value": [""]}, **options)
+
+
+class ResultStore:
+    """Cell files under ``root`` (module docstring)."""
+
+    def __init__(self, root: str | Path) -> None:
+        self.root = Path(root)
+
+    # ------------------------------------------------------------------ paths
+    def cell_stem(self, estimator: str, scenario: str, seeds: tuple[int, ...]) -> Path:
+        return self.root / "cells" / safe_name(estimator) / safe_name(scenario) / f"seeds-{seeds[0]}-{seeds[-1]}"
+
+    def _paths(self, stem: Path) -> tuple[Path, Path, Path]:
+        return stem.with_suffix(".csv"), stem.with_suffix(".npz"), stem.with_suffix(".json")
+
+    # ------------------------------------------------------------------ resume
+    def finished(self, spec: CellSpec) -> CellRecord | None:
+        """The stored record of ``spec`` when it is finished with the same key, else None."""
+        stem = self.cell_stem(spec.estimator, spec.scenario, spec.seeds)
+        json_path = self._paths(stem)[2]
+        if not json_path.exists():
+            return None
+        try:
+            record = self.read_cell(json_path)
+        except StoreError:
+            return None
+        return record if record.key == spec.key() else None
+
+    # ------------------------------------------------------------------ write
+    def write_cell(self, record: CellRecord) -> Path:
+        """Write the record's rows, sums and JSON (last) atomically; returns the JSON path."""
+        stem = self.cell_stem(record.estimator, record.scenario, record.seeds)
+        csv_path, npz_path, json_path = self._paths(stem)
+        write_text_atomic(csv_path, rows_to_csv(record.rows))
+        arrays: dict[str, np.ndarray] = {}
+        for name, sums in (("nees", record.nees), ("nis", record.nis)):
+            if sums is not None:
+                arrays[f"{name}_sum"] = sums.sum
+                arrays[f"{name}_count"] = sums.count
+        with atomic_path(npz_path) as tmp, open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+        document = {
+            "format": CELL_FORMAT,
+            "cell": f"{record.estimator}/{record.scenario}/seeds-{record.seeds[0]}-{record.seeds[-1]}",
+            "estimator": record.estimator,
+            "scenario": record.scenario,
+            "seeds": list(record.seeds),
+            "status": record.status,
+            "error": record.error,
+            "key": record.key,
+            "source": record.source,
+            "files": {"rows": csv_path.name, "sums": npz_path.name},
+            "notes": record.notes,
+            "provenance": record.provenance,
+        }
+        return write_json_atomic(json_path, document)
+
+    # ------------------------------------------------------------------ read
+    def read_cell(self, json_path: str | Path) -> CellRecord:
+        """Read one finished cell (raises :class:`StoreError`)."""
+        json_path = Path(json_path)
+        try:
+            document = read_json(json_path)
+        except (OSError, ValueError) as exc:
+            raise StoreError(str(exc)) from None
+        if not isinstance(document, dict) or document.get("format") != CELL_FORMAT:
+            raise StoreError(f"{json_path} is not an fkn-bench cell file")
+        try:
+            rows = read_rows_csv(json_path.with_name(document["files"]["rows"]))
+            with np.load(json_path.with_name(document["files"]["sums"]), allow_pickle=False) as npz:
+                sums = {name: np.array(npz[name]) for name in npz.files}
+        except (OSError, KeyError, ValueError) as exc:
+            raise StoreError(f"cell {json_path} is incomplete: {exc}") from None
+
+        def pair(name: str) -> StatisticSums | None:
+            if f"{name}_sum" not in sums:
+                return None
+            return StatisticSums(sums[f"{name}_sum"], sums[f"{name}_count"])
+
+        return CellRecord(
+            estimator=document["estimator"],
+            scenario=document["scenario"],
+            seeds=tuple(int(s) for s in document["seeds"]),
+            key=document["key"],
+            source=document["source"],
+            status=document["status"],
+            rows=rows,
+            nees=pair("nees"),
+            nis=pair("nis"),
+            error=document.get("error"),
+            notes=document.get("notes") or {},
+            provenance=document.get("provenance") or {},
+        )
+
+    def cell_files(self) -> list[Path]:
+        """JSON files of the stored cells, sorted."""
+        return sorted((self.root / "cells").glob("*/*/seeds-*.json"))
+
+    def load(self) -> Results:
+        """Every stored cell (raises :class:`StoreError` when there are none or one is broken)."""
+        if not self.root.is_dir():
+            raise StoreError(f"results directory not found: {self.root}")
+        files = self.cell_files()
+        if not files:
+            raise StoreError(f"no cell results under {self.root} (expected cells/<estimator>/<scenario>/seeds-*.json)")
+        return Results(self.read_cell(path) for path in files)
+
+    def write_summary(self, results: Results, provenance: dict[str, Any]) -> None:
+        """Write ``results.csv`` (all rows, exact floats) and ``results.json`` (provenance)."""
+        write_text_atomic(self.root / "results.csv", rows_to_csv(results.rows))
+        write_json_atomic(self.root / "results.json", provenance)

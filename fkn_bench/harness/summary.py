@@ -1,0 +1,122 @@
+"""Summaries over seeds of one estimator on one scenario: what ``fkn-bench run`` prints and the
+leaderboards rank.
+
+Scalars are means over runs (seeds) of the per-run values, taken over the runs where the value is
+finite (:func:`fkn_bench.metrics.summarize`); ``statistics`` adds median and interquartile range.
+Divergence is reported apart (``diverged_fraction``, over all runs, failed runs included) and
+never folded into the RMSEs. ANEES/ANIS pool every run's per-step NEES/NIS (Bar-Shalom, Li &
+Kirubarajan 2001, sec. 5.4): ``anees`` is the average over runs and steps,
+``nees_in_bounds_fraction`` the share of steps whose average over the runs lies in the two-sided
+95% chi-square interval for that many runs (``anees_bounds``, given for all runs).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from fkn_bench.harness.records import Results
+from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS, NEES_DOF, NIS_DOF, average_statistic, chi2_interval, summarize
+from fkn_bench.types import STATE_NAMES
+
+__all__ = ["PRIMARY_SCORE", "summarize_pair", "summarize_results", "per_seed_table", "STATISTIC_METRICS"]
+
+PRIMARY_SCORE = ("state", "rmse")
+"""(group, metric) of the primary score: the 13-state RMSE (lower is better)."""
+
+STATISTIC_METRICS: dict[str, tuple[str, str]] = {
+    "state_rmse": ("state", "rmse"),
+    "attitude_rmse_deg": ("attitude", "rmse"),
+    "position_rmse_m": ("position", "rmse"),
+    "omega_rmse_rad_s": ("omega", "rmse"),
+    "velocity_rmse_m_s": ("velocity", "rmse"),
+    "settling_time_s": ("settling", "time"),
+    "nees_mean": ("consistency", "nees_mean"),
+}
+"""Metrics whose mean, median and IQR over seeds the summary's ``statistics`` gives."""
+
+_GROUP_KEYS = {
+    "attitude": "attitude_rmse_deg",
+    "position": "position_rmse_m",
+    "omega": "omega_rmse_rad_s",
+    "velocity": "velocity_rmse_m_s",
+}
+
+
+def per_seed_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """Rows of one pair as a table: index seed, columns ``(group, metric)``."""
+    return rows.pivot_table(index="seed", columns=["group", "metric"], values="value", aggfunc="first", dropna=False)
+
+
+def _column(table: pd.DataFrame, group: str, metric: str, runs: int) -> np.ndarray:
+    if (group, metric) in table.columns:
+        return table[(group, metric)].to_numpy(dtype=np.float64)
+    return np.full(runs, np.nan)
+
+
+def _finite_max(values: np.ndarray) -> float:
+    finite = values[np.isfinite(values)]
+    return float(finite.max()) if finite.size else float("nan")
+
+
+def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str, Any]:
+    """The summary of one ``(estimator, scenario)`` (module docstring); JSON-compatible except
+    that missing values are NaN (``fkn_bench.io.to_jsonable`` turns them into null)."""
+    cells = results.cells(estimator, scenario)
+    if not cells:
+        raise KeyError(f"no results for {estimator} on {scenario}")
+    rows = pd.concat([c.rows for c in cells], ignore_index=True)
+    seeds = results.seeds(estimator, scenario)
+    table = per_seed_table(rows).reindex(seeds)
+    runs = len(seeds)
+
+    def mean(group: str, metric: str) -> float:
+        return summarize(_column(table, group, metric, runs)).mean
+
+    nees, nis = results.pooled(estimator, scenario)
+    anees = average_statistic(nees, NEES_DOF) if nees is not None else None
+    anis = average_statistic(nis, NIS_DOF) if nis is not None else None
+    lower, upper = chi2_interval(NEES_DOF, runs)
+    nis_runs = int(np.max(nis.count)) if nis is not None and nis.count.size else 0
+    nis_lower, nis_upper = chi2_interval(NIS_DOF, nis_runs) if nis_runs else (np.nan, np.nan)
+    diverged = _column(table, "stability", "diverged", runs)
+    failed = _column(table, "stability", "failed", runs)
+    source = cells[0].source
+    return {
+        "estimator": estimator,
+        "scenario": scenario,
+        "seeds": seeds,
+        "split": source.get("split"),
+        "config_hash": source.get("config_hash"),
+        "runs": runs,
+        "failed_runs": int(np.nansum(failed)),
+        "state_rmse": mean(*PRIMARY_SCORE),
+        "rmse": {name: mean("state", f"rmse_{name}") for name in STATE_NAMES},
+        **{_GROUP_KEYS[g]: mean(g, "rmse") for g in GROUPS},
+        "settling_time_s": mean("settling", "time"),
+        "settled_fraction": mean("settling", "settled"),
+        "settling_time_by_group_s": {g: mean(g, "settling_time") for g in GROUPS},
+        "diverged_fraction": float(np.mean(np.nan_to_num(diverged, nan=1.0))) if runs else float("nan"),
+        "divergence_reasons": {r: mean("stability", r) for r in DIVERGENCE_REASONS},
+        "anees": anees.average if anees else float("nan"),
+        "anees_bounds": [float(lower), float(upper)],
+        "nees_in_bounds_fraction": anees.in_bounds_fraction if anees else float("nan"),
+        "anis": anis.average if anis else float("nan"),
+        "anis_bounds": [float(nis_lower), float(nis_upper)],
+        "nis_in_bounds_fraction": anis.in_bounds_fraction if anis else float("nan"),
+        "us_per_step": mean("cost", "us_per_step_online"),
+        "us_per_step_batched": mean("cost", "us_per_step_batched"),
+        "peak_memory_mib": _finite_max(_column(table, "cost", "peak_memory_mib", runs)),
+        "statistics": {
+            key: summarize(_column(table, group, metric, runs)).as_dict() for key, (group, metric) in STATISTIC_METRICS.items()
+        },
+        "errors": sorted({c.error for c in cells if c.error}),
+    }
+
+
+def summarize_results(results: Results, order: list[tuple[str, str]] | None = None) -> list[dict[str, Any]]:
+    """Summaries of every pair, in ``order`` (default: sorted by estimator, then scenario)."""
+    pairs = order if order is not None else results.pairs()
+    return [summarize_pair(results, estimator, scenario) for estimator, scenario in pairs]

@@ -1,0 +1,80 @@
+"""Presentation tables and their Markdown and HTML renderings (deterministic text: no dates)."""
+
+from __future__ import annotations
+
+import html
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+__all__ = ["Table", "markdown_table", "html_table", "html_page"]
+
+
+@dataclass(frozen=True)
+class Table:
+    """A titled table of pre-formatted strings, with notes printed under it.
+
+    ``align`` holds ``"l"`` or ``"r"`` per column (default: first left, others right)."""
+
+    title: str
+    header: Sequence[str]
+    rows: Sequence[Sequence[str]]
+    notes: Sequence[str] = field(default_factory=tuple)
+    align: Sequence[str] | None = None
+
+    def alignment(self) -> list[str]:
+        if self.align is not None:
+            return list(self.align)
+        return ["l"] + ["r"] * (len(self.header) - 1)
+
+
+def _md_cell(text: str) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def markdown_table(table: Table, *, level: int = 2) -> str:
+    """GitHub-flavoured Markdown: ``## title``, the table, then the notes as a paragraph."""
+    lines = [f"{'#' * level} {table.title}", ""] if table.title else []
+    lines.append("| " + " | ".join(_md_cell(h) for h in table.header) + " |")
+    lines.append("|" + "|".join(":---" if a == "l" else "---:" for a in table.alignment()) + "|")
+    for row in table.rows:
+        lines.append("| " + " | ".join(_md_cell(c) for c in row) + " |")
+    for note in table.notes:
+        lines.extend(["", note])
+    return "\n".join(lines) + "\n"
+
+
+def html_table(table: Table, *, level: int = 2) -> str:
+    """An HTML fragment: heading, ``<table>`` and notes (escaped)."""
+    esc = html.escape
+    align = table.alignment()
+    parts = [f"<h{level}>{esc(table.title)}</h{level}>"] if table.title else []
+    parts.append("<table>")
+    parts.append("<thead><tr>" + "".join(f'<th class="{a}">{esc(str(h))}</th>' for h, a in zip(table.header, align)) + "</tr></thead>")
+    parts.append("<tbody>")
+    for row in table.rows:
+        parts.append("<tr>" + "".join(f'<td class="{a}">{esc(str(c))}</td>' for c, a in zip(row, align)) + "</tr>")
+    parts.append("</tbody></table>")
+    for note in table.notes:
+        parts.append(f"<p class=\"note\">{esc(note)}</p>")
+    return "\n".join(parts) + "\n"
+
+
+_STYLE = (
+    "body{font-family:system-ui,sans-serif;margin:2em;max-width:80em}"
+    "table{border-collapse:collapse;margin:1em 0}"
+    "th,td{border:1px solid #ccc;padding:.3em .6em}"
+    "th{background:#f3f3f3}td.r,th.r{text-align:right}td.l,th.l{text-align:left}"
+    "p.note{color:#444;font-size:.9em}"
+)
+
+
+def html_page(title: str, intro: Sequence[str], tables: Sequence[Table]) -> str:
+    """A standalone HTML page: title, intro paragraphs, then the tables."""
+    esc = html.escape
+    body = [f"<h1>{esc(title)}</h1>"] + [f"<p>{esc(p)}</p>" for p in intro] + [html_table(t) for t in tables]
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        f"<title>{esc(title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n"
+        + "\n".join(body)
+        + "</body>\n</html>\n"
+    )

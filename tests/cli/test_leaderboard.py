@@ -1,0 +1,46 @@
+"""``fkn-bench leaderboard``: the committed leaderboards regenerate byte for byte from the committed
+results; errors for missing results."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fkn_bench.cli import main
+from fkn_bench.harness.leaderboard import REGENERATE_COMMAND
+
+REPO = Path(__file__).resolve().parents[2]
+LEADERBOARDS = REPO / "leaderboards"
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in root.iterdir() if p.is_file() and not p.name.startswith(".")}
+
+
+def test_committed_leaderboards_regenerate_identically(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert (LEADERBOARDS / "results" / "cells").is_dir(), "committed results are missing"
+    assert main(["leaderboard", "--results", str(LEADERBOARDS / "results"), "--out", str(tmp_path)]) == 0
+    regenerated, committed = _files(tmp_path), _files(LEADERBOARDS)
+    assert sorted(regenerated) == sorted(committed)
+    for name in sorted(committed):
+        assert regenerated[name] == committed[name], f"leaderboards/{name} differs from its regeneration"
+    written = capsys.readouterr().out.split()
+    assert len(written) == len(committed)
+
+
+def test_committed_leaderboards_cover_every_named_scenario() -> None:
+    from fkn_bench.scenarios import scenario_names
+
+    names = _files(LEADERBOARDS)
+    for scenario in scenario_names()[:8]:
+        assert {f"{scenario}.md", f"{scenario}.html", f"{scenario}.csv"} <= set(names)
+    assert "paper: FlexKalmanNet (quoted)" in (LEADERBOARDS / "ds1.md").read_text()
+    assert REGENERATE_COMMAND in (LEADERBOARDS / "README.md").read_text()
+
+
+def test_missing_results_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["leaderboard", "--results", str(tmp_path / "nothing"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "not found" in err and "fkn-bench run --all --out" in err
+    assert not (tmp_path / "out").exists()

@@ -1,0 +1,186 @@
+"""``fkn-bench run``: JSON document, table, defaults, exit codes, resume, determinism."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from fkn_bench.cli import main
+from fkn_bench.estimators import estimator_names, make_estimator, registry as estimator_registry
+from fkn_bench.scenarios import registry as scenario_registry
+from fkn_bench.types import STATE_NAMES
+
+JSON_KEYS = (
+    "estimator", "scenario", "seeds", "rmse", "attitude_rmse_deg", "position_rmse_m", "omega_rmse_rad_s",
+    "velocity_rmse_m_s", "settling_time_s", "diverged_fraction", "anees", "nees_in_bounds_fraction", "us_per_step",
+)
+COST_KEYS = ("us_per_step", "us_per_step_batched", "peak_memory_mib")
+
+
+@pytest.fixture(autouse=True)
+def isolated_registries(monkeypatch: pytest.MonkeyPatch) -> None:
+    """--scenario-file registers scenarios; some tests register estimators: keep both local."""
+    monkeypatch.setattr(scenario_registry, "_REGISTRY", dict(scenario_registry._REGISTRY))
+    estimator_names()
+    monkeypatch.setattr(estimator_registry, "_REGISTRY", dict(estimator_registry._REGISTRY))
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> str:
+    """A TOML file defining ``tiny``: ds1 with 2000 samples (a 200-step test split)."""
+    path = tmp_path_factory.mktemp("scenarios") / "tiny.toml"
+    path.write_text('[scenario.tiny]\nbase = "ds1"\nn_steps = 2000\n')
+    return str(path)
+
+
+def _run_json(capsys: pytest.CaptureFixture, *args: str) -> dict:
+    assert main(["run", *args, "--json"]) == 0
+    captured = capsys.readouterr()
+    return json.loads(captured.out)  # exactly one JSON document on stdout
+
+
+def test_json_document(capsys: pytest.CaptureFixture, tiny: str) -> None:
+    document = _run_json(capsys, "--estimator", "manual-ekf", "--scenario", "tiny", "--scenario-file", tiny,
+                         "--seeds", "3", "--no-progress")
+    (entry,) = document["results"]
+    for key in JSON_KEYS:
+        assert key in entry
+    assert entry["estimator"] == "manual-ekf" and entry["scenario"] == "tiny" and entry["seeds"] == [0, 1, 2]
+    assert list(entry["rmse"]) == list(STATE_NAMES)
+    assert all(isinstance(v, float) for v in entry["rmse"].values())
+    assert 0 < entry["attitude_rmse_deg"] < 20 and entry["diverged_fraction"] == 0.0
+    assert entry["us_per_step"] > 0
+    assert document["cells"] == {"total": 1, "computed": 1, "reused": 0, "failed": 0}
+
+
+def test_progress_bar_goes_to_stderr(capsys: pytest.CaptureFixture, tiny: str) -> None:
+    assert main(["run", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "2", "--json"]) == 0
+    captured = capsys.readouterr()
+    json.loads(captured.out)
+    assert "fkn-bench run" in captured.err and "cell" in captured.err
+
+
+def test_table_output(capsys: pytest.CaptureFixture, tiny: str) -> None:
+    assert main(["run", "--estimator", "manual-ekf", "--estimator", "oracle-ekf", "--scenario", "tiny",
+                 "--scenario-file", tiny, "--seeds", "2", "--no-progress"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("estimator / scenario")
+    assert lines[2].startswith("manual-ekf / tiny") and lines[3].startswith("oracle-ekf / tiny")
+    assert any("13-state RMSE" in line for line in lines[5:])
+
+
+def _unavailable(scenario=None, **_):
+    raise FileNotFoundError("no trained parameters")
+
+
+def test_default_estimator_is_flexkalmannet_when_available(capsys: pytest.CaptureFixture, tiny: str) -> None:
+    args = ("--scenario", "tiny", "--scenario-file", tiny, "--seeds", "1", "--no-progress")
+    estimator_registry._REGISTRY.pop("flexkalmannet", None)
+    assert [e["estimator"] for e in _run_json(capsys, *args)["results"]] == ["manual-ekf"]
+    estimator_registry.register_estimator("flexkalmannet", _unavailable)
+    assert [e["estimator"] for e in _run_json(capsys, *args)["results"]] == ["manual-ekf"]
+    estimator_registry.register_estimator("flexkalmannet", lambda scenario=None, **_: make_estimator("manual-ekf"),
+                                          overwrite=True)
+    assert [e["estimator"] for e in _run_json(capsys, *args)["results"]] == ["flexkalmannet"]
+
+
+def test_unavailable_estimator(capsys: pytest.CaptureFixture, tiny: str) -> None:
+    estimator_registry.register_estimator("needs-training", _unavailable)
+    base = ["run", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "1", "--no-progress"]
+    assert main([*base, "--estimator", "needs-training"]) == 2
+    assert "not available for scenario tiny: FileNotFoundError: no trained parameters" in capsys.readouterr().err
+    assert main([*base, "--all", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert "skipping needs-training on tiny" in captured.err
+    assert "needs-training" not in [e["estimator"] for e in json.loads(captured.out)["results"]]
+
+
+def _only_for_tiny(scenario=None, **_):
+    if scenario is None or scenario.name != "tiny":
+        raise FileNotFoundError("no trained parameters for this scenario")
+    return make_estimator("manual-ekf")
+
+
+def test_all_skips_only_the_unavailable_pairs(capsys: pytest.CaptureFixture, tiny: str) -> None:
+    estimator_registry.register_estimator("partly-trained", _only_for_tiny)
+    document = _run_json(capsys, "--all", "--scenario", "tiny", "--scenario", "ds1", "--scenario-file", tiny,
+                         "--seeds", "1", "--no-progress", "--cut", "10")
+    pairs = [(e["estimator"], e["scenario"]) for e in document["results"]]
+    assert ("partly-trained", "tiny") in pairs and ("partly-trained", "ds1") not in pairs
+    assert ("manual-ekf", "ds1") in pairs
+
+
+def test_default_scenario_and_seeds() -> None:
+    from fkn_bench.cli.run import DEFAULT_SCENARIO, DEFAULT_SEEDS
+
+    assert DEFAULT_SCENARIO == "ds1" and DEFAULT_SEEDS >= 20
+
+
+def test_all_runs_every_available_estimator(capsys: pytest.CaptureFixture, tiny: str) -> None:
+    estimator_registry.register_estimator(
+        "late-arrival", lambda scenario=None, **_: make_estimator("manual-mekf"), overwrite=True
+    )
+    document = _run_json(capsys, "--all", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "1",
+                         "--no-progress")
+    from fkn_bench.harness import probe_estimator
+    from fkn_bench.scenarios import get_scenario
+
+    available = [n for n in estimator_names() if probe_estimator(n, get_scenario("tiny")).available]
+    assert [e["estimator"] for e in document["results"]] == available
+    assert "late-arrival" in available and {"manual-ekf", "oracle-ekf"} <= set(available)
+
+
+def test_unknown_estimator_exits_2_with_the_list(capsys: pytest.CaptureFixture) -> None:
+    assert main(["run", "--estimator", "kalmannet-9000", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "kalmannet-9000" in err and "valid estimators: " in err
+    for name in estimator_names():
+        assert name in err
+
+
+def test_unknown_scenario_exits_2_with_the_list(capsys: pytest.CaptureFixture) -> None:
+    assert main(["run", "--scenario", "ds9", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "ds9" in err and "valid scenarios: ds1, ds2" in err
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--seeds", "0"], "--seeds"),
+        (["--workers", "0"], "--workers"),
+        (["--scheduler", "tcp://127.0.0.1:1"], "--backend dask"),
+        (["--rerun"], "--out"),
+        (["--cut", "5000"], "nothing to score"),
+    ],
+)
+def test_usage_errors_exit_2(capsys: pytest.CaptureFixture, args: list[str], message: str) -> None:
+    assert main(["run", *args, "--no-progress"]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_out_resumes_and_is_deterministic(capsys: pytest.CaptureFixture, tiny: str, tmp_path: Path) -> None:
+    args = ("--estimator", "manual-ekf", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "12",
+            "--out", str(tmp_path), "--no-progress")
+    first = _run_json(capsys, *args)
+    assert first["cells"] == {"total": 2, "computed": 2, "reused": 0, "failed": 0}
+    assert len(list((tmp_path / "cells" / "manual-ekf" / "tiny").glob("*.json"))) == 2
+    assert (tmp_path / "results.csv").exists() and json.loads((tmp_path / "results.json").read_text())["cells"] == 2
+    second = _run_json(capsys, *args)
+    assert second["cells"]["reused"] == 2 and second["results"] == first["results"]
+    third = _run_json(capsys, *args, "--rerun")
+    assert third["cells"]["computed"] == 2
+    strip = [{k: v for k, v in r.items() if k not in COST_KEYS} for r in (first["results"][0], third["results"][0])]
+    assert strip[0] == strip[1]  # recomputed: identical except timings
+
+
+def test_help_lists_run(capsys: pytest.CaptureFixture) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(["run", "--help"])
+    assert exit_info.value.code == 0
+    out = capsys.readouterr().out
+    for option in ("--estimator", "--scenario", "--seeds", "--split", "--json", "--out", "--backend", "--workers",
+                   "--scheduler"):
+        assert option in out

@@ -1,0 +1,59 @@
+"""Seed chunks, grid order and cell keys."""
+
+from __future__ import annotations
+
+import pytest
+
+from fkn_bench.harness import SEED_CHUNK, SimulatedSource, build_grid, chunk_seeds
+from fkn_bench.harness.grid import safe_name
+from fkn_bench.metrics import MetricSettings
+from fkn_bench.scenarios import get_scenario
+
+
+def test_chunks_are_consecutive_tens() -> None:
+    assert SEED_CHUNK == 10
+    chunks = chunk_seeds(range(25))
+    assert chunks == [tuple(range(10)), tuple(range(10, 20)), tuple(range(20, 25))]
+    assert chunk_seeds([7, 3, 5], size=2) == [(7, 3), (5,)]
+
+
+@pytest.mark.parametrize("seeds", [[], [1, 1], [-1]])
+def test_bad_seed_lists(seeds: list[int]) -> None:
+    with pytest.raises(ValueError):
+        chunk_seeds(seeds)
+
+
+def test_grid_order_and_keys() -> None:
+    sources = [SimulatedSource(get_scenario("ds1")), SimulatedSource(get_scenario("ds2"))]
+    cells = build_grid(["a", "b"], sources, range(15), fingerprints={("a", "ds1"): "f1"})
+    assert [c.name for c in cells[:4]] == ["a/ds1/seeds-0-9", "b/ds1/seeds-0-9", "a/ds1/seeds-10-14", "b/ds1/seeds-10-14"]
+    assert len(cells) == 8
+    assert cells[0].estimator_fingerprint == "f1" and cells[1].estimator_fingerprint == ""
+    key = cells[0].key()
+    assert key["source"].startswith("simulated:ds1:") and key["seeds"] == list(range(10))
+    other = build_grid(["a"], sources[:1], range(15), settings=MetricSettings(cut=50))[0]
+    assert other.key() != cells[0].key() and other.key_hash() != cells[0].key_hash()
+
+
+def test_source_key_follows_the_configuration() -> None:
+    a = SimulatedSource(get_scenario("ds1"))
+    b = SimulatedSource(get_scenario("ds1", noise_scale=2.0))
+    assert a.key() != b.key() and a.label == b.label == "ds1"
+    with pytest.raises(ValueError):
+        SimulatedSource(get_scenario("ds1"), split="nope")
+
+
+def test_safe_name() -> None:
+    assert safe_name("manual-ekf") == "manual-ekf"
+    assert safe_name("my filter/v2") == "my_filter_v2"
+
+
+def test_simulated_source_is_an_episode_source() -> None:
+    from fkn_bench.harness import EpisodeSource
+
+    source = SimulatedSource(get_scenario("ds1", n_steps=2000))
+    assert isinstance(source, EpisodeSource)
+    episodes = source.load([2, 5])
+    assert episodes.seeds == (2, 5) and episodes.truth.shape == (2, 200, 13)
+    assert not episodes.measurements.flags.writeable  # shared by the cells of a process
+    assert source.describe()["config_hash"] == source.scenario.config_hash()

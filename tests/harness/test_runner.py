@@ -1,0 +1,83 @@
+"""Grid runs: resume without recomputing, interrupted grids, failures kept as results."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from fkn_bench.harness import (
+    CellResult,
+    CellSpec,
+    LocalBackend,
+    ResultStore,
+    build_grid,
+    deterministic_rows,
+    run_grid,
+)
+from fkn_bench.harness.sources import SimulatedSource
+
+
+class CountingBackend(LocalBackend):
+    """The local backend, counting cells and optionally interrupted after ``stop_after`` cells."""
+
+    def __init__(self, stop_after: int | None = None) -> None:
+        super().__init__(1)
+        self.ran: list[str] = []
+        self.stop_after = stop_after
+
+    def run(self, cells: Sequence[CellSpec]) -> Iterator[CellResult]:
+        for result in super().run(cells):
+            if self.stop_after is not None and len(self.ran) >= self.stop_after:
+                raise KeyboardInterrupt
+            self.ran.append(result.spec.name)
+            yield result
+
+
+def test_resume_skips_finished_cells(tmp_path: Path, short_ds1: SimulatedSource) -> None:
+    cells = build_grid(["manual-ekf"], [short_ds1], range(15))
+    store = ResultStore(tmp_path)
+    first = run_grid(cells, store=store, backend=CountingBackend(), progress=False)
+    assert (first.computed, first.reused, first.failed) == (2, 0, 0)
+    backend = CountingBackend()
+    again = run_grid(cells, store=store, backend=backend, progress=False)
+    assert (again.computed, again.reused) == (0, 2) and backend.ran == []
+    pd.testing.assert_frame_equal(again.results.rows, first.results.rows, check_exact=True)
+    assert (tmp_path / "results.csv").exists() and (tmp_path / "results.json").exists()
+    rerun = run_grid(cells, store=store, backend=CountingBackend(), progress=False, rerun=True)
+    assert rerun.computed == 2
+
+
+def test_interrupted_grid_resumes_where_it_stopped(tmp_path: Path, short_ds1: SimulatedSource,
+                                                    short_ds2: SimulatedSource) -> None:
+    cells = build_grid(["manual-ekf"], [short_ds1, short_ds2], range(12))  # 4 cells
+    store = ResultStore(tmp_path)
+    with pytest.raises(KeyboardInterrupt):
+        run_grid(cells, store=store, backend=CountingBackend(stop_after=2), progress=False)
+    assert len(store.cell_files()) == 2
+    assert not list(tmp_path.rglob("*.tmp"))  # nothing torn left behind
+    backend = CountingBackend()
+    resumed = run_grid(cells, store=store, backend=backend, progress=False)
+    assert (resumed.computed, resumed.reused) == (2, 2)
+    assert backend.ran == [c.name for c in cells[2:]]
+    fresh = run_grid(cells, progress=False)
+    pd.testing.assert_frame_equal(deterministic_rows(resumed.results.rows), deterministic_rows(fresh.results.rows),
+                                  check_exact=True)
+
+
+def test_failures_are_results(tmp_path: Path, short_ds1: SimulatedSource, test_estimators: None) -> None:
+    cells = build_grid(["raising", "manual-ekf"], [short_ds1], range(3))
+    outcome = run_grid(cells, store=ResultStore(tmp_path), progress=False)
+    assert outcome.failed == 1 and outcome.computed == 2
+    loaded = ResultStore(tmp_path).load()
+    statuses = {r.estimator: r.status for r in loaded.records}
+    assert statuses == {"raising": "failed", "manual-ekf": "ok"}
+    again = run_grid(cells, store=ResultStore(tmp_path), progress=False)
+    assert again.reused == 2  # a failure is a finished result
+
+
+def test_without_store_results_stay_in_memory(short_ds1: SimulatedSource) -> None:
+    outcome = run_grid(build_grid(["manual-ekf"], [short_ds1], range(2)), progress=False)
+    assert len(outcome.results) == 1 and outcome.results.seeds("manual-ekf", "ds1") == [0, 1]

@@ -1,0 +1,72 @@
+"""Result files: exact round trips, resume keys, loading, and nothing torn or left behind."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from fkn_bench.harness import CellSpec, ResultStore, StoreError, record_of, run_cell
+from fkn_bench.harness.sources import SimulatedSource
+from fkn_bench.harness.store import read_rows_csv, rows_to_csv
+from fkn_bench.metrics import MetricSettings
+
+
+def _spec(source: SimulatedSource, **changes) -> CellSpec:
+    fields = {"estimator": "manual-ekf", "source": source, "seeds": (3, 4), "settings": MetricSettings(),
+              "estimator_fingerprint": "abc", "online_steps": 20}
+    fields.update(changes)
+    return CellSpec(**fields)
+
+
+def test_round_trip_is_exact(tmp_path: Path, short_ds1: SimulatedSource) -> None:
+    record = record_of(run_cell(_spec(short_ds1)))
+    store = ResultStore(tmp_path)
+    json_path = store.write_cell(record)
+    assert json_path == tmp_path / "cells" / "manual-ekf" / "ds1" / "seeds-3-4.json"
+    back = store.read_cell(json_path)
+    pd.testing.assert_frame_equal(back.rows, record.rows, check_exact=True)
+    assert np.array_equal(back.nees.sum, record.nees.sum) and np.array_equal(back.nis.count, record.nis.count)
+    assert back.key == record.key and back.status == "ok" and back.seeds == (3, 4)
+    assert sorted(p.name for p in json_path.parent.iterdir()) == ["seeds-3-4.csv", "seeds-3-4.json", "seeds-3-4.npz"]
+
+
+def test_finished_matches_the_key(tmp_path: Path, short_ds1: SimulatedSource) -> None:
+    store = ResultStore(tmp_path)
+    spec = _spec(short_ds1)
+    assert store.finished(spec) is None
+    store.write_cell(record_of(run_cell(spec)))
+    assert store.finished(spec) is not None
+    assert store.finished(_spec(short_ds1, estimator_fingerprint="retuned")) is None
+    assert store.finished(_spec(short_ds1, settings=MetricSettings(cut=50))) is None
+    other_config = SimulatedSource(short_ds1.scenario.replace(noise_scale=2.0))
+    assert store.finished(_spec(other_config)) is None
+
+
+def test_torn_cell_is_not_finished(tmp_path: Path, short_ds1: SimulatedSource) -> None:
+    store = ResultStore(tmp_path)
+    spec = _spec(short_ds1)
+    json_path = store.write_cell(record_of(run_cell(spec)))
+    json_path.with_suffix(".csv").unlink()
+    assert store.finished(spec) is None
+    with pytest.raises(StoreError, match="incomplete"):
+        store.read_cell(json_path)
+
+
+def test_load_errors(tmp_path: Path) -> None:
+    with pytest.raises(StoreError, match="not found"):
+        ResultStore(tmp_path / "missing").load()
+    with pytest.raises(StoreError, match="no cell results"):
+        ResultStore(tmp_path).load()
+
+
+def test_csv_keeps_odd_names_and_nan(tmp_path: Path) -> None:
+    rows = pd.DataFrame({"estimator": ["NA"], "scenario": ["nan"], "seed": [1], "group": ["g"], "metric": ["m"],
+                         "value": [np.nan], "unit": [""]})
+    path = tmp_path / "rows.csv"
+    path.write_text(rows_to_csv(rows))
+    back = read_rows_csv(path)
+    assert back.estimator[0] == "NA" and back.scenario[0] == "nan" and np.isnan(back.value[0])
+    assert back.unit[0] == ""

@@ -1,0 +1,75 @@
+"""Summaries over seeds of stored results, and the run table."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fkn_bench.harness import ResultStore, build_grid, run_grid, summarize_pair, summarize_results, summary_text
+from fkn_bench.harness.report import format_number, text_table
+from fkn_bench.harness.sources import SimulatedSource
+from fkn_bench.metrics import NEES_DOF, chi2_interval
+from fkn_bench.types import STATE_NAMES
+
+JSON_KEYS = {
+    "estimator", "scenario", "seeds", "rmse", "attitude_rmse_deg", "position_rmse_m", "omega_rmse_rad_s",
+    "velocity_rmse_m_s", "settling_time_s", "diverged_fraction", "anees", "nees_in_bounds_fraction", "us_per_step",
+}
+
+
+def test_summary_of_stored_results(small_results_dir: Path) -> None:
+    results = ResultStore(small_results_dir).load()
+    assert len(results) == 8
+    s = summarize_pair(results, "oracle-ekf", "ds1")
+    assert JSON_KEYS <= set(s)
+    assert s["seeds"] == list(range(12)) and s["runs"] == 12
+    assert list(s["rmse"]) == list(STATE_NAMES)
+    rows = results.rows
+    per_seed = rows[(rows.estimator == "oracle-ekf") & (rows.scenario == "ds1") & (rows.group == "attitude")
+                    & (rows.metric == "rmse")].value
+    assert s["attitude_rmse_deg"] == pytest.approx(per_seed.mean(), rel=1e-12)
+    assert s["statistics"]["attitude_rmse_deg"]["median"] == pytest.approx(per_seed.median(), rel=1e-12)
+    assert s["anees_bounds"] == pytest.approx([float(b) for b in chi2_interval(NEES_DOF, 12)])
+    assert 0.0 <= s["nees_in_bounds_fraction"] <= 1.0 and s["anees"] > 0
+    assert s["diverged_fraction"] == 0.0 and s["errors"] == []
+
+
+def test_pooled_anees_equals_the_mean_of_per_seed_nees(small_results_dir: Path) -> None:
+    results = ResultStore(small_results_dir).load()
+    nees, _ = results.pooled("manual-ekf", "ds2")
+    rows = results.rows
+    per_seed = rows[(rows.estimator == "manual-ekf") & (rows.scenario == "ds2") & (rows.metric == "nees_mean")].value
+    assert np.sum(nees.sum) / np.sum(nees.count) == pytest.approx(per_seed.mean(), rel=1e-12)
+
+
+def test_failed_runs_count_as_diverged(short_ds1: SimulatedSource, test_estimators: None) -> None:
+    outcome = run_grid(build_grid(["raising", "nan"], [short_ds1], range(3)), progress=False)
+    raising, nan = summarize_results(outcome.results, [("raising", "ds1"), ("nan", "ds1")])
+    assert raising["diverged_fraction"] == 1.0 and raising["failed_runs"] == 3
+    assert np.isnan(raising["state_rmse"]) and "boom" in raising["errors"][0]
+    assert nan["diverged_fraction"] == 1.0 and nan["divergence_reasons"]["non_finite"] == 1.0
+    text = summary_text([raising, nan])
+    assert "Failures:" in text and "raising / ds1" in text
+
+
+def test_summary_text_has_one_line_per_pair(small_results_dir: Path) -> None:
+    summaries = summarize_results(ResultStore(small_results_dir).load())
+    lines = summary_text(summaries).splitlines()
+    assert lines[0].startswith("estimator / scenario") and lines[2].startswith("manual-ekf / ds1")
+    assert sum(" / ds" in line for line in lines[2:6]) == 4
+
+
+def test_format_number() -> None:
+    assert format_number(0.0197812) == "0.01978"
+    assert format_number(5.4034, 3) == "5.40"
+    assert format_number(1234.5, 3) == "1234"
+    assert format_number(2e-6, 3) == "2.00e-06"
+    assert format_number(float("nan")) == "-" and format_number(None) == "-"
+    assert format_number(0) == "0"
+
+
+def test_text_table_alignment() -> None:
+    table = text_table(["name", "x"], [["a", "1"], ["long", "22"]])
+    assert table.splitlines() == ["name   x", "----  --", "a      1", "long  22"]
