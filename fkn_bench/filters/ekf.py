@@ -39,7 +39,7 @@ def joseph_update(
     then becomes ``(T A) P (T A)^T + (T K) R (T K)^T`` with ``A = I - K H``: the Joseph form
     followed by the projection ``T P T^T``, in one pass. Returns ``(x+, P+, S)``.
     """
-    n = x.shape[-1]
+    batch, n = x.shape
     if observed is not None:
         PHt = P[:, :, observed]
         S = P[:, observed, observed] + R
@@ -49,20 +49,46 @@ def joseph_update(
         S = H @ PHt + R
     # S is symmetric positive definite (R is); its inverse gives K with one batched product
     K = PHt @ torch.linalg.inv_ex(S)[0]  # (B, n, m)
-    x_post = x + (K @ nu.unsqueeze(-1)).squeeze(-1)
-    TA = _eye(n, x.dtype).expand(x.shape[0], n, n).clone()  # becomes T A = T - (T K) H
+    x_post = torch.baddbmm(x.unsqueeze(-1), K, nu.unsqueeze(-1)).squeeze(-1)
     TK = K
+    block = N = None
     if normalize is not None:
         x_post, block, N = normalize(x_post)
         if block is not None and N is not None:
             TK = torch.cat((K[:, : block.start], N @ K[:, block], K[:, block.stop :]), dim=1)
-            TA[:, block, block] = N
+    # T A = T - (T K) H with T the identity but for the block N
+    T = _projection_matrix(block, N, batch, n, x.dtype)
     if observed is not None:
-        TA[:, :, observed] -= TK
+        TA = T - _pad_columns(TK, observed, n)
     else:
-        TA = TA - TK @ H
-    P_post = torch.baddbmm(TA @ P @ TA.transpose(1, 2), TK @ R.expand(x.shape[0], -1, -1), TK.transpose(1, 2))
+        TA = T - TK @ H
+    P_post = torch.baddbmm(TA @ P @ TA.transpose(1, 2), TK @ R.expand(batch, -1, -1), TK.transpose(1, 2))
     return x_post, P_post, S
+
+
+def _pad_columns(M: Tensor, columns: slice, n: int) -> Tensor:
+    """``M (B, r, m)`` placed at ``columns`` of a ``(B, r, n)`` zero matrix (``M H`` for ``H``
+    selecting ``columns``)."""
+    batch, rows, _ = M.shape
+    parts = [M]
+    if columns.start:
+        parts.insert(0, M.new_zeros(()).expand(batch, rows, columns.start))
+    if columns.stop < n:
+        parts.append(M.new_zeros(()).expand(batch, rows, n - columns.stop))
+    return torch.cat(parts, dim=2) if len(parts) > 1 else M
+
+
+def _projection_matrix(block: slice | None, N: Tensor | None, batch: int, n: int, dtype: torch.dtype) -> Tensor:
+    """``T (B, n, n)``: the identity with ``N`` on the diagonal block ``block``."""
+    eye = _eye(n, dtype)
+    if block is None or N is None:
+        return eye.expand(batch, n, n)
+    rows = [_pad_columns(N, block, n)]
+    if block.start:
+        rows.insert(0, eye[: block.start].expand(batch, -1, -1))
+    if block.stop < n:
+        rows.append(eye[block.stop :].expand(batch, -1, -1))
+    return torch.cat(rows, dim=1) if len(rows) > 1 else rows[0]
 
 
 _EYES: dict[tuple[int, torch.dtype], Tensor] = {}
@@ -89,8 +115,7 @@ class ExtendedKalmanFilter(KalmanFilter):
         self.layout = self.model.layout
 
     def predict(self, state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
-        F = self.model.jacobian(state.mean, dt)
-        mean = self.model.predict(state.mean, dt)
+        mean, F = self.model.transition(state.mean, dt)
         FP = F @ state.covariance
         Q = process_noise.expand(FP.shape[0], -1, -1)
         return FilterState(mean, torch.baddbmm(Q, FP, F.transpose(1, 2)))

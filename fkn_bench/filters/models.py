@@ -63,6 +63,10 @@ class StateSpaceModel:
         """``F = df/dx`` ``(B, n, n)`` at ``x``."""
         raise NotImplementedError
 
+    def transition(self, x: Tensor, dt: float) -> tuple[Tensor, Tensor]:
+        """``(f(x), F)`` together; models override it when sharing work makes it cheaper."""
+        return self.predict(x, dt), self.jacobian(x, dt)
+
     def sanitize(self, measurements: Tensor, mask: Tensor) -> tuple[Tensor, Tensor]:
         """Clean inputs once per sequence: drop non-finite measurements from the mask."""
         finite = torch.isfinite(measurements).all(-1)
@@ -117,32 +121,38 @@ class PoseTwistModel(StateSpaceModel):
         self._cache: dict = {}
 
     def predict(self, x: Tensor, dt: float) -> Tensor:
-        q, r, w, v = x[:, 0:4], x[:, 4:7], x[:, 7:10], x[:, 10:13]
-        dq = qt.multiply(torch.cat((torch.zeros_like(w[:, :1]), w), dim=1), q)  # Theta(q) w
-        return torch.cat((q + (0.5 * dt) * dq, r + dt * v, w, v), dim=1)
+        return self.transition(x, dt)[0]
 
     def jacobian(self, x: Tensor, dt: float) -> Tensor:
-        batch, dtype = x.shape[0], x.dtype
-        half = 0.5 * dt
-        quaternion_rows = torch.cat(
-            (
-                self._eye4(dtype) + half * qt.omega_matrix(x[:, 7:10]),
-                torch.zeros(batch, 4, 3, dtype=dtype),
-                half * qt.theta_matrix(x[:, 0:4]),
-                torch.zeros(batch, 4, 3, dtype=dtype),
-            ),
-            dim=2,
-        )
-        return torch.cat((quaternion_rows, self._lower_rows(dtype, dt).expand(batch, 9, 13)), dim=1)
+        return self.transition(x, dt)[1]
 
-    def _lower_rows(self, dtype: torch.dtype, dt: float) -> Tensor:
-        key = (dtype, float(dt))
-        rows = self._cache.get(key)
-        if rows is None:
-            rows = torch.eye(13, dtype=dtype)[4:].clone()
-            rows[0:3, 10:13] = dt * torch.eye(3, dtype=dtype)
-            self._cache[key] = rows
-        return rows
+    def transition(self, x: Tensor, dt: float) -> tuple[Tensor, Tensor]:
+        """Mean and Jacobian with few batched operations (the filter's hot path).
+
+        ``E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]`` (the quaternion rows of ``F - A``, with
+        ``A`` the identity plus ``r += dt v``) is linear in the state: ``E = x @ B`` for a
+        constant basis ``B``. Since ``Omega(w) q = Theta(q) w``, ``E x = dt Theta(q) w`` is twice
+        the quaternion increment, so ``f(x) = (A + E/2) x`` and ``F = A + E``.
+        """
+        batch = x.shape[0]
+        A, basis, zeros = self._transition_constants(x.dtype, dt)
+        E = torch.cat(((x @ basis).view(batch, 4, 13), zeros.expand(batch, 9, 13)), dim=1)
+        mean = (torch.add(A, E, alpha=0.5) @ x.unsqueeze(-1)).squeeze(-1)
+        return mean, A + E
+
+    def _transition_constants(self, dtype: torch.dtype, dt: float) -> tuple[Tensor, Tensor, Tensor]:
+        key = ("transition", dtype, float(dt))
+        constants = self._cache.get(key)
+        if constants is None:
+            A = torch.eye(13, dtype=dtype)
+            A[4:7, 10:13] = dt * torch.eye(3, dtype=dtype)
+            basis = torch.zeros(13, 4, 13, dtype=dtype)
+            unit = torch.eye(13, dtype=dtype)
+            basis[0:4, :, 7:10] = qt.theta_matrix(unit[0:4, 0:4])  # d(Theta(q) w)/dw rows, per q_i
+            basis[7:10, :, 0:4] = qt.omega_matrix(unit[7:10, 7:10])  # Omega(w) per w_i
+            constants = (A, (0.5 * dt) * basis.reshape(13, 52), torch.zeros(9, 13, dtype=dtype))
+            self._cache[key] = constants
+        return constants
 
     def _eye4(self, dtype: torch.dtype) -> Tensor:
         return self._constant("eye4", dtype, lambda: torch.eye(4, dtype=dtype))
@@ -165,14 +175,17 @@ class PoseTwistModel(StateSpaceModel):
         return torch.where(usable[..., None], z, torch.zeros_like(z)), usable
 
     def align(self, z: Tensor, x_pred: Tensor) -> Tensor:
-        q = qt.align_sign(z[:, :4], x_pred[:, :4])
-        return torch.cat((q, z[:, 4:]), dim=1)
+        # copysign(1, z_q . q-) is -1 where the measured quaternion points away from the prediction
+        dot = (z[:, None, 0:4] @ x_pred[:, 0:4, None]).squeeze(-1)
+        sign = torch.copysign(torch.ones_like(dot), dot)
+        return z * torch.cat((sign.expand(-1, 4), torch.ones_like(z[:, 4:])), dim=1)
 
     def normalize(self, x: Tensor) -> tuple[Tensor, slice | None, Tensor | None]:
         q = x[:, :4]
         norm = q.norm(dim=1, keepdim=True)
         unit = q / norm
-        N = (self._eye4(x.dtype) - unit[:, :, None] * unit[:, None, :]) / norm[:, :, None]
+        # N = (I - u u^T) / |q|
+        N = torch.baddbmm(self._eye4(x.dtype), unit[:, :, None], unit[:, None, :], alpha=-1.0) / norm[:, :, None]
         return torch.cat((unit, x[:, 4:]), dim=1), slice(0, 4), N
 
     def null_direction(self, x: Tensor) -> Tensor | None:

@@ -83,7 +83,7 @@ def _model_skeleton(config: FlexKalmanNetConfig, reference: torch.Tensor, mean: 
 
 def build_model(config: FlexKalmanNetConfig, data: TrainingData) -> FlexKalmanNet:
     """A fresh FlexKalmanNet for ``data`` (weights seeded by ``config.seed``)."""
-    measurements = data.train_full.measurements[0][data.train_full.mask[0]]
+    measurements = data.train_full.measurements[data.train_full.mask]
     generator = torch.Generator().manual_seed(config.seed)
     if len(measurements) > REFERENCE_SAMPLES:
         pick = torch.randperm(len(measurements), generator=generator)[:REFERENCE_SAMPLES].sort().values

@@ -57,7 +57,7 @@ class FlexKalmanNetConfig:
     ``dropout``, ``network_dtype``, ``mode`` (constant or time_varying), ``samples_per_window``,
     ``history``.
     Data: ``window`` (consecutive samples per training window; the paper's batch of 512),
-    ``stride``, ``train_measurement_every``.
+    ``stride``, ``train_measurement_every``, ``episodes`` (recordings in the data set; the paper: 1).
     Optimisation: ``objective``, ``epochs``, ``patience``, ``lr``, ``weight_decay``,
     ``windows_per_batch``, ``loss_cut``, ``seed``, ``scheduler_factor``,
     ``scheduler_patience``, ``max_grad_norm``, ``threads``.
@@ -77,6 +77,7 @@ class FlexKalmanNetConfig:
     window: int = 512
     stride: int | None = None
     train_measurement_every: int | None = 1
+    episodes: int = 1
     objective: str = "supervised"
     epochs: int = 100
     patience: int = 20

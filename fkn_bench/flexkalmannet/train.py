@@ -120,6 +120,7 @@ def train_flexkalmannet(
         window=config.window,
         stride=config.stride,
         train_measurement_every=config.train_measurement_every,
+        episodes=config.episodes,
     )
     model = build_model(config, data)
     variant = make_filter(config.variant)

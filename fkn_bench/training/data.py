@@ -50,10 +50,11 @@ class Sequences:
         return Sequences(self.measurements[index], self.mask[index], self.truth[index])
 
 
-def _split(scenario: Scenario, split: str, every: int, dtype: torch.dtype) -> Sequences:
+def _split(scenario: Scenario, split: str, every: int, dtype: torch.dtype, episodes: int = 1) -> Sequences:
     from fkn_bench.envs import generate_episodes
 
-    episode = generate_episodes(scenario.replace(measurement_every=every), [scenario.dataset_seed], split=split)
+    seeds = [scenario.dataset_seed + i for i in range(episodes)]
+    episode = generate_episodes(scenario.replace(measurement_every=every), seeds, split=split)
     return Sequences(
         torch.as_tensor(episode.measurements, dtype=dtype),
         torch.as_tensor(episode.valid),
@@ -70,6 +71,9 @@ class TrainingData:
         stride: samples between window starts (default: ``window``, non-overlapping).
         train_measurement_every: measurement schedule of the training windows (default: the
             scenario's).
+        episodes: episodes in the data set: seeds ``dataset_seed, dataset_seed + 1, ...`` (the
+            paper has one recording: 1). Training windows come from every episode's train
+            split, validation runs over every episode's val split.
         dtype: tensor dtype (float64 by default).
     """
 
@@ -80,6 +84,7 @@ class TrainingData:
         window: int = 512,
         stride: int | None = None,
         train_measurement_every: int | None = None,
+        episodes: int = 1,
         dtype: torch.dtype = torch.float64,
     ) -> None:
         self.scenario = get_scenario(scenario)
@@ -90,18 +95,22 @@ class TrainingData:
             raise ValueError(f"stride must be >= 1 (got {stride})")
         self.window, self.stride = int(window), int(stride)
         self.train_measurement_every = int(train_measurement_every or self.scenario.measurement_every)
+        if episodes < 1:
+            raise ValueError(f"episodes must be >= 1 (got {episodes})")
+        self.episodes = int(episodes)
         self.dtype = dtype
-        train = _split(self.scenario, "train", self.train_measurement_every, dtype)
+        train = _split(self.scenario, "train", self.train_measurement_every, dtype, self.episodes)
         length = train.measurements.shape[1]
         if length < window:
             raise ValueError(f"the train split has {length} samples, fewer than one window of {window}")
         starts = torch.arange(0, length - window + 1, stride)
         index = starts[:, None] + torch.arange(window)[None, :]
-        self.train = Sequences(train.measurements[0][index], train.mask[0][index], train.truth[0][index])
+        flat = lambda t: t[:, index].flatten(0, 1)  # noqa: E731  (episodes x windows, window, ...)
+        self.train = Sequences(flat(train.measurements), flat(train.mask), flat(train.truth))
         self.train_full = train
-        self.val = _split(self.scenario, "val", self.scenario.measurement_every, dtype)
-        valid = train.mask[0]
-        positions = train.measurements[0][valid][:, 4:7]
+        self.val = _split(self.scenario, "val", self.scenario.measurement_every, dtype, self.episodes)
+        valid = train.mask
+        positions = train.measurements[valid][:, 4:7]
         self.position_mean = positions.mean(0)
         self.position_std = positions.std(0).clamp_min(1e-9)
 
@@ -120,6 +129,7 @@ class TrainingData:
             "scenario": self.scenario.name,
             "config_hash": self.scenario.config_hash(),
             "dataset_seed": self.scenario.dataset_seed,
+            "episodes": self.episodes,
             "window": self.window,
             "stride": self.stride,
             "windows": self.n_windows,

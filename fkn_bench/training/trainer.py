@@ -156,7 +156,9 @@ class Trainer:
         return mse, mse
 
     def validate(self) -> tuple[float, float]:
-        """``(validation loss, validation 13-state RMSE)`` with the deployed parameters."""
+        """``(validation loss, validation 13-state RMSE)`` with the deployed parameters; the loss
+        is the optimised objective (square root of the possibly weighted MSE, or the NLL) and
+        selects the best epoch."""
         with torch.no_grad():
             raw = self.model.deployed_raw().expand(self.data.val.batch_size, -1)
             loss, mse = self.loss(self.data.val, raw)
@@ -166,13 +168,13 @@ class Trainer:
 
     # ------------------------------------------------------------------ epochs
     def run_epoch(self) -> float:
-        """One pass over the training windows; returns the mean training loss (RMSE for the
-        supervised objective, NLL otherwise)."""
+        """One pass over the training windows; returns the mean training loss (the plain 13-state
+        RMSE for the supervised objective, whatever its weights; the NLL otherwise)."""
         self.model.train()
         total, count = 0.0, 0
         for batch in self.data.batches(self.config.windows_per_batch, self.generator):
             self.optimizer.zero_grad(set_to_none=True)
-            loss, _ = self.loss(batch, self.model.window_raw(batch))
+            loss, mse = self.loss(batch, self.model.window_raw(batch))
             if not torch.isfinite(loss):
                 raise FloatingPointError(
                     f"non-finite training loss at epoch {len(self.history) + 1}: lower the learning rate"
@@ -181,7 +183,8 @@ class Trainer:
             if self.config.max_grad_norm is not None:
                 nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm)
             self.optimizer.step()
-            total += float(loss.detach()) * batch.batch_size
+            reported = mse if (self.config.objective == "supervised" and mse is not None) else loss
+            total += float(reported.detach()) * batch.batch_size
             count += batch.batch_size
         self.model.eval()
         mean = total / count

@@ -1,0 +1,90 @@
+"""Training speed: one epoch of the batched trainer against the sequential reference.
+
+Both learn FlexKalmanNet with the same configuration, parameter set, data windows, objective and
+loss cut; the reference (:mod:`fkn_bench.flexkalmannet.reference`) runs the windows one after
+another and the network at every step, the trainer runs all windows of a batch through the
+filter at once. Both start from the same freshly built model. Timed in one process, one after the
+other, with the same thread count, so the ratio is meaningful on a noisy machine.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from fkn_bench.filters import make_filter
+from fkn_bench.flexkalmannet.checkpoint import build_model
+from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
+from fkn_bench.flexkalmannet.reference import sequential_reference_epoch
+from fkn_bench.runtime import torch_threads
+from fkn_bench.scenarios import Scenario, get_scenario
+from fkn_bench.training import Trainer, TrainingData
+
+__all__ = ["TrainingSpeed", "measure_training_speed"]
+
+
+@dataclass(frozen=True)
+class TrainingSpeed:
+    """Seconds per epoch of both trainers and their ratio."""
+
+    scenario: str
+    window: int
+    train_measurement_every: int
+    windows: int
+    reference_windows_timed: int
+    reference_seconds_per_epoch: float
+    trainer_seconds_per_epoch: float
+    trainer_epochs_timed: int
+
+    @property
+    def ratio(self) -> float:
+        return self.reference_seconds_per_epoch / self.trainer_seconds_per_epoch
+
+    def to_dict(self) -> dict[str, Any]:
+        return {**asdict(self), "ratio": self.ratio}
+
+
+def measure_training_speed(
+    scenario: str | Scenario = "ds1",
+    config: FlexKalmanNetConfig | None = None,
+    *,
+    reference_windows: int | None = None,
+    trainer_epochs: int = 3,
+) -> TrainingSpeed:
+    """Time the reference epoch (or ``reference_windows`` of its windows, scaled to an epoch)
+    and the median of ``trainer_epochs`` trainer epochs."""
+    scenario = get_scenario(scenario)
+    config = config if config is not None else FlexKalmanNetConfig()
+    data = TrainingData(
+        scenario,
+        window=config.window,
+        stride=config.stride,
+        train_measurement_every=config.train_measurement_every,
+        episodes=config.episodes,
+    )
+    fresh = build_model(config, data)
+    with torch_threads(config.threads):
+        trainer = Trainer(copy.deepcopy(fresh), make_filter(config.variant), data, config.train_config())
+        durations = []
+        for _ in range(trainer_epochs):
+            began = time.perf_counter()
+            trainer.run_epoch()
+            durations.append(time.perf_counter() - began)
+        reference = sequential_reference_epoch(
+            copy.deepcopy(fresh), data, lr=config.lr, loss_cut=config.loss_cut, max_windows=reference_windows
+        )
+    durations.sort()
+    trainer_seconds = durations[len(durations) // 2]
+    reference_seconds = reference.seconds * data.n_windows / reference.windows
+    return TrainingSpeed(
+        scenario=scenario.name,
+        window=data.window,
+        train_measurement_every=data.train_measurement_every,
+        windows=data.n_windows,
+        reference_windows_timed=reference.windows,
+        reference_seconds_per_epoch=reference_seconds,
+        trainer_seconds_per_epoch=trainer_seconds,
+        trainer_epochs_timed=trainer_epochs,
+    )
