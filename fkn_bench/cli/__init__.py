@@ -14,7 +14,9 @@ from collections.abc import Sequence
 
 __all__ = ["main", "UsageError", "COMMANDS"]
 
-COMMANDS: tuple[str, ...] = ("scenarios", "simulate", "run", "train", "bench", "leaderboard", "plot", "record")
+COMMANDS: tuple[str, ...] = (
+    "scenarios", "simulate", "run", "train", "bench", "leaderboard", "plot", "record", "reproduce", "sweep",
+)
 """Subcommand modules, in the order ``--help`` lists them."""
 
 
@@ -50,6 +52,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"fkn-bench {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # e.g. `fkn-bench run | head`: the reader left, nothing to report
+        import os
+
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
+        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

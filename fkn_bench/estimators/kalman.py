@@ -189,8 +189,8 @@ class KalmanEstimator(Estimator):
         Q = self._numpy_noise[0]
         if self.variant_name == "ekf":
             return online_ekf.predict(x, P, Q, dt)
-        with torch.no_grad():
-            state = self.filter.predict(FilterState(torch.from_numpy(x)[None], torch.from_numpy(P)[None]), torch.from_numpy(Q), dt)
+        with torch.no_grad():  # torch.tensor copies: P is shared read-only with the last Estimate
+            state = self.filter.predict(FilterState(torch.tensor(x)[None], torch.tensor(P)[None]), torch.tensor(Q), dt)
         return state.mean[0].numpy(), state.covariance[0].numpy()
 
     def _update(self, x: ArrayF, P: ArrayF, z: ArrayF) -> tuple[ArrayF, ArrayF]:
@@ -200,7 +200,7 @@ class KalmanEstimator(Estimator):
             return x, P
         with torch.no_grad():
             state, _, _ = self.filter.update(
-                FilterState(torch.from_numpy(x)[None], torch.from_numpy(P)[None]), torch.from_numpy(z)[None], torch.from_numpy(R)
+                FilterState(torch.tensor(x)[None], torch.tensor(P)[None]), torch.tensor(z)[None], torch.tensor(R)
             )
             P_new = state.covariance[0]
             P_new = 0.5 * (P_new + P_new.T)

@@ -13,6 +13,11 @@ parameterisation, how far reality departs from the filter's model:
   onto the unit sphere, and 0.1 m per position axis). Outliers count: they are part of the noise.
 
 Computed on the train split of the scenario's ``dataset_seed`` episode.
+
+It is the true noise, not the best tuning: where the model is wrong in a smooth, correlated way
+(free tumbling, whose world-frame rate drifts, or the first-order quaternion model at ds2's
+rates), a white process noise with the residuals' RMS is too small and the oracle filter is
+overconfident (the leaderboard's consistency columns show it).
 """
 
 from __future__ import annotations

@@ -112,6 +112,31 @@ def _check_noise_shapes(noise: NoiseParameters, batch: int, steps: int, k: int, 
             )
 
 
+class _StepOutputs:
+    """One per-step output series, returned time-major ``(T, ...)``.
+
+    Without autograd the steps are written into one preallocated buffer: a list of per-step
+    tensors kept alive would fragment the heap and make every step's temporaries fresh memory
+    (page faults dominated large batches). With autograd the steps are collected and stacked
+    once: writing slices of one buffer would make the backward pass copy the whole buffer's
+    gradient at every step (quadratic in T).
+    """
+
+    def __init__(self, steps: int, shape: tuple[int, ...], dtype: torch.dtype, tracked: bool) -> None:
+        self._tracked = tracked
+        self._items: list[Tensor] = []
+        self._buffer = None if tracked else torch.empty(steps, *shape, dtype=dtype)
+
+    def put(self, t: int, value: Tensor) -> None:
+        if self._buffer is None:
+            self._items.append(value)
+        else:
+            self._buffer[t] = value
+
+    def result(self) -> Tensor:
+        return torch.stack(self._items) if self._buffer is None else self._buffer
+
+
 class KalmanFilter(ABC):
     """A filter variant: one step's ``predict`` and ``update`` on a batch, and the recursion.
 
@@ -207,15 +232,15 @@ class KalmanFilter(ABC):
             state = FilterState(initial.mean.to(dtype), initial.covariance.to(dtype))
             initialised = torch.ones(batch, dtype=torch.bool)
 
-        # outputs go into preallocated time-major buffers (one contiguous block per step), returned
-        # as (B, T, ...) views: keeping a list of per-step tensors alive would fragment the heap and
-        # make every step's temporaries fresh memory, which page-faults
-        m, k = self.innovation_dim, self.covariance_dim
-        means = torch.empty(steps, batch, self.model.state_dim, dtype=dtype)
-        covariances = torch.empty(steps, batch, k, k, dtype=dtype) if store_covariances else None
-        innovations = torch.zeros(steps, batch, m, dtype=dtype) if store_innovations else None
-        innovation_covs = torch.empty(steps, batch, m, m, dtype=dtype) if store_innovations else None
-        prior_means = torch.empty(steps, batch, self.model.state_dim, dtype=dtype) if store_innovations else None
+        m, k, n = self.innovation_dim, self.covariance_dim, self.model.state_dim
+        tracked = torch.is_grad_enabled() and any(
+            t.requires_grad for t in (noise.process, noise.measurement, noise.initial, measurements)
+        ) or (initial is not None and (initial.mean.requires_grad or initial.covariance.requires_grad))
+        means = _StepOutputs(steps, (batch, n), dtype, tracked)
+        covariances = _StepOutputs(steps, (batch, k, k), dtype, tracked) if store_covariances else None
+        innovations = _StepOutputs(steps, (batch, m), dtype, tracked) if store_innovations else None
+        innovation_covs = _StepOutputs(steps, (batch, m, m), dtype, tracked) if store_innovations else None
+        prior_means = _StepOutputs(steps, (batch, n), dtype, tracked) if store_innovations else None
         updated_steps = torch.zeros(steps, batch, dtype=torch.bool)
         initialised_steps = torch.zeros(steps, batch, dtype=torch.bool)
         no_innovation = torch.zeros(batch, m, dtype=dtype)
@@ -225,7 +250,7 @@ class KalmanFilter(ABC):
             if t > 0:
                 state = self.predict(state, step_noise.process, dt)
             if prior_means is not None:
-                prior_means[t] = state.mean
+                prior_means.put(t, state.mean)
             update_rows = usable[:, t]
             if t in init_steps:
                 now = first == t
@@ -253,23 +278,22 @@ class KalmanFilter(ABC):
                 state = FilterState(state.mean, P.add(P.transpose(1, 2)).mul_(0.5))
             else:
                 update_rows = torch.zeros_like(update_rows)
-            means[t] = state.mean
+            means.put(t, state.mean)
             if covariances is not None:
-                covariances[t] = state.covariance
+                covariances.put(t, state.covariance)
             if innovations is not None and innovation_covs is not None:
-                if do_update:
-                    innovations[t] = nu
-                innovation_covs[t] = S
+                innovations.put(t, nu)
+                innovation_covs.put(t, S)
             updated_steps[t] = update_rows
             initialised_steps[t] = initialised
-        batch_first = lambda buffer: None if buffer is None else buffer.transpose(0, 1)  # noqa: E731
+        batch_first = lambda outputs: None if outputs is None else outputs.result().transpose(0, 1)  # noqa: E731
         return FilterResult(
             means=batch_first(means),
             covariances=batch_first(covariances),
             innovations=batch_first(innovations),
             innovation_covariances=batch_first(innovation_covs),
             prior_means=batch_first(prior_means),
-            updated=batch_first(updated_steps),
-            initialised=batch_first(initialised_steps),
+            updated=updated_steps.transpose(0, 1),
+            initialised=initialised_steps.transpose(0, 1),
             final=state,
         )

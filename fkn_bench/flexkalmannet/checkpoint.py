@@ -67,6 +67,7 @@ def _model_skeleton(config: FlexKalmanNetConfig, reference: torch.Tensor, mean: 
             activation=config.activation,
             dropout=config.dropout,
             dtype=config.torch_network_dtype,
+            output_scale=config.output_scale,
         )
     finally:
         torch.random.set_rng_state(generator_state)

@@ -71,6 +71,7 @@ class FlexKalmanNetConfig:
     activation: str = "leaky_relu"
     dropout: float = 0.0
     network_dtype: str = "float32"
+    output_scale: float = 1e-3
     mode: str = "constant"
     samples_per_window: int | None = 64
     history: int = 50

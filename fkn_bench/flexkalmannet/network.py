@@ -60,6 +60,7 @@ class FlexKalmanNetwork(nn.Module):
         position_mean, position_std: z-score statistics of the training positions, m.
         hidden, layers, activation, dropout: architecture (see module docstring).
         dtype: the network's dtype (float32 by default; the filter runs in float64).
+        output_scale: factor on the output layer's initial weights.
     """
 
     def __init__(
@@ -74,6 +75,7 @@ class FlexKalmanNetwork(nn.Module):
         activation: str = "leaky_relu",
         dropout: float = 0.0,
         dtype: torch.dtype = torch.float32,
+        output_scale: float = _OUTPUT_WEIGHT_SCALE,
     ) -> None:
         super().__init__()
         if activation not in ACTIVATIONS:
@@ -91,7 +93,7 @@ class FlexKalmanNetwork(nn.Module):
             width = hidden
         output = nn.Linear(width, output_size)
         with torch.no_grad():
-            output.weight.mul_(_OUTPUT_WEIGHT_SCALE)
+            output.weight.mul_(output_scale)
             output.bias.copy_(initial_output)
         modules.append(output)
         self.layers = nn.Sequential(*modules).to(dtype)
