@@ -11,6 +11,13 @@ Examples::
     fkn-bench run --estimator manual-ekf --scenario ds1 --scenario ds2 --seeds 50 --json
     fkn-bench run --all --seeds 20 --out leaderboards/results   # every estimator x scenario
     fkn-bench run --all --backend dask --workers 4              # on a local Dask cluster
+    fkn-bench run --recording run.mcap --estimator manual-ekf    # replay a recording (MCAP)
+
+With ``--recording`` the whole recording is one episode (truth from ``--truth-topic``, by default
+the truth of an fkn-bench recording or Astrobee's ``<robot>/loc/truth/pose``); measurements come
+from ``--measurement-topic`` as recorded, or are synthesised from the truth with the noise model
+of the recording's scenario, one noise draw per seed (``--seeds``; default 1 with recorded
+measurements, which do not depend on the seed).
 """
 
 from __future__ import annotations
@@ -60,6 +67,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="worker processes (local: a process pool when > 1; dask: LocalCluster size)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: start a LocalCluster)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    replay = parser.add_argument_group("recordings (instead of --scenario)")
+    replay.add_argument("--recording", metavar="FILE.mcap", help="run on this MCAP recording")
+    replay.add_argument("--truth-topic", metavar="TOPIC", help="pose topic of the ground truth")
+    replay.add_argument("--measurement-topic", metavar="TOPIC", help="pose topic of the measurements (default: synthesise)")
+    replay.add_argument("--repair", action="store_true", help="repair broken recordings (sort, deduplicate, renormalise)")
+    replay.add_argument("--dt", metavar="SECONDS|native", help="replay time step (default: the scenario's)")
     add_scenario_file_option(parser)
     parser.set_defaults(handler=run)
 
@@ -139,6 +152,32 @@ def _scenarios(args: argparse.Namespace) -> list[Any]:
     return scenarios
 
 
+def _recording_source(args: argparse.Namespace) -> Any:
+    """The recording source of ``--recording`` (errors naming the file are usage errors)."""
+    from fkn_bench.cli import UsageError
+    from fkn_bench.harness import RecordingSource
+    from fkn_bench.recordings import RecordingError
+
+    if args.scenario or args.all:
+        raise UsageError("--recording replaces --scenario and --all")
+    options: dict[str, Any] = {"repair": bool(args.repair)}
+    if args.truth_topic:
+        options["truth_topic"] = args.truth_topic
+    if args.measurement_topic:
+        options["measurement_topic"] = args.measurement_topic
+    if args.dt is not None:
+        try:
+            options["dt"] = args.dt if args.dt == "native" else float(args.dt)
+        except ValueError:
+            raise UsageError(f"--dt must be a number of seconds or 'native' (got {args.dt!r})") from None
+    source = RecordingSource(str(args.recording), tuple(sorted(options.items())))
+    try:
+        print(source._trajectory().report.summary(), file=sys.stderr)
+    except (RecordingError, OSError) as exc:
+        raise UsageError(str(exc)) from None
+    return source
+
+
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.harness import (
         MetricSettings,
@@ -154,10 +193,21 @@ def run(args: argparse.Namespace) -> int:
 
     _check_arguments(args)
     load_scenario_files(args)
-    scenarios = _scenarios(args)
+    if args.recording:
+        recording = _recording_source(args)
+        if args.measurement_topic and args.seeds == DEFAULT_SEEDS:
+            args.seeds = 1  # recorded measurements: every seed would score the same data
+        if args.cut >= recording.scenario.n_steps:
+            from fkn_bench.cli import UsageError
+
+            raise UsageError(f"--cut {args.cut} leaves nothing to score in the recording ({recording.scenario.n_steps} steps)")
+        scenarios = [recording.scenario]
+        sources: list[Any] = [recording]
+    else:
+        scenarios = _scenarios(args)
+        sources = [SimulatedSource(scenario, args.split) for scenario in scenarios]
     estimators, fingerprints = _estimators(args, scenarios)
     settings = MetricSettings(cut=args.cut)
-    sources = [SimulatedSource(scenario, args.split) for scenario in scenarios]
     cells = [
         cell
         for cell in build_grid(estimators, sources, range(args.seeds), settings=settings, fingerprints=fingerprints)

@@ -1,7 +1,8 @@
 """The benchmark harness: joins estimators, episodes and metrics into a grid of cells, runs it on
 a backend, stores the results, and summarises them.
 
-* :mod:`~fkn_bench.harness.sources`: where episodes come from (:class:`SimulatedSource`);
+* :mod:`~fkn_bench.harness.sources`: where episodes come from (:class:`SimulatedSource`,
+  :class:`RecordingSource`);
 * :mod:`~fkn_bench.harness.grid`: cells (estimator x source x seed chunk);
 * :mod:`~fkn_bench.harness.cell`: running and scoring one cell;
 * :mod:`~fkn_bench.harness.backends`: local and Dask execution;
@@ -26,7 +27,7 @@ from fkn_bench.harness.records import CellRecord, Results, record_of
 from fkn_bench.harness.report import summary_text
 from fkn_bench.harness.rows import COLUMNS, deterministic_rows
 from fkn_bench.harness.runner import GridRun, run_grid
-from fkn_bench.harness.sources import EpisodeSource, SimulatedSource
+from fkn_bench.harness.sources import EpisodeSource, RecordingSource, SimulatedSource
 from fkn_bench.harness.store import ResultStore, StoreError
 from fkn_bench.harness.summary import PRIMARY_SCORE, summarize_pair, summarize_results
 from fkn_bench.metrics import MetricSettings
@@ -48,6 +49,7 @@ __all__ = [
     "ResultStore",
     "Results",
     "SEED_CHUNK",
+    "RecordingSource",
     "SimulatedSource",
     "StoreError",
     "build_grid",
