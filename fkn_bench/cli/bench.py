@@ -1,23 +1,64 @@
-"""``fkn-bench bench``: speed measurements that print ratios measured in one run.
+"""``fkn-bench bench``: speed measurements.
 
-``fkn-bench bench train`` times one epoch of FlexKalmanNet's batched trainer and one epoch of the
-sequential reference trainer (windows one after another, the network at every step) on the same
-data and configuration, and prints both and their ratio.
+* ``fkn-bench bench run``: run the pytest-benchmark speed suite (``tests/benchmarks`` of a source
+  checkout), save its JSON (with machine info) and print the summary table;
+* ``fkn-bench bench report FILE.json``: the summary table of a saved pytest-benchmark JSON: per
+  benchmark the rounds, median and mean time, spread, and the throughput in steps/s from the
+  ``steps`` each benchmark records in ``extra_info``;
+* ``fkn-bench bench gate``: the CI speed-ratio gate (:mod:`fkn_bench.gates.speed`): each check's
+  ratio against the reference timed beside it, its threshold and verdict;
+* ``fkn-bench bench train``: one epoch of FlexKalmanNet's batched trainer against one epoch of
+  the sequential reference trainer (windows one after another, the network at every step) on the
+  same data and configuration, and their ratio.
+
+Examples::
+
+    fkn-bench bench run --json bench.json          # the whole suite (a few minutes)
+    fkn-bench bench run -k "filter or online"      # a part of it
+    fkn-bench bench report bench.json
+    fkn-bench bench gate --check ekf-forward --check train-epoch
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
 
 from fkn_bench.cli import UsageError
 
-__all__ = ["add_parser"]
+__all__ = ["add_parser", "summarize_benchmarks", "format_summary"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("bench", help="speed benchmarks (ratios measured in one run)", description=__doc__)
+    parser = subparsers.add_parser("bench", help="speed benchmarks, their summary and the CI speed gate",
+                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     kinds = parser.add_subparsers(dest="bench", metavar="WHAT", required=True)
+
+    run = kinds.add_parser("run", help="run the pytest-benchmark speed suite and print its summary")
+    run.add_argument("--json", default="bench.json", metavar="FILE",
+                     help="where pytest-benchmark writes its results (default: bench.json)")
+    run.add_argument("-k", dest="keyword", metavar="EXPR", help="only benchmarks matching this pytest -k expression")
+    run.add_argument("--suite", metavar="DIR",
+                     help="the suite's directory (default: tests/benchmarks here or in the source checkout)")
+    run.set_defaults(handler=run_suite)
+
+    report = kinds.add_parser("report", help="summary table (throughputs) of a pytest-benchmark JSON file")
+    report.add_argument("file", metavar="FILE.json")
+    report.add_argument("--json", action="store_true", help="print the summary as JSON")
+    report.set_defaults(handler=run_report)
+
+    gate = kinds.add_parser("gate", help="the CI speed-ratio gate: ratios against references timed beside them")
+    gate.add_argument("--check", action="append", metavar="NAME", help="only this check (repeatable; default: all)")
+    gate.add_argument("--attempts", type=int, default=3, help="measurements before a check fails (default: 3)")
+    gate.add_argument("--list", action="store_true", help="list the checks and thresholds, measure nothing")
+    gate.add_argument("--json", action="store_true")
+    gate.set_defaults(handler=run_gate)
+
     train = kinds.add_parser("train", help="batched trainer vs the sequential reference, one epoch each")
     train.add_argument("--scenario", default="ds1")
     train.add_argument("--paper-windows", action="store_true", help="the paper's 512-sample windows with a measurement every step")
@@ -27,6 +68,172 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     train.set_defaults(handler=run_train)
 
 
+# ---------------------------------------------------------------------------------- report
+def _load_benchmarks(path: str | Path) -> dict[str, Any]:
+    try:
+        document = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise UsageError(f"benchmark file not found: {path}") from None
+    except (OSError, ValueError) as exc:
+        raise UsageError(f"{path} is not a readable JSON file: {exc}") from None
+    if not isinstance(document, dict) or not isinstance(document.get("benchmarks"), list):
+        raise UsageError(f"{path} is not a pytest-benchmark JSON file (no 'benchmarks' list; write one with --benchmark-json)")
+    return document
+
+
+def summarize_benchmarks(document: dict[str, Any]) -> list[dict[str, Any]]:
+    """One row per benchmark of a pytest-benchmark JSON document: name, rounds, median, mean,
+    min and standard deviation (s), ``steps`` per call (``extra_info``) and steps/s (from the
+    median: the least disturbed by a busy machine but for the minimum, and steadier than it)."""
+    rows = []
+    for bench in document["benchmarks"]:
+        stats = bench.get("stats", {})
+        extra = bench.get("extra_info", {}) or {}
+        median = float(stats.get("median", math.nan))
+        steps = extra.get("steps")
+        rows.append({
+            "name": bench.get("name", "?"),
+            "group": bench.get("group"),
+            "rounds": int(stats.get("rounds", 0)),
+            "median_s": median,
+            "mean_s": float(stats.get("mean", math.nan)),
+            "min_s": float(stats.get("min", math.nan)),
+            "stddev_s": float(stats.get("stddev", math.nan)),
+            "steps": int(steps) if steps is not None else None,
+            "steps_per_s": (int(steps) / median) if steps and median > 0 else None,
+            "what": extra.get("what", ""),
+        })
+    return rows
+
+
+def _seconds(value: float) -> str:
+    if not math.isfinite(value):
+        return "-"
+    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("us", 1e-6)):
+        if value >= scale:
+            return f"{value / scale:.3g} {unit}"
+    return f"{value / 1e-9:.3g} ns"
+
+
+def _rate(value: float | None) -> str:
+    if value is None or not math.isfinite(value):
+        return "-"
+    for suffix, scale in (("G", 1e9), ("M", 1e6), ("k", 1e3)):
+        if value >= scale:
+            return f"{value / scale:.3g} {suffix}"
+    return f"{value:.3g}"
+
+
+def _machine(document: dict[str, Any]) -> str:
+    machine = document.get("machine_info", {}) or {}
+    cpu = machine.get("cpu", {}) or {}
+    commit = document.get("commit_info", {}) or {}
+    parts = [
+        machine.get("machine") or "?",
+        cpu.get("brand_raw") or machine.get("processor") or "unknown CPU",
+        f"{cpu.get('count', '?')} CPUs",
+        f"{machine.get('python_implementation', 'Python')} {machine.get('python_version', '?')}",
+    ]
+    text = "machine: " + ", ".join(str(p) for p in parts)
+    if commit.get("id"):
+        text += f"; commit {str(commit['id'])[:12]}{' (dirty)' if commit.get('dirty') else ''}"
+    return text
+
+
+def format_summary(document: dict[str, Any], *, source: str = "") -> str:
+    """The summary table of :func:`summarize_benchmarks` as text, with the machine."""
+    rows = summarize_benchmarks(document)
+    header = ("benchmark", "rounds", "median", "mean", "stddev", "steps", "steps/s", "what")
+    body = []
+    for row in rows:
+        spread = f"{100 * row['stddev_s'] / row['mean_s']:.0f}%" if row["mean_s"] and math.isfinite(row["stddev_s"]) else "-"
+        body.append((row["name"], str(row["rounds"]), _seconds(row["median_s"]), _seconds(row["mean_s"]), spread,
+                     "-" if row["steps"] is None else str(row["steps"]), _rate(row["steps_per_s"]), row["what"]))
+    widths = [max(len(r[i]) for r in [header, *body]) for i in range(len(header))]
+    right = set(range(1, 7))
+
+    def line(cells: tuple[str, ...]) -> str:
+        return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
+
+    title = f"fkn-bench speed suite{': ' + source if source else ''} (pytest-benchmark {document.get('version', '?')}"
+    title += f", {document.get('datetime', '?')})"
+    lines = [title, _machine(document), "", line(header), line(tuple("-" * w for w in widths)), *(line(r) for r in body)]
+    lines.append("")
+    lines.append("Times are wall-clock per call; steps/s = steps per call / median. Absolute times vary by tens of "
+                 "percent between runs on shared machines: compare ratios within one run (fkn-bench bench gate).")
+    return "\n".join(lines)
+
+
+def run_report(args: argparse.Namespace) -> int:
+    document = _load_benchmarks(args.file)
+    if args.json:
+        print(json.dumps({"file": args.file, "machine_info": document.get("machine_info"),
+                          "commit_info": document.get("commit_info"), "benchmarks": summarize_benchmarks(document)},
+                         indent=2))
+    else:
+        print(format_summary(document, source=args.file))
+    return 0
+
+
+# ---------------------------------------------------------------------------------- run
+def _suite_directory(given: str | None) -> Path:
+    if given is not None:
+        path = Path(given)
+        if not path.is_dir():
+            raise UsageError(f"benchmark suite not found: {path}")
+        return path.resolve()
+    import fkn_bench
+
+    for candidate in (Path.cwd() / "tests" / "benchmarks", Path(fkn_bench.__file__).resolve().parents[1] / "tests" / "benchmarks"):
+        if candidate.is_dir():
+            return candidate.resolve()
+    raise UsageError("the speed suite (tests/benchmarks) is part of the source checkout: run this from the "
+                     "repository root, or pass --suite DIR")
+
+
+def run_suite(args: argparse.Namespace) -> int:
+    suite = _suite_directory(args.suite)
+    output = Path(args.json).resolve()
+    command = [sys.executable, "-m", "pytest", str(suite), "--benchmark-only", f"--benchmark-json={output}",
+               "-q", "-p", "no:cacheprovider"]
+    if args.keyword:
+        command += ["-k", args.keyword]
+    print(f"fkn-bench bench run: {' '.join(command)}", file=sys.stderr)
+    code = subprocess.call(command, cwd=suite.parents[1])
+    if output.is_file():
+        print(format_summary(_load_benchmarks(output), source=str(args.json)))
+    return code
+
+
+# ---------------------------------------------------------------------------------- gate
+def run_gate(args: argparse.Namespace) -> int:
+    from fkn_bench.gates import speed
+
+    if args.attempts < 1:
+        raise UsageError("--attempts must be >= 1")
+    checks = speed.all_checks()
+    if args.check:
+        known = {c.name: c for c in checks}
+        unknown = [n for n in args.check if n not in known]
+        if unknown:
+            raise UsageError(f"unknown check(s) {', '.join(unknown)}; valid checks: {', '.join(known)}")
+        checks = [known[n] for n in args.check]
+    if args.list:
+        for check in checks:
+            print(f"{check.name:28s} min ratio {check.min_ratio:<7g} {check.description}")
+        return 0
+    outcomes = []
+    for check in checks:
+        outcomes.append(speed.evaluate(check, attempts=args.attempts))
+        if not args.json:
+            print(speed.format_outcomes(outcomes[-1:]).splitlines()[-1] if len(outcomes) > 1
+                  else speed.format_outcomes(outcomes[-1:]), flush=True)
+    if args.json:
+        print(json.dumps([o.to_dict() for o in outcomes], indent=2))
+    return 0 if all(o.passed for o in outcomes) else 1
+
+
+# ---------------------------------------------------------------------------------- train
 def run_train(args: argparse.Namespace) -> int:
     from fkn_bench.flexkalmannet.benchmark import measure_training_speed
     from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig

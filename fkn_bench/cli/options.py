@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["add_scenario_file_option", "load_scenario_files"]
+from typing import Any
+
+__all__ = ["add_scenario_file_option", "load_scenario_files", "parse_value", "parse_key_values"]
 
 
 def add_scenario_file_option(parser: argparse.ArgumentParser) -> None:
@@ -22,3 +24,33 @@ def load_scenario_files(args: argparse.Namespace) -> None:
 
     for path in getattr(args, "scenario_file", []) or []:
         load_scenarios(path)
+
+
+def parse_value(text: str) -> Any:
+    """A command-line value: None, a bool, an int, a float, a comma-separated list or a string."""
+    lowered = text.strip().lower()
+    if lowered in ("none", "null"):
+        return None
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for cast in (int, float):
+        try:
+            return cast(text)
+        except ValueError:
+            pass
+    if "," in text:
+        return [part.strip() for part in text.split(",") if part.strip()]
+    return text
+
+
+def parse_key_values(items: list[str], option: str) -> dict[str, Any]:
+    """``KEY=VALUE`` strings to a dict (values through :func:`parse_value`)."""
+    from fkn_bench.cli import UsageError
+
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UsageError(f"{option} expects KEY=VALUE (got {item!r})")
+        out[key.strip()] = parse_value(value)
+    return out

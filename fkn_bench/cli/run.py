@@ -27,7 +27,7 @@ import json
 import sys
 from typing import Any
 
-from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files, parse_key_values
 
 __all__ = ["add_parser", "run", "DEFAULT_SCENARIO", "DEFAULT_SEEDS"]
 
@@ -67,6 +67,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="worker processes (local: a process pool when > 1; dask: LocalCluster size)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: start a LocalCluster)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    parser.add_argument(
+        "--estimator-option", action="append", default=[], metavar="KEY=VALUE",
+        help="option for the estimators' factories, e.g. parameters=runs/fkn/parameters.json (repeatable)",
+    )
     replay = parser.add_argument_group("recordings (instead of --scenario)")
     replay.add_argument("--recording", metavar="FILE.mcap", help="run on this MCAP recording")
     replay.add_argument("--truth-topic", metavar="TOPIC", help="pose topic of the ground truth")
@@ -120,8 +124,11 @@ def _estimators(args: argparse.Namespace, scenarios: list[Any]) -> tuple[list[st
                 print(f"fkn-bench run: {better} is not available ({reason}); running {names[0]}", file=sys.stderr)
     fingerprints: dict[tuple[str, str], str] = {}
     chosen = []
+    options = parse_key_values(args.estimator_option, "--estimator-option")
+    if options and not args.estimator:
+        raise UsageError("--estimator-option needs --estimator NAME")
     for name in names:
-        probes = [probe_estimator(name, scenario) for scenario in scenarios]
+        probes = [probe_estimator(name, scenario, options) for scenario in scenarios]
         failed = [p for p in probes if not p.available]
         if failed and (args.estimator or not args.all):
             raise UsageError(f"estimator {name!r} is not available for scenario {failed[0].scenario}: {failed[0].error}")
@@ -210,7 +217,10 @@ def run(args: argparse.Namespace) -> int:
     settings = MetricSettings(cut=args.cut)
     cells = [
         cell
-        for cell in build_grid(estimators, sources, range(args.seeds), settings=settings, fingerprints=fingerprints)
+        for cell in build_grid(
+            estimators, sources, range(args.seeds), settings=settings, fingerprints=fingerprints,
+            estimator_options=parse_key_values(args.estimator_option, "--estimator-option"),
+        )
         if (cell.estimator, cell.scenario) in fingerprints  # available pairs only
     ]
     store = ResultStore(args.out) if args.out else None

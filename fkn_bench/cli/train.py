@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from fkn_bench.cli import UsageError
-from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files, parse_key_values
 
 __all__ = ["add_parser", "parse_options"]
 
@@ -46,30 +46,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
-def _value(text: str) -> Any:
-    lowered = text.strip().lower()
-    if lowered in ("none", "null"):
-        return None
-    if lowered in ("true", "false"):
-        return lowered == "true"
-    for cast in (int, float):
-        try:
-            return cast(text)
-        except ValueError:
-            pass
-    if "," in text:
-        return [part.strip() for part in text.split(",") if part.strip()]
-    return text
-
-
 def parse_options(args: argparse.Namespace) -> dict[str, Any]:
     """Config overrides from the named options and ``--set KEY=VALUE`` pairs."""
-    options: dict[str, Any] = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise UsageError(f"--set expects KEY=VALUE (got {item!r})")
-        options[key.strip()] = _value(value)
+    options = parse_key_values(args.set, "--set")
     for name in ("variant", "objective", "epochs", "lr", "seed", "config"):
         value = getattr(args, name)
         if value is not None:

@@ -49,7 +49,7 @@ ENTRY_POINT_GROUP = "fkn_bench.estimators"
 EstimatorFactory = Callable[..., Estimator]
 
 # modules whose import registers the built-in estimators (imported lazily: they pull in torch)
-_BUILTIN_MODULES: tuple[str, ...] = ("fkn_bench.estimators.builtin", "fkn_bench.flexkalmannet.registration")
+_BUILTIN_MODULES: tuple[str, ...] = ("fkn_bench.estimators.builtin", "fkn_bench.flexkalmannet.registration", "fkn_bench.baselines.registration")
 
 
 class UnknownEstimatorError(KeyError):

@@ -89,7 +89,7 @@ def run_cell(spec: CellSpec) -> CellResult:
         episodes = spec.source.load(spec.seeds)
         dt = float(episodes.scenario.dt)
         try:
-            estimator = make_estimator(spec.estimator, scenario=spec.source.scenario)
+            estimator = make_estimator(spec.estimator, scenario=spec.source.scenario, **dict(spec.estimator_options))
             measurements = np.array(episodes.measurements)  # private copies: estimators get writable input
             valid = np.array(episodes.valid)
             with measure() as batched:

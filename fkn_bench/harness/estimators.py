@@ -9,6 +9,8 @@ skips it in ``--all`` grids, saying why, rather than scoring a filter that never
 
 from __future__ import annotations
 
+from typing import Any
+
 import hashlib
 import json
 from collections.abc import Sequence
@@ -47,10 +49,11 @@ class Availability:
         return self.error is None
 
 
-def probe_estimator(name: str, scenario: Scenario) -> Availability:
-    """Build ``name`` for ``scenario`` and describe it (never raises for factory errors)."""
+def probe_estimator(name: str, scenario: Scenario, options: dict[str, Any] | None = None) -> Availability:
+    """Build ``name`` for ``scenario`` (with factory ``options``) and describe it (never raises
+    for factory errors)."""
     try:
-        config = make_estimator(name, scenario=scenario).to_config()
+        config = make_estimator(name, scenario=scenario, **(options or {})).to_config()
     except Exception as exc:  # noqa: BLE001 - reported to the user as unavailability
         return Availability(name, scenario.name, None, f"{type(exc).__name__}: {exc}")
     try:

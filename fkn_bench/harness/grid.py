@@ -61,6 +61,7 @@ class CellSpec:
         estimator_fingerprint: short hash of the estimator's configuration (``to_config()``), so
             that a retuned estimator is recomputed on resume ("" when unknown).
         online_steps: length of the timed online run.
+        estimator_options: keyword options for the estimator's factory, as sorted pairs.
     """
 
     estimator: str
@@ -69,6 +70,7 @@ class CellSpec:
     settings: MetricSettings
     estimator_fingerprint: str = ""
     online_steps: int = ONLINE_STEPS
+    estimator_options: tuple[tuple[str, Any], ...] = ()
 
     @property
     def scenario(self) -> str:
@@ -85,6 +87,7 @@ class CellSpec:
             "format_version": CELL_FORMAT_VERSION,
             "estimator": self.estimator,
             "estimator_fingerprint": self.estimator_fingerprint,
+            **({"estimator_options": [list(item) for item in self.estimator_options]} if self.estimator_options else {}),
             "source": self.source.key(),
             "seeds": list(self.seeds),
             "settings": self.settings.to_dict(),
@@ -103,10 +106,13 @@ def build_grid(
     fingerprints: dict[tuple[str, str], str] | None = None,
     chunk_size: int = SEED_CHUNK,
     online_steps: int = ONLINE_STEPS,
+    estimator_options: dict[str, Any] | None = None,
 ) -> list[CellSpec]:
     """All cells, ordered source, then seed chunk, then estimator (so that consecutive cells
     share generated episodes). ``fingerprints`` maps ``(estimator, source label)`` to
-    :attr:`CellSpec.estimator_fingerprint`."""
+    :attr:`CellSpec.estimator_fingerprint`; ``estimator_options`` go to every estimator's
+    factory."""
+    options = tuple(sorted((estimator_options or {}).items()))
     settings = settings or MetricSettings()
     fingerprints = fingerprints or {}
     cells = []
@@ -121,6 +127,7 @@ def build_grid(
                         settings=settings,
                         estimator_fingerprint=fingerprints.get((estimator, source.label), ""),
                         online_steps=online_steps,
+                        estimator_options=options,
                     )
                 )
     return cells

@@ -1,0 +1,137 @@
+"""``fkn-bench sweep``: hyperparameter search for FlexKalmanNet (or any trainable estimator) on
+optuna, following the paper's method: a random search to narrow the space, then a grid search
+over the reduced space (``--sampler random-grid``, the default); ``tpe``, ``random`` and ``grid``
+run one stage.
+
+The search space is a TOML file (``--space FILE``, or the name of a packaged space: ``paper``,
+``quick``; see ``fkn_bench/sweep/space.py`` for the format). Trials report their validation RMSE
+after every epoch and are pruned by the space's pruner (median by default). The study lives in a
+journal file (``--storage``, default ``OUT/study.journal``) or any RDB URL
+(``sqlite:///sweep.db``, ``postgresql://...``), so that several processes or machines share it:
+``--workers N`` runs N processes here; run the same command elsewhere with the same
+``--storage`` and ``--study-name`` to add machines.
+
+Outputs in ``--out`` (default ``sweeps/<study name>``): ``best.toml`` (for ``fkn-bench train
+--config`` and ``fkn-bench reproduce --config``), ``trials.csv``, ``parallel_coordinates.png``
+and ``sweep.json``.
+
+Examples::
+
+    fkn-bench sweep --space quick --workers 2
+    fkn-bench sweep --space paper --workers 2 --storage sweeps/paper.journal --study-name paper
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+
+__all__ = ["add_parser", "run"]
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> None:
+    from fkn_bench.sweep.space import SAMPLERS
+
+    parser = subparsers.add_parser(
+        "sweep",
+        help="hyperparameter search (random then grid, or TPE) on optuna",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--space", required=True, metavar="TOML",
+                        help="search-space file, or a packaged space name (paper, quick)")
+    parser.add_argument("--estimator", help="trainable estimator (default: the space's, else flexkalmannet)")
+    parser.add_argument("--scenario", help="training scenario (default: the space's, else ds1)")
+    parser.add_argument("--trials", type=int, metavar="N", help="trials of the random (or only) stage (default: the space's, else 20)")
+    parser.add_argument("--grid-trials", type=int, metavar="N",
+                        help="random-grid: most points of the reduced grid (default: the space's, else --trials)")
+    parser.add_argument("--top-k", type=int, metavar="K",
+                        help="random-grid: best random trials spanning the reduced grid (default: the space's, else 3)")
+    parser.add_argument("--sampler", choices=SAMPLERS, help="search method (default: the space's, else random-grid)")
+    parser.add_argument("--workers", type=int, default=1, metavar="N", help="parallel worker processes here (default: 1)")
+    parser.add_argument("--storage", metavar="PATH|URL",
+                        help="journal file or RDB URL shared by the workers (default: OUT/study.journal)")
+    parser.add_argument("--study-name", metavar="NAME", help="study name (default: <estimator>-<scenario>)")
+    parser.add_argument("--seed", type=int, help="sampler seed (default: the space's, else 0)")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="output directory (default: sweeps/<study name>)")
+    parser.add_argument("--no-progress", action="store_true", help="no per-trial messages")
+    add_scenario_file_option(parser)
+    parser.set_defaults(handler=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from fkn_bench.cli import UsageError
+    from fkn_bench.estimators import UnknownEstimatorError, estimator_spec, estimator_specs
+    from fkn_bench.scenarios import get_scenario
+    from fkn_bench.sweep import SearchSpace, SpaceError, SweepError, SweepSettings, load_space, resolve_space, run_sweep, trial_config
+
+    load_scenario_files(args)
+    try:
+        space: SearchSpace = load_space(resolve_space(args.space))
+    except SpaceError as exc:
+        raise UsageError(str(exc)) from None
+    defaults = space.defaults
+    estimator = args.estimator or defaults.get("estimator", "flexkalmannet")
+    try:
+        spec = estimator_spec(estimator)
+    except UnknownEstimatorError as exc:
+        raise UsageError(str(exc)) from None
+    if spec.train is None:
+        trainable = ", ".join(s.name for s in estimator_specs() if s.trainable)
+        raise UsageError(f"estimator {estimator!r} is not trainable; trainable estimators: {trainable}")
+    scenario = get_scenario(args.scenario or defaults.get("scenario", "ds1"))
+    sampler = args.sampler or defaults.get("sampler", "random-grid")
+    try:
+        if estimator == "flexkalmannet":
+            import dataclasses
+
+            from fkn_bench.flexkalmannet import FlexKalmanNetConfig
+
+            space.check_fields([f.name for f in dataclasses.fields(FlexKalmanNetConfig)], "FlexKalmanNetConfig")
+            trial_config(space, {})  # the fixed values on their own must be valid
+        if sampler == "grid":
+            space.grid()
+    except (SpaceError, ValueError, TypeError) as exc:
+        raise UsageError(str(exc)) from None
+    trials = args.trials if args.trials is not None else defaults.get("trials", 20)
+    study_name = args.study_name or f"{estimator}-{scenario.name}"
+    out = args.out if args.out is not None else Path("sweeps") / study_name
+    try:
+        settings = SweepSettings(
+            space=space,
+            scenario=scenario,
+            out=out,
+            estimator=estimator,
+            sampler=sampler,
+            trials=trials,
+            grid_trials=args.grid_trials if args.grid_trials is not None else defaults.get("grid_trials"),
+            top_k=args.top_k if args.top_k is not None else defaults.get("top_k", 3),
+            workers=args.workers,
+            storage=args.storage,
+            study_name=study_name,
+            seed=args.seed if args.seed is not None else defaults.get("seed", 0),
+        )
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
+
+    def log(message: str) -> None:
+        print(message, file=sys.stderr, flush=True)
+
+    try:
+        result = run_sweep(settings, progress=not args.no_progress, log=None if args.no_progress else log)
+    except SweepError as exc:
+        print(f"fkn-bench sweep: error: {exc}", file=sys.stderr)
+        return 1
+    counts = {stage: ", ".join(f"{n} {state}" for state, n in c.items() if n) for stage, c in result.counts.items()}
+    print(f"best validation RMSE {result.best_value:.6g} ({result.best_stage} trial {result.best_number}): "
+          + ", ".join(f"{k}={v}" for k, v in result.best_params.items()))
+    for stage, text in counts.items():
+        print(f"  {stage}: {text}")
+    print(f"  {result.best_config}")
+    print(f"  {result.trials_csv}")
+    if result.figure is not None:
+        print(f"  {result.figure}")
+    return 0

@@ -1,0 +1,448 @@
+"""``fkn-bench reproduce``: regenerate the paper's results section from scratch.
+
+Steps (:func:`run_reproduction`), all deterministic for a given seed:
+
+1. **Train** FlexKalmanNet on ds1 and on ds2 (:func:`fkn_bench.flexkalmannet.train_flexkalmannet`)
+   with :class:`~fkn_bench.flexkalmannet.FlexKalmanNetConfig`'s defaults (or ``--config``), into
+   ``OUT/training/<data set>/`` (checkpoint, history, the two training figures, the learned
+   parameters).
+2. **Evaluate** the learned filters, the paper's manual tuning (``manual-<variant>``) and the
+   oracle EKF (the simulation's true noise) on the test split of ``eval_seeds`` seeds, the paper's
+   protocol (a measurement every 10 steps, scored from step 100): ds1 and ds2 with both learned
+   parameter sets (the matched and the cross-data-set runs), and the robustness runs ds1-noise5x
+   and ds1-gap100 with the DS1 parameters (:mod:`fkn_bench.reproduce.evaluation`).
+3. **Figures** from seed ``figure_seed``: the training loss and the 20 parameters over epochs
+   (DS2, as the paper, and DS1), the DS1 state plot, the angular-rate 2-sigma uncertainty over
+   the first 500 samples, the 5x-noise and 100-step-gap runs, and the cross-data-set runs.
+4. **Tables** with the paper's quoted values beside ours (:mod:`fkn_bench.reproduce.tables`) and
+   the **differences from the paper** generated from the numbers
+   (:mod:`fkn_bench.reproduce.differences`).
+5. **Report**: ``OUT/index.md``, ``OUT/index.html``, ``OUT/figures/*.png``, ``OUT/tables/*.csv``
+   and ``OUT/results.json`` (every number, the configuration and provenance).
+
+``--quick`` (:data:`QUICK_OVERRIDES`) trains a much smaller network for a few epochs and evaluates
+fewer seeds: the same pipeline in well under two minutes, labelled QUICK throughout the report.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from fkn_bench.estimators import Estimator, make_estimator
+from fkn_bench.filters import make_filter
+from fkn_bench.flexkalmannet import FlexKalmanNetConfig, FlexKalmanNetEstimator, train_flexkalmannet
+from fkn_bench.flexkalmannet.plots import plot_losses, plot_parameters
+from fkn_bench.harness.reference import PAPER_TITLE
+from fkn_bench.io import read_json, write_json_atomic
+from fkn_bench.reproduce import figures as figs
+from fkn_bench.reproduce.differences import Context, differences
+from fkn_bench.reproduce.evaluation import Evaluation, evaluate, run_trace
+from fkn_bench.reproduce.report import Block, Bullets, FigureRef, Heading, Paragraph, Table, write_report
+from fkn_bench.reproduce.tables import (
+    cross_dataset_table,
+    hyperparameter_table,
+    learned_std_table,
+    rmse_table,
+    robustness_table,
+    training_table,
+)
+from fkn_bench.scenarios import get_scenario
+
+__all__ = [
+    "QUICK_OVERRIDES",
+    "QUICK_EVAL_SEEDS",
+    "DEFAULT_EVAL_SEEDS",
+    "ReproduceSettings",
+    "TrainedModel",
+    "Reproduction",
+    "run_reproduction",
+]
+
+DATASETS = ("ds1", "ds2")
+DEFAULT_EVAL_SEEDS = 20
+QUICK_EVAL_SEEDS = 5
+QUICK_OVERRIDES: dict[str, Any] = {"hidden": 32, "layers": 2, "epochs": 3, "patience": 3, "episodes": 1}
+"""What ``--quick`` changes in the training configuration (everything else: the defaults)."""
+
+LABELS = {
+    "learned-ds1": "learned DS1",
+    "learned-ds2": "learned DS2",
+    "manual": "manual tuning",
+    "oracle": "oracle EKF (true noise)",
+}
+
+Log = Callable[[str], None]
+
+
+def _stderr(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+@dataclass(frozen=True)
+class ReproduceSettings:
+    """What a reproduction runs.
+
+    Attributes:
+        seed: training seed (network initialisation and window order; the config's ``seed``).
+        eval_seeds: number of test-split seeds per evaluation (default 20, quick 5).
+        quick: the ``--quick`` pipeline (:data:`QUICK_OVERRIDES`).
+        config: base training configuration (default ``FlexKalmanNetConfig()``, read when the
+            settings are used, so that new defaults apply).
+        figure_seed: seed of the episodes the figures show.
+        uncertainty_steps: samples of the angular-rate uncertainty figure (the paper: 500).
+    """
+
+    seed: int = 0
+    eval_seeds: int | None = None
+    quick: bool = False
+    config: FlexKalmanNetConfig | None = None
+    figure_seed: int = 0
+    uncertainty_steps: int = 500
+
+    def __post_init__(self) -> None:
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0 (got {self.seed})")
+        if self.eval_seeds is not None and self.eval_seeds < 1:
+            raise ValueError(f"eval_seeds must be >= 1 (got {self.eval_seeds})")
+        if self.uncertainty_steps < 2:
+            raise ValueError(f"uncertainty_steps must be >= 2 (got {self.uncertainty_steps})")
+
+    @property
+    def n_eval_seeds(self) -> int:
+        if self.eval_seeds is not None:
+            return int(self.eval_seeds)
+        return QUICK_EVAL_SEEDS if self.quick else DEFAULT_EVAL_SEEDS
+
+    def training_config(self) -> FlexKalmanNetConfig:
+        base = self.config if self.config is not None else FlexKalmanNetConfig()
+        changes: dict[str, Any] = {"seed": self.seed}
+        if self.quick:
+            changes.update(QUICK_OVERRIDES)
+        return base.replace(**changes)
+
+
+@dataclass(frozen=True)
+class TrainedModel:
+    """A trained FlexKalmanNet and what the report needs from its training."""
+
+    dataset: str
+    out: Path
+    artifact: Path
+    estimator: FlexKalmanNetEstimator
+    history: pd.DataFrame
+    best_epoch: int
+    best_val_rmse: float
+    test_rmse: float
+    seconds_per_epoch: float
+    epochs_run: int
+    output_size: int
+    windows: int
+    learned_std: dict[str, float]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "dataset": self.dataset,
+            "out": str(self.out),
+            "artifact": str(self.artifact),
+            "best_epoch": self.best_epoch,
+            "best_val_rmse": self.best_val_rmse,
+            "test_rmse": self.test_rmse,
+            "seconds_per_epoch": self.seconds_per_epoch,
+            "epochs_run": self.epochs_run,
+            "output_size": self.output_size,
+            "windows": self.windows,
+            "learned_std": self.learned_std,
+        }
+
+
+@dataclass
+class Reproduction:
+    """Everything a reproduction produced (see :func:`run_reproduction`)."""
+
+    out: Path
+    settings: ReproduceSettings
+    config: FlexKalmanNetConfig
+    trained: dict[str, TrainedModel]
+    evaluations: dict[tuple[str, str], Evaluation]
+    tables: dict[str, Table]
+    figures: list[FigureRef]
+    differences: list[str]
+    seconds: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def index(self) -> Path:
+        return self.out / "index.md"
+
+
+def named_std(estimator: Any, variant: str) -> dict[str, float]:
+    """``sigma_R_<label>`` then ``sigma_Q_<label>`` (the paper's table order) of a constant
+    Kalman estimator in ``variant``'s layout."""
+    layout = make_filter(variant).layout
+    out = {f"sigma_R_{label}": float(v) for label, v in zip(layout.r_labels, estimator.r_std)}
+    out.update({f"sigma_Q_{label}": float(v) for label, v in zip(layout.q_labels, estimator.q_std)})
+    return out
+
+
+def _train(dataset: str, config: FlexKalmanNetConfig, out: Path, progress: bool) -> TrainedModel:
+    outcome = train_flexkalmannet(dataset, config, out=out, progress=progress, plots=False)
+    history = outcome.history
+    estimator = FlexKalmanNetEstimator.from_artifact(outcome.artifact)
+    document = read_json(outcome.artifact)
+    best = history[history["epoch"] == outcome.best_epoch]
+    best_val = float(best["val_rmse"].iloc[0]) if len(best) else math.nan
+    return TrainedModel(
+        dataset=dataset,
+        out=out,
+        artifact=outcome.artifact,
+        estimator=estimator,
+        history=history,
+        best_epoch=int(outcome.best_epoch),
+        best_val_rmse=best_val,
+        test_rmse=float(outcome.test["test_rmse"]),
+        seconds_per_epoch=float(history["seconds"].mean()) if len(history) else math.nan,
+        epochs_run=len(history),
+        output_size=int(outcome.model.parameter_set.size),
+        windows=int(document.get("training", {}).get("data", {}).get("windows", 0)),
+        learned_std=named_std(estimator, config.variant),
+    )
+
+
+def _uncertainty_steps(trace: Any, window: int) -> float:
+    """Steps until the angular-rate sigma (norm over the axes) has made 90% of its decrease
+    between the first sample and sample ``window``."""
+    sigma = figs.omega_sigma(trace, window)
+    norm = np.sqrt(np.sum(np.square(sigma), axis=1))
+    if len(norm) < 2 or not np.all(np.isfinite(norm)):
+        return math.nan
+    start, end = norm[0], norm[-1]
+    if start <= end:
+        return math.nan
+    below = np.nonzero(norm <= end + 0.1 * (start - end))[0]
+    return float(below[0]) if below.size else math.nan
+
+
+def _config_summary(config: FlexKalmanNetConfig, quick: bool) -> str:
+    text = (f"{config.layers} layers of {config.hidden}, lr {config.lr:g}, up to {config.epochs} epochs "
+            f"(early stop {config.patience}), windows of {config.window} samples, {config.episodes} training "
+            f"episode(s), variant {config.variant}")
+    return ("quick run: " if quick else "") + text
+
+
+def run_reproduction(
+    out: str | Path,
+    settings: ReproduceSettings | None = None,
+    *,
+    progress: bool = True,
+    log: Log | None = _stderr,
+) -> Reproduction:
+    """Run the whole pipeline (module docstring) into ``out`` and return what it produced."""
+    settings = settings or ReproduceSettings()
+    say = log or (lambda message: None)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    config = settings.training_config()
+    seeds = list(range(settings.n_eval_seeds))
+    seconds: dict[str, float] = {}
+    began = time.perf_counter()
+
+    # 1. training
+    trained: dict[str, TrainedModel] = {}
+    for dataset in DATASETS:
+        say(f"[reproduce] training FlexKalmanNet on {dataset} ({_config_summary(config, settings.quick)})")
+        t0 = time.perf_counter()
+        trained[dataset] = _train(dataset, config, out / "training" / dataset, progress)
+        seconds[f"train_{dataset}"] = time.perf_counter() - t0
+        model = trained[dataset]
+        say(f"[reproduce]   {model.epochs_run} epochs, best {model.best_epoch}, val RMSE {model.best_val_rmse:.5f}, "
+            f"{seconds[f'train_{dataset}']:.0f} s")
+
+    # 2. evaluation
+    say(f"[reproduce] evaluating on {len(seeds)} test seeds")
+    t0 = time.perf_counter()
+    manual_name = f"manual-{config.variant}" if config.variant in ("ekf", "ukf", "mekf") else "manual-ekf"
+    constant: dict[str, Estimator] = {
+        "learned-ds1": trained["ds1"].estimator,
+        "learned-ds2": trained["ds2"].estimator,
+        "manual": make_estimator(manual_name),
+    }
+    plan = {
+        "ds1": ("learned-ds1", "learned-ds2", "manual", "oracle"),
+        "ds2": ("learned-ds2", "learned-ds1", "manual", "oracle"),
+        "ds1-noise5x": ("learned-ds1", "manual", "oracle"),
+        "ds1-gap100": ("learned-ds1", "manual", "oracle"),
+    }
+    evaluations: dict[tuple[str, str], Evaluation] = {}
+    for scenario_name, labels in plan.items():
+        scenario = get_scenario(scenario_name)
+        for label in labels:
+            estimator = make_estimator("oracle-ekf", scenario=scenario) if label == "oracle" else constant[label]
+            evaluations[(label, scenario_name)] = evaluate(estimator, label, scenario, seeds)
+    seconds["evaluate"] = time.perf_counter() - t0
+
+    # 3. figures
+    say("[reproduce] drawing figures")
+    t0 = time.perf_counter()
+    figure_list: list[FigureRef] = []
+    fig_dir = out / "figures"
+    quick_tag = " [QUICK RUN]" if settings.quick else ""
+    for dataset in ("ds2", "ds1"):
+        model = trained[dataset]
+        if len(model.history):
+            plot_losses(model.history, fig_dir / f"training_loss_{dataset}.png",
+                        title=f"Training and validation loss, {dataset.upper()}{quick_tag}", best_epoch=model.best_epoch)
+            plot_parameters(model.history, fig_dir / f"parameters_{dataset}.png",
+                            title=f"Learned standard deviations over epochs, {dataset.upper()}{quick_tag}")
+    seed = settings.figure_seed
+    ds1, ds2 = get_scenario("ds1"), get_scenario("ds2")
+    ds1_trace = run_trace(constant["learned-ds1"], "learned DS1", ds1, seed)
+    figs.save(figs.states_figure_titled(ds1_trace, f"EKF with the parameters learned from DS1, on DS1 (test split, seed {seed}){quick_tag}"),
+              fig_dir / "states_ds1.png")
+    figs.save(figs.omega_uncertainty_figure(ds1_trace, steps=settings.uncertainty_steps,
+                                            title=f"Angular-rate estimates with 2σ bands, DS1 parameters on DS1, first {settings.uncertainty_steps} samples{quick_tag}"),
+              fig_dir / "omega_uncertainty_ds1.png")
+    uncertainty_steps = _uncertainty_steps(ds1_trace, settings.uncertainty_steps)
+    for scenario_name, label, stem, title in (
+        ("ds1-noise5x", "learned-ds1", "states_ds1_noise5x", "DS1 parameters on DS1 with five times the noise"),
+        ("ds1-gap100", "learned-ds1", "states_ds1_gap100", "DS1 parameters on DS1 with a measurement every 100 steps"),
+        ("ds2", "learned-ds2", "states_ds2", "DS2 parameters on DS2"),
+        ("ds2", "learned-ds1", "states_ds1_params_on_ds2", "DS1 parameters on DS2 (cross-data-set)"),
+        ("ds1", "learned-ds2", "states_ds2_params_on_ds1", "DS2 parameters on DS1 (cross-data-set)"),
+    ):
+        trace = run_trace(constant[label], LABELS[label], get_scenario(scenario_name), seed)
+        figs.save(figs.states_figure_titled(trace, f"EKF, {title} (test split, seed {seed}){quick_tag}"), fig_dir / f"{stem}.png")
+    captions = {
+        "training_loss_ds2": "Paper Fig. 3: training (blue) and validation (orange) RMSE per epoch, DS2.",
+        "parameters_ds2": "Paper Fig. 4: the 20 learned standard deviations over the epochs, DS2.",
+        "training_loss_ds1": "Training and validation loss per epoch, DS1 (not shown in the paper).",
+        "parameters_ds1": "The learned standard deviations over the epochs, DS1 (not shown in the paper).",
+        "states_ds1": "Paper Fig. 5: EKF with the DS1 parameters on DS1: estimate, measurement and truth of the four state groups.",
+        "omega_uncertainty_ds1": f"Paper Fig. 6: angular-rate estimates with their 2σ band over the first {settings.uncertainty_steps} samples of DS1.",
+        "states_ds1_noise5x": "Paper Fig. 7: DS1 parameters on DS1 with five times the measurement noise.",
+        "states_ds1_gap100": "Paper Fig. 8: DS1 parameters on DS1 with a measurement every 100 steps.",
+        "states_ds2": "DS2 parameters on DS2 (the paper omits this plot for brevity).",
+        "states_ds1_params_on_ds2": "Cross-data-set: DS1 parameters on DS2 (the paper describes it in words only).",
+        "states_ds2_params_on_ds1": "Cross-data-set: DS2 parameters on DS1 (the paper describes it in words only).",
+    }
+    for stem, caption in captions.items():
+        if (fig_dir / f"{stem}.png").is_file():
+            figure_list.append(FigureRef(f"figures/{stem}.png", caption + quick_tag))
+    seconds["figures"] = time.perf_counter() - t0
+
+    # 4. tables and differences
+    manual_std = named_std(constant["manual"], config.variant)
+    oracle_std = named_std(make_estimator("oracle-ekf", scenario=ds1), "ekf")
+    tables = {
+        "hyperparameters": hyperparameter_table(config, trained["ds1"].output_size, quick=settings.quick),
+        "training_results": training_table(trained),
+        "learned_std": learned_std_table(trained, manual_std, oracle_std),
+        "rmse_learned_vs_manual": rmse_table(evaluations[("learned-ds1", "ds1")], evaluations[("manual", "ds1")],
+                                             evaluations.get(("oracle", "ds1"))),
+        "cross_dataset": cross_dataset_table(evaluations, LABELS),
+        "robustness": robustness_table(evaluations, LABELS),
+    }
+    context = Context(
+        trained=trained,
+        evaluations=evaluations,
+        true_std=oracle_std,
+        uncertainty_steps=uncertainty_steps,
+        uncertainty_window=settings.uncertainty_steps,
+        quick=settings.quick,
+        config_summary=_config_summary(config, settings.quick),
+    )
+    bullets = differences(context)
+    seconds["total"] = time.perf_counter() - began
+
+    reproduction = Reproduction(out, settings, config, trained, evaluations, tables, figure_list, bullets, seconds)
+    _write(reproduction)
+    say(f"[reproduce] report written to {out / 'index.md'} and {out / 'index.html'} ({seconds['total']:.0f} s)")
+    return reproduction
+
+
+def _figure(reproduction: Reproduction, stem: str) -> list[Block]:
+    return [f for f in reproduction.figures if f.path == f"figures/{stem}.png"]
+
+
+def _blocks(r: Reproduction) -> list[Block]:
+    s = r.settings
+    quick = s.quick
+    title = "Reproduction of FlexKalmanNet's results" + (" — QUICK RUN (not a reproduction)" if quick else "")
+    command = "fkn-bench reproduce" + (" --quick" if quick else "") + f" --seed {s.seed} --seeds {s.n_eval_seeds}"
+    blocks: list[Block] = [Heading(title, 1)]
+    if quick:
+        blocks.append(Paragraph(
+            "**QUICK RUN.** Generated by `fkn-bench reproduce --quick`: a much smaller network trained for a few "
+            "epochs and fewer evaluation seeds, to test the pipeline. Run `fkn-bench reproduce` for the real numbers."
+        ))
+    blocks += [
+        Paragraph(
+            f"Every table and figure of the results section of {PAPER_TITLE}, regenerated from scratch (simulated data, "
+            f"training, evaluation) by `{command}` in {r.seconds.get('total', math.nan):.0f} s. Columns and rows marked "
+            "\"paper (quoted)\" are the paper's printed numbers; everything else was computed by this run. Training: "
+            f"{_config_summary(r.config, quick)}, seed {r.config.seed}. Evaluation: the test split of {s.n_eval_seeds} "
+            f"seeds (seed 0 is the held-out tenth of the training recording), a measurement every 10 steps, scored "
+            f"from step 100 (the paper's protocol); figures from seed {s.figure_seed}."
+        ),
+        Heading("Differences from the paper (generated from the numbers)"),
+        Bullets(tuple(r.differences)),
+        Heading("Training"),
+        r.tables["hyperparameters"],
+        r.tables["training_results"],
+        *_figure(r, "training_loss_ds2"),
+        *_figure(r, "parameters_ds2"),
+        *_figure(r, "training_loss_ds1"),
+        *_figure(r, "parameters_ds1"),
+        Heading("Learned parameters"),
+        r.tables["learned_std"],
+        Heading("Evaluation on DS1"),
+        *_figure(r, "states_ds1"),
+        *_figure(r, "omega_uncertainty_ds1"),
+        r.tables["rmse_learned_vs_manual"],
+        Heading("Robustness: 5x noise and 100-step gaps"),
+        *_figure(r, "states_ds1_noise5x"),
+        *_figure(r, "states_ds1_gap100"),
+        r.tables["robustness"],
+        Heading("Cross-data-set runs"),
+        r.tables["cross_dataset"],
+        *_figure(r, "states_ds2"),
+        *_figure(r, "states_ds1_params_on_ds2"),
+        *_figure(r, "states_ds2_params_on_ds1"),
+        Heading("Files"),
+        Bullets((
+            "`training/ds1/`, `training/ds2/`: checkpoint, `history.csv` and the learned parameters "
+            "(`parameters.json`, usable as `fkn-bench run --estimator flexkalmannet` input via "
+            "`make_estimator(\"flexkalmannet\", parameters=...)`)",
+            "`tables/*.csv`: every table above; `results.json`: every number, the configuration, timings and provenance",
+            "`figures/*.png`: the figures above; `index.html`: this report as HTML",
+        )),
+    ]
+    return blocks
+
+
+def _write(r: Reproduction) -> None:
+    from fkn_bench.training.artifacts import run_provenance
+
+    blocks = _blocks(r)
+    write_report(r.out, blocks, title="FlexKalmanNet reproduction" + (" (quick)" if r.settings.quick else ""))
+    write_json_atomic(r.out / "results.json", {
+        "quick": r.settings.quick,
+        "seed": r.settings.seed,
+        "eval_seeds": r.settings.n_eval_seeds,
+        "figure_seed": r.settings.figure_seed,
+        "config": r.config.to_dict(),
+        "training": {k: v.to_dict() for k, v in r.trained.items()},
+        "evaluations": [e.to_dict() for e in r.evaluations.values()],
+        "differences": r.differences,
+        "figures": [f.path for f in r.figures],
+        "tables": sorted(r.tables),
+        "seconds": r.seconds,
+        "provenance": run_provenance(),
+    })

@@ -1,0 +1,184 @@
+"""The report: a small document model written as Markdown (``index.md``) and HTML
+(``index.html``) from the same blocks, plus one CSV per table (``tables/<name>.csv``).
+
+Blocks: :class:`Heading`, :class:`Paragraph` (plain text; ``**bold**`` and backticks are kept in
+Markdown and rendered in HTML), :class:`Bullets`, :class:`Table` and :class:`FigureRef` (a PNG in
+the report directory). Every file is written atomically.
+"""
+
+from __future__ import annotations
+
+import csv
+import html
+import io
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fkn_bench.io import write_text_atomic
+
+__all__ = ["Heading", "Paragraph", "Bullets", "Table", "FigureRef", "Block", "render_markdown", "render_html", "write_report"]
+
+
+@dataclass(frozen=True)
+class Heading:
+    text: str
+    level: int = 2
+
+
+@dataclass(frozen=True)
+class Paragraph:
+    text: str
+
+
+@dataclass(frozen=True)
+class Bullets:
+    items: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Table:
+    """A table of formatted cells. ``name`` is the CSV file stem; ``notes`` print below it;
+    ``align`` per column: ``l`` or ``r``."""
+
+    name: str
+    title: str
+    columns: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+    notes: tuple[str, ...] = ()
+    align: tuple[str, ...] = field(default_factory=tuple)
+
+    def __post_init__(self) -> None:
+        for row in self.rows:
+            if len(row) != len(self.columns):
+                raise ValueError(f"table {self.name}: row {row} has {len(row)} cells for {len(self.columns)} columns")
+
+    def to_csv(self) -> str:
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(self.columns)
+        writer.writerows(self.rows)
+        return buffer.getvalue()
+
+    def column(self, name: str) -> list[str]:
+        index = self.columns.index(name)
+        return [row[index] for row in self.rows]
+
+
+@dataclass(frozen=True)
+class FigureRef:
+    """A figure file (relative to the report directory) with its caption."""
+
+    path: str
+    caption: str
+
+
+Block = Heading | Paragraph | Bullets | Table | FigureRef
+
+
+def _md_cell(text: str) -> str:
+    return text.replace("|", "\\|").replace("\n", " ")
+
+
+def render_markdown(blocks: Sequence[Block]) -> str:
+    """The blocks as GitHub-flavoured Markdown."""
+    out: list[str] = []
+    for block in blocks:
+        if isinstance(block, Heading):
+            out.append(f"{'#' * block.level} {block.text}\n")
+        elif isinstance(block, Paragraph):
+            out.append(f"{block.text}\n")
+        elif isinstance(block, Bullets):
+            out.append("\n".join(f"- {item}" for item in block.items) + "\n")
+        elif isinstance(block, Table):
+            align = block.align or tuple("l" if i == 0 else "r" for i in range(len(block.columns)))
+            lines = [f"**{block.title}**", ""]
+            lines.append("| " + " | ".join(_md_cell(c) for c in block.columns) + " |")
+            lines.append("|" + "|".join(":---" if a == "l" else "---:" for a in align) + "|")
+            lines.extend("| " + " | ".join(_md_cell(c) for c in row) + " |" for row in block.rows)
+            if block.notes:
+                lines.append("")
+                lines.extend(f"*{note}*" if not note.startswith("*") else note for note in block.notes)
+            lines.append(f"\n(CSV: [`tables/{block.name}.csv`](tables/{block.name}.csv))")
+            out.append("\n".join(lines) + "\n")
+        elif isinstance(block, FigureRef):
+            out.append(f"![{block.caption}]({block.path})\n\n*{block.caption}*\n")
+        else:  # pragma: no cover - the union is closed
+            raise TypeError(f"unknown block {block!r}")
+    return "\n".join(out)
+
+
+_INLINE = [
+    (re.compile(r"\*\*(.+?)\*\*"), r"<strong>\1</strong>"),
+    (re.compile(r"`(.+?)`"), r"<code>\1</code>"),
+    (re.compile(r"\[([^\]]+)\]\(([^)\s]+)\)"), r'<a href="\2">\1</a>'),
+]
+
+
+def _inline(text: str) -> str:
+    escaped = html.escape(text, quote=False)
+    for pattern, replacement in _INLINE:
+        escaped = pattern.sub(replacement, escaped)
+    return escaped
+
+
+_STYLE = """
+body { font-family: system-ui, sans-serif; max-width: 1100px; margin: 2em auto; padding: 0 1em; line-height: 1.45; }
+table { border-collapse: collapse; margin: 0.5em 0 0.3em; font-size: 0.92em; }
+th, td { border: 1px solid #ccc; padding: 0.25em 0.6em; }
+th { background: #f2f2f2; }
+td.r { text-align: right; font-variant-numeric: tabular-nums; }
+caption { font-weight: bold; text-align: left; padding-bottom: 0.3em; }
+figure { margin: 1em 0; } figure img { max-width: 100%; border: 1px solid #ddd; }
+.note { font-size: 0.88em; color: #444; margin: 0.1em 0; }
+"""
+
+
+def render_html(blocks: Sequence[Block], *, title: str) -> str:
+    """The blocks as one self-contained HTML page (figures referenced by relative path)."""
+    body: list[str] = []
+    for block in blocks:
+        if isinstance(block, Heading):
+            level = min(max(block.level, 1), 6)
+            anchor = re.sub(r"[^a-z0-9]+", "-", block.text.lower()).strip("-")
+            body.append(f'<h{level} id="{anchor}">{_inline(block.text)}</h{level}>')
+        elif isinstance(block, Paragraph):
+            body.append(f"<p>{_inline(block.text)}</p>")
+        elif isinstance(block, Bullets):
+            body.append("<ul>" + "".join(f"<li>{_inline(item)}</li>" for item in block.items) + "</ul>")
+        elif isinstance(block, Table):
+            align = block.align or tuple("l" if i == 0 else "r" for i in range(len(block.columns)))
+            head = "".join(f"<th>{_inline(c)}</th>" for c in block.columns)
+            rows = "".join(
+                "<tr>" + "".join(f'<td class="{a}">{_inline(c)}</td>' for c, a in zip(row, align)) + "</tr>"
+                for row in block.rows
+            )
+            notes = "".join(f'<p class="note">{_inline(n.strip("*"))}</p>' for n in block.notes)
+            link = f'<p class="note">CSV: <a href="tables/{block.name}.csv">tables/{block.name}.csv</a></p>'
+            body.append(f"<table><caption>{_inline(block.title)}</caption><thead><tr>{head}</tr></thead>"
+                        f"<tbody>{rows}</tbody></table>{notes}{link}")
+        elif isinstance(block, FigureRef):
+            body.append(f'<figure><img src="{html.escape(block.path)}" alt="{html.escape(block.caption)}">'
+                        f"<figcaption>{_inline(block.caption)}</figcaption></figure>")
+        else:  # pragma: no cover
+            raise TypeError(f"unknown block {block!r}")
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n"
+        f"<title>{html.escape(title)}</title>\n<style>{_STYLE}</style>\n</head>\n<body>\n"
+        + "\n".join(body)
+        + "\n</body>\n</html>\n"
+    )
+
+
+def write_report(out: str | Path, blocks: Sequence[Block], *, title: str) -> dict[str, Path]:
+    """Write ``index.md``, ``index.html`` and ``tables/<name>.csv`` into ``out``."""
+    out = Path(out)
+    written = {
+        "markdown": write_text_atomic(out / "index.md", render_markdown(blocks)),
+        "html": write_text_atomic(out / "index.html", render_html(blocks, title=title)),
+    }
+    for block in blocks:
+        if isinstance(block, Table):
+            written[f"table:{block.name}"] = write_text_atomic(out / "tables" / f"{block.name}.csv", block.to_csv())
+    return written

@@ -1,0 +1,51 @@
+"""Hyperparameter sweeps on optuna (``fkn-bench sweep``), following the paper's method: a random
+search to narrow the space, then a grid search over the reduced space (TPE, random or grid search
+alone as options).
+
+* :mod:`~fkn_bench.sweep.space`: search spaces from TOML (packaged: ``paper``, ``quick``);
+* :mod:`~fkn_bench.sweep.objective`: a trial = one training, reporting the validation RMSE per
+  epoch and pruned by the study's pruner;
+* :mod:`~fkn_bench.sweep.study`: storages (journal file or RDB URL), samplers and the reduced grid;
+* :mod:`~fkn_bench.sweep.runner`: worker processes sharing one study, and the outputs
+  (``best.toml``, ``trials.csv``, ``parallel_coordinates.png``, ``sweep.json``).
+"""
+
+from fkn_bench.sweep.objective import SweepTask, TrialError, make_objective, trial_config
+from fkn_bench.sweep.runner import SweepError, SweepResult, SweepSettings, run_sweep, write_toml
+from fkn_bench.sweep.space import (
+    PRUNERS,
+    SAMPLERS,
+    Knob,
+    PrunerSpec,
+    SearchSpace,
+    SpaceError,
+    load_space,
+    packaged_spaces,
+    parse_space,
+    resolve_space,
+)
+from fkn_bench.sweep.study import open_storage, reduced_grid
+
+__all__ = [
+    "Knob",
+    "PRUNERS",
+    "PrunerSpec",
+    "SAMPLERS",
+    "SearchSpace",
+    "SpaceError",
+    "SweepError",
+    "SweepResult",
+    "SweepSettings",
+    "SweepTask",
+    "TrialError",
+    "load_space",
+    "make_objective",
+    "open_storage",
+    "packaged_spaces",
+    "parse_space",
+    "reduced_grid",
+    "resolve_space",
+    "run_sweep",
+    "trial_config",
+    "write_toml",
+]

@@ -1,0 +1,448 @@
+"""Running a sweep: stages, worker processes that share one study, and the outputs.
+
+:func:`run_sweep` creates (or resumes) the stage studies in the storage and runs each stage with
+``workers`` processes (``spawn``ed; ``workers = 1`` runs in this process). Each worker loads the
+study from the storage and runs its share of the trials still missing, so the study is shared
+through the storage only: more processes (or machines, with an RDB URL) can join the same study
+with the same command. ``trials`` is the number of trials a stage aims for, counting the trials
+already in the study, so rerunning a finished sweep only rewrites the outputs.
+
+Outputs in ``out``:
+
+* ``best.toml``: the best trial's full configuration (``[flexkalmannet]`` table), loadable with
+  ``FlexKalmanNetConfig.from_toml`` and ``fkn-bench train --config best.toml`` (for other
+  estimators: their training options at the top level);
+* ``trials.csv``: every trial of every stage (stage, number, state, value, params, user
+  attributes such as ``best_epoch``, ``epochs_run`` and ``error``, the last reported epoch);
+* ``parallel_coordinates.png``: the completed trials' hyperparameters mapped to their validation
+  RMSE (like the paper's sweep figure; drawn with ``optuna.visualization.matplotlib``);
+* ``sweep.json``: settings, the reduced grid of ``random-grid``, counts per state and the best
+  trial.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing
+import sys
+import time
+import warnings
+from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import optuna
+from optuna.trial import FrozenTrial, TrialState
+
+from fkn_bench.io import atomic_path, write_json_atomic, write_text_atomic
+from fkn_bench.scenarios import Scenario
+from fkn_bench.sweep.objective import CATCH, SweepTask, coerce_config, make_objective, trial_config
+from fkn_bench.sweep.space import SAMPLERS, SearchSpace
+from fkn_bench.sweep.study import completed, make_sampler, open_storage, reduced_grid, stage_names, storage_label
+
+__all__ = ["SweepError", "SweepSettings", "SweepResult", "run_sweep", "write_toml", "shares"]
+
+Log = Callable[[str], None]
+
+
+class SweepError(RuntimeError):
+    """A sweep that cannot go on (a worker crashed, no trial completed, a foreign study)."""
+
+
+@dataclass(frozen=True)
+class SweepSettings:
+    """A sweep (see :mod:`fkn_bench.sweep` and the ``fkn-bench sweep`` options).
+
+    Attributes:
+        space: the search space.
+        scenario: training scenario.
+        out: output directory.
+        estimator: trainable estimator (default ``flexkalmannet``).
+        sampler: one of :data:`~fkn_bench.sweep.space.SAMPLERS`.
+        trials: trials of the random (or only) stage.
+        grid_trials: most points of the reduced grid (``random-grid``; default ``trials``).
+        top_k: best random trials whose values span the reduced grid.
+        workers: parallel worker processes.
+        storage: journal file path or RDB URL (default ``out/study.journal``).
+        study_name: study name (default ``<estimator>-<scenario>``).
+        seed: sampler seed.
+    """
+
+    space: SearchSpace
+    scenario: Scenario
+    out: Path
+    estimator: str = "flexkalmannet"
+    sampler: str = "random-grid"
+    trials: int = 20
+    grid_trials: int | None = None
+    top_k: int = 3
+    workers: int = 1
+    storage: str | None = None
+    study_name: str | None = None
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.sampler not in SAMPLERS:
+            raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)} (got {self.sampler!r})")
+        for name in ("trials", "top_k", "workers"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be >= 1 (got {getattr(self, name)!r})")
+        if self.grid_trials is not None and self.grid_trials < 1:
+            raise ValueError(f"grid_trials must be >= 1 (got {self.grid_trials!r})")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0 (got {self.seed!r})")
+
+    @property
+    def storage_spec(self) -> str:
+        return self.storage if self.storage is not None else str(Path(self.out) / "study.journal")
+
+    @property
+    def name(self) -> str:
+        return self.study_name or f"{self.estimator}-{self.scenario.name}"
+
+
+@dataclass
+class SweepResult:
+    """What a sweep produced."""
+
+    out: Path
+    best_value: float
+    best_params: dict[str, Any]
+    best_stage: str
+    best_number: int
+    best_config: Path
+    trials_csv: Path
+    figure: Path | None
+    counts: dict[str, dict[str, int]]
+    grid: dict[str, list[Any]] | None = None
+    seconds: float = 0.0
+    stages: list[tuple[str, str]] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class _WorkerJob:
+    task: SweepTask
+    storage: str
+    study_name: str
+    stage: str
+    seed: int
+    worker: int
+    n_trials: int
+    grid: dict[str, list[Any]] | None
+    verbose: bool
+
+
+def shares(total: int, workers: int) -> list[int]:
+    """``total`` trials split over ``workers`` as evenly as possible (zeros dropped)."""
+    base, extra = divmod(max(total, 0), workers)
+    return [n for n in (base + (1 if i < extra else 0) for i in range(workers)) if n > 0]
+
+
+def _describe(trial: FrozenTrial) -> str:
+    return ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in trial.params.items())
+
+
+def _worker_main(job: _WorkerJob) -> None:
+    """Run ``job.n_trials`` trials of a stage (in this process or a spawned one)."""
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
+    study = optuna.load_study(
+        study_name=job.study_name,
+        storage=open_storage(job.storage),
+        sampler=make_sampler(job.stage, seed=job.seed, worker=job.worker, grid=job.grid),
+        pruner=job.task.space.pruner.make(),
+    )
+
+    def report(study: optuna.Study, trial: FrozenTrial) -> None:
+        if not job.verbose:
+            return
+        if trial.state == TrialState.COMPLETE:
+            outcome = f"validation RMSE {trial.value:.5g}"
+        elif trial.state == TrialState.PRUNED:
+            outcome = f"pruned after epoch {trial.last_step}"
+        else:
+            outcome = f"{trial.state.name.lower()}: {trial.user_attrs.get('error', '')}"
+        print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {_describe(trial)}",
+              file=sys.stderr, flush=True)
+
+    study.optimize(make_objective(job.task), n_trials=job.n_trials, catch=CATCH, callbacks=[report],
+                   gc_after_trial=False, show_progress_bar=False)
+
+
+class _Workers:
+    """The worker processes of a sweep: a pool of ``spawn``ed processes created on first use and
+    kept for every stage (importing torch once per process, not once per stage)."""
+
+    def __init__(self, count: int) -> None:
+        self.count = count
+        self._pool: ProcessPoolExecutor | None = None
+
+    def run(self, jobs: list[_WorkerJob]) -> None:
+        if not jobs:
+            return
+        if self.count == 1 or len(jobs) == 1 and self._pool is None:
+            for job in jobs:
+                _worker_main(job)
+            return
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(max_workers=self.count, mp_context=multiprocessing.get_context("spawn"))
+        futures = [self._pool.submit(_worker_main, job) for job in jobs]
+        errors = []
+        for job, future in zip(jobs, futures):
+            try:
+                future.result()
+            except BrokenProcessPool as exc:
+                errors.append(f"worker {job.worker}: its process died ({exc})")
+            except Exception as exc:  # noqa: BLE001 - reported together below
+                errors.append(f"worker {job.worker}: {type(exc).__name__}: {exc}")
+        if errors:
+            raise SweepError("; ".join(errors))
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+def _prepare_study(storage: Any, name: str, settings: SweepSettings, stage: str) -> optuna.Study:
+    study = optuna.create_study(storage=storage, study_name=name, direction="minimize", load_if_exists=True)
+    identity = {
+        "fkn_bench_space": settings.space.fingerprint(),
+        "fkn_bench_estimator": settings.estimator,
+        "fkn_bench_scenario": settings.scenario.config_hash(),
+    }
+    attrs = study.user_attrs
+    for key, value in identity.items():
+        if key in attrs and attrs[key] != value:
+            raise SweepError(
+                f"study {name!r} in {storage_label(settings.storage_spec)} was created with another "
+                f"{key.removeprefix('fkn_bench_')} ({attrs[key]} vs {value}): choose another --study-name or --storage"
+            )
+    for key, value in identity.items():
+        if key not in attrs:
+            study.set_user_attr(key, value)
+    if "fkn_bench_stage" not in attrs:
+        study.set_user_attr("fkn_bench_stage", stage)
+        study.set_user_attr("fkn_bench_space_source", settings.space.source)
+    return study
+
+
+def _started(study: optuna.Study) -> int:
+    return sum(1 for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING)
+
+
+def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, target: int,
+           grid: dict[str, list[Any]] | None, verbose: bool, log: Log, workers: _Workers) -> None:
+    storage = open_storage(settings.storage_spec)
+    study = _prepare_study(storage, name, settings, stage)
+    if grid is not None:
+        stored = study.user_attrs.get("fkn_bench_grid")
+        if stored is None:
+            study.set_user_attr("fkn_bench_grid", grid)
+        elif stored != grid:
+            raise SweepError(f"study {name!r} already runs another grid ({stored}); choose another --study-name")
+    remaining = target - _started(study)
+    split = shares(remaining, settings.workers)
+    log(f"[sweep] stage {stage} ({name}): {target} trials, {max(remaining, 0)} to run on {len(split)} worker(s)")
+    jobs = [
+        _WorkerJob(task, settings.storage_spec, name, stage, settings.seed, i, n, grid, verbose)
+        for i, n in enumerate(split)
+    ]
+    workers.run(jobs)
+
+
+def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None = None) -> SweepResult:
+    """Run (or resume) the sweep and write its outputs (module docstring)."""
+    say = log or (lambda message: None)
+    began = time.perf_counter()
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    out = Path(settings.out)
+    out.mkdir(parents=True, exist_ok=True)
+    task = SweepTask(settings.estimator, settings.scenario, settings.space, out)
+    stages = stage_names(settings.name, settings.sampler)
+    grid: dict[str, list[Any]] | None = None
+    workers = _Workers(settings.workers)
+    try:
+        for stage, name in stages:
+            if stage == "grid" and settings.sampler == "random-grid":
+                storage = open_storage(settings.storage_spec)
+                grid_study = _prepare_study(storage, name, settings, stage)
+                grid = grid_study.user_attrs.get("fkn_bench_grid")
+                if grid is None:
+                    random_study = optuna.load_study(study_name=stages[0][1], storage=storage)
+                    try:
+                        grid = reduced_grid(random_study.get_trials(deepcopy=False), settings.space,
+                                            top_k=settings.top_k, budget=settings.grid_trials or settings.trials)
+                    except ValueError as exc:
+                        raise SweepError(f"cannot derive the grid stage: {exc}") from None
+                say(f"[sweep] reduced grid from the best {settings.top_k} random trials: {json.dumps(grid)}")
+                _stage(settings, task, stage, name, math.prod(len(v) for v in grid.values()), grid, progress, say, workers)
+            elif stage == "grid":
+                grid = settings.space.grid()
+                size = math.prod(len(v) for v in grid.values())
+                _stage(settings, task, stage, name, min(settings.trials, size), grid, progress, say, workers)
+            else:
+                _stage(settings, task, stage, name, settings.trials, None, progress, say, workers)
+    finally:
+        workers.close()
+    result = write_outputs(settings, stages, grid)
+    result.seconds = time.perf_counter() - began
+    say(f"[sweep] best validation RMSE {result.best_value:.5g} ({result.best_stage} trial {result.best_number}); "
+        f"outputs in {out}")
+    return result
+
+
+# ---------------------------------------------------------------------------------------------
+# outputs
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if math.isnan(value):
+            return "nan"
+        if math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        text = repr(value)
+        return text if any(c in text for c in ".en") else text + ".0"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
+
+
+def write_toml(path: str | Path, values: dict[str, Any], *, table: str | None = None, header: str = "") -> Path:
+    """Write a flat mapping of scalars and lists as TOML (``None`` values become comments: TOML
+    has no null, and leaving the key out keeps the reader's default)."""
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    if lines:
+        lines.append("")
+    if table:
+        lines.append(f"[{table}]")
+    for key, value in values.items():
+        if value is None:
+            lines.append(f"# {key}: None (the default when left out)")
+        else:
+            lines.append(f"{key} = {_toml_value(value)}")
+    return write_text_atomic(path, "\n".join(lines) + "\n")
+
+
+def _best_config(settings: SweepSettings, params: dict[str, Any]) -> tuple[dict[str, Any], str | None]:
+    if settings.estimator == "flexkalmannet":
+        config = trial_config(settings.space, params).to_dict()
+        return config, "flexkalmannet"
+    return coerce_config({**settings.space.fixed, **params}, {}), None
+
+
+def _trials_frame(study: optuna.Study, stage: str) -> Any:
+    import pandas as pd
+
+    trials = study.get_trials(deepcopy=False)
+    if not trials:
+        return pd.DataFrame()
+    frame = study.trials_dataframe(attrs=("number", "value", "state", "params", "user_attrs", "duration"))
+    frame.insert(0, "stage", stage)
+    frame.insert(1, "study", study.study_name)
+    last = {t.number: t.last_step for t in trials}
+    frame["last_epoch_reported"] = frame["number"].map(last)
+    if "duration" in frame:
+        frame["seconds"] = frame.pop("duration").dt.total_seconds()
+    return frame
+
+
+def parallel_coordinates(trials: list[FrozenTrial], space: SearchSpace, path: Path, title: str) -> Path | None:
+    """Parallel-coordinates figure of the completed ``trials`` (None when there are none)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    done = completed(trials)
+    if not done:
+        return None
+    study = optuna.create_study(direction="minimize")
+    study.add_trials(done)
+    params = [n for n in space.names if len({repr(t.params.get(n)) for t in done}) > 1] or space.names
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", category=optuna.exceptions.ExperimentalWarning)
+        axes = optuna.visualization.matplotlib.plot_parallel_coordinate(study, params=params, target_name="validation RMSE")
+    figure = axes.figure
+    figure.set_size_inches(max(7.0, 1.6 * (len(params) + 1)), 5.0)
+    axes.set_title(title)
+    with atomic_path(path, suffix=".png") as tmp:
+        figure.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
+    plt.close(figure)
+    return path
+
+
+def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: dict[str, list[Any]] | None) -> SweepResult:
+    """``best.toml``, ``trials.csv``, ``parallel_coordinates.png`` and ``sweep.json`` from the
+    stage studies in the storage."""
+    import pandas as pd
+
+    out = Path(settings.out)
+    storage = open_storage(settings.storage_spec)
+    frames, everything, counts = [], [], {}
+    best: tuple[FrozenTrial, str] | None = None
+    for stage, name in stages:
+        study = optuna.load_study(study_name=name, storage=storage)
+        trials = study.get_trials(deepcopy=False)
+        everything += trials
+        counts[stage] = {state.name.lower(): sum(1 for t in trials if t.state == state)
+                         for state in (TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL, TrialState.RUNNING)}
+        frames.append(_trials_frame(study, stage))
+        done = completed(trials)
+        if done and (best is None or done[0].value < best[0].value):  # type: ignore[operator]
+            best = (done[0], stage)
+    frame = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()
+    trials_csv = out / "trials.csv"
+    with atomic_path(trials_csv, suffix=".csv") as tmp:
+        frame.to_csv(tmp, index=False)
+    if best is None:
+        raise SweepError(f"no trial completed ({json.dumps(counts)}); see {trials_csv} for the errors")
+    trial, stage = best
+    config, table = _best_config(settings, dict(trial.params))
+    header = (
+        f"Best configuration of fkn-bench sweep study {settings.name!r} ({settings.sampler}), {stage} trial "
+        f"{trial.number}\nvalidation 13-state RMSE {trial.value:.6g} on scenario {settings.scenario.name}\n"
+        f"searched: {', '.join(f'{k} = {v!r}' for k, v in trial.params.items())}\n"
+        f"use: fkn-bench train --estimator {settings.estimator} --scenario {settings.scenario.name} --config best.toml"
+    )
+    best_config = write_toml(out / "best.toml", config, table=table, header=header)
+    figure = parallel_coordinates(
+        everything, settings.space, out / "parallel_coordinates.png",
+        f"{settings.name}: hyperparameters vs validation RMSE ({settings.sampler}, {len(completed(everything))} completed trials)",
+    )
+    result = SweepResult(
+        out=out, best_value=float(trial.value), best_params=dict(trial.params), best_stage=stage,  # type: ignore[arg-type]
+        best_number=trial.number, best_config=best_config, trials_csv=trials_csv, figure=figure, counts=counts,
+        grid=grid, stages=stages,
+    )
+    write_json_atomic(out / "sweep.json", {
+        "study_name": settings.name,
+        "stages": [{"stage": s, "study": n} for s, n in stages],
+        "storage": storage_label(settings.storage_spec),
+        "estimator": settings.estimator,
+        "scenario": settings.scenario.name,
+        "scenario_config_hash": settings.scenario.config_hash(),
+        "sampler": settings.sampler,
+        "trials": settings.trials,
+        "grid_trials": settings.grid_trials,
+        "top_k": settings.top_k,
+        "workers": settings.workers,
+        "seed": settings.seed,
+        "space_source": settings.space.source,
+        "space": settings.space.to_dict(),
+        "grid": grid,
+        "counts": counts,
+        "best": {"stage": stage, "number": trial.number, "value": trial.value, "params": dict(trial.params),
+                 "user_attrs": dict(trial.user_attrs)},
+        "best_config": str(best_config),
+    })
+    return result

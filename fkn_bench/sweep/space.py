@@ -1,0 +1,442 @@
+"""Search spaces for hyperparameter sweeps, read from TOML.
+
+A space file names the knobs to search (``[params.<config field>]`` tables), the values every
+trial holds fixed (``[fixed]``) and, optionally, defaults for the command line (``[sweep]``)::
+
+    [sweep]                     # optional; command-line options override these
+    estimator = "flexkalmannet"
+    scenario = "ds1"
+    sampler = "random-grid"     # random-grid | random | grid | tpe
+    trials = 40                 # trials of the random (or only) stage
+    grid_trials = 16            # random-grid: most grid points of the second stage
+    top_k = 4                   # random-grid: best random trials that span the reduced grid
+    seed = 0
+
+    [sweep.pruner]              # optional; default: median, 3 startup trials, 2 warm-up epochs
+    kind = "median"             # median | percentile | hyperband | none
+    n_startup_trials = 3
+    n_warmup_steps = 2
+    # percentile = 25.0         (kind = "percentile")
+
+    [fixed]                     # config fields held by every trial
+    epochs = 30
+
+    [params.hidden]             # categorical: a list of values (numbers, strings, booleans)
+    values = [64, 128, 256, 512]
+
+    [params.layers]             # integer range (low and high are integers), inclusive
+    low = 2
+    high = 7
+
+    [params.lr]                 # float range; log = true samples log-uniformly
+    low = 1e-5
+    high = 1e-2
+    log = true
+    grid = [1e-5, 1e-4, 1e-3, 1e-2]   # values for the grid sampler (or grid_points = 4)
+
+Knob names are fields of the estimator's configuration (for ``flexkalmannet``,
+:class:`~fkn_bench.flexkalmannet.FlexKalmanNetConfig`: ``hidden``, ``layers``, ``lr``,
+``window``, ``windows_per_batch``, ``loss_cut``, ``dropout``, ``weight_decay``, ``activation``,
+``variant``, ``objective``, ...). A range knob takes ``type = "int"`` or ``"float"`` to override
+the type its bounds imply, ``step`` for a discretised range (not with ``log``), and for the grid
+sampler either an explicit ``grid`` list or ``grid_points = N`` (evenly spaced, geometrically when
+``log``); an integer range without them is enumerated when it has at most
+:data:`MAX_ENUMERATED` values. Tuple-valued fields (``learn``) take comma-separated strings
+(``values = ["q_std,r_std", "q_chol,r_std"]``).
+
+Errors (:class:`SpaceError`) name the file, the knob and what is wrong.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import tomllib
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import optuna
+from optuna.distributions import BaseDistribution, CategoricalDistribution, FloatDistribution, IntDistribution
+
+__all__ = [
+    "SpaceError",
+    "Knob",
+    "PrunerSpec",
+    "SearchSpace",
+    "SAMPLERS",
+    "PRUNERS",
+    "MAX_ENUMERATED",
+    "parse_space",
+    "load_space",
+    "packaged_spaces",
+    "resolve_space",
+]
+
+SAMPLERS = ("random-grid", "random", "grid", "tpe")
+"""Sampling methods: the paper's random search then grid search over the reduced space
+(``random-grid``), or one of random search, grid search and TPE alone."""
+PRUNERS = ("median", "percentile", "hyperband", "none")
+MAX_ENUMERATED = 64
+"""Largest integer range the grid sampler enumerates without an explicit ``grid``."""
+
+_SWEEP_KEYS = {"estimator", "scenario", "sampler", "trials", "grid_trials", "top_k", "seed", "pruner"}
+_PRUNER_KEYS = {"kind", "n_startup_trials", "n_warmup_steps", "percentile", "min_resource", "reduction_factor"}
+_KNOB_KEYS = {"values", "low", "high", "log", "step", "type", "grid", "grid_points"}
+_SPACES_DIR = Path(__file__).with_name("spaces")
+
+
+class SpaceError(ValueError):
+    """An invalid search space (the message names the file and the knob)."""
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+@dataclass(frozen=True)
+class Knob:
+    """One searched hyperparameter.
+
+    Attributes:
+        name: the configuration field.
+        kind: ``categorical``, ``int`` or ``float``.
+        values: the choices of a categorical knob.
+        low, high: the bounds of a range (inclusive).
+        log: log-uniform sampling of a range.
+        step: discretisation step of a range (None: continuous floats, step 1 for ints).
+        grid: explicit grid values of a range (the grid sampler's candidates).
+        grid_points: number of evenly spaced grid values of a range when ``grid`` is not given.
+    """
+
+    name: str
+    kind: str
+    values: tuple[Any, ...] = ()
+    low: float | int | None = None
+    high: float | int | None = None
+    log: bool = False
+    step: float | int | None = None
+    grid: tuple[Any, ...] = ()
+    grid_points: int | None = None
+
+    def distribution(self) -> BaseDistribution:
+        """The optuna distribution of the knob (the same in every stage of a sweep)."""
+        if self.kind == "categorical":
+            return CategoricalDistribution(self.values)
+        if self.kind == "int":
+            return IntDistribution(int(self.low), int(self.high), log=self.log, step=int(self.step or 1))  # type: ignore[arg-type]
+        return FloatDistribution(float(self.low), float(self.high), log=self.log, step=self.step)  # type: ignore[arg-type]
+
+    def suggest(self, trial: optuna.Trial) -> Any:
+        """Ask ``trial`` for a value (the sampler decides which)."""
+        if self.kind == "categorical":
+            return trial.suggest_categorical(self.name, list(self.values))
+        if self.kind == "int":
+            return trial.suggest_int(self.name, int(self.low), int(self.high), log=self.log, step=int(self.step or 1))  # type: ignore[arg-type]
+        return trial.suggest_float(self.name, float(self.low), float(self.high), log=self.log, step=self.step)  # type: ignore[arg-type]
+
+    def contains(self, value: Any) -> bool:
+        distribution = self.distribution()
+        try:
+            return bool(distribution._contains(distribution.to_internal_repr(value)))
+        except (ValueError, TypeError):
+            return False
+
+    def grid_values(self, source: str = "<space>") -> tuple[Any, ...]:
+        """Candidates of the grid sampler (see module docstring)."""
+        if self.kind == "categorical":
+            return self.values
+        if self.grid:
+            return self.grid
+        low, high = self.low, self.high
+        assert low is not None and high is not None
+        if self.grid_points is not None:
+            n = self.grid_points
+            if self.log:
+                points = [math.exp(math.log(low) + i * (math.log(high) - math.log(low)) / (n - 1)) for i in range(n)]
+            else:
+                points = [low + i * (high - low) / (n - 1) for i in range(n)]
+            if self.kind == "int":
+                return tuple(sorted({int(round(p)) for p in points}))
+            return tuple(float(f"{p:.6g}") for p in points)
+        if self.kind == "int":
+            step = int(self.step or 1)
+            values = tuple(range(int(low), int(high) + 1, step))
+            if len(values) <= MAX_ENUMERATED:
+                return values
+            raise SpaceError(f"{source}: [params.{self.name}] has {len(values)} integer values: give `grid = [...]` "
+                             f"or `grid_points = N` for the grid sampler")
+        if self.step is not None:
+            count = int(round((high - low) / self.step)) + 1
+            if count <= MAX_ENUMERATED:
+                return tuple(float(f"{low + i * self.step:.12g}") for i in range(count))
+        raise SpaceError(f"{source}: [params.{self.name}] is a continuous range: give `grid = [...]` or "
+                         f"`grid_points = N` for the grid sampler")
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"kind": self.kind}
+        if self.kind == "categorical":
+            out["values"] = list(self.values)
+        else:
+            out.update(low=self.low, high=self.high, log=self.log)
+            if self.step is not None:
+                out["step"] = self.step
+            if self.grid:
+                out["grid"] = list(self.grid)
+            if self.grid_points is not None:
+                out["grid_points"] = self.grid_points
+        return out
+
+
+@dataclass(frozen=True)
+class PrunerSpec:
+    """Which optuna pruner stops unpromising trials early (on the reported validation losses)."""
+
+    kind: str = "median"
+    n_startup_trials: int = 3
+    n_warmup_steps: int = 2
+    percentile: float = 25.0
+    min_resource: int = 1
+    reduction_factor: int = 3
+
+    def make(self) -> optuna.pruners.BasePruner:
+        if self.kind == "median":
+            return optuna.pruners.MedianPruner(n_startup_trials=self.n_startup_trials, n_warmup_steps=self.n_warmup_steps)
+        if self.kind == "percentile":
+            return optuna.pruners.PercentilePruner(self.percentile, n_startup_trials=self.n_startup_trials,
+                                                   n_warmup_steps=self.n_warmup_steps)
+        if self.kind == "hyperband":
+            return optuna.pruners.HyperbandPruner(min_resource=self.min_resource, reduction_factor=self.reduction_factor)
+        return optuna.pruners.NopPruner()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, "n_startup_trials": self.n_startup_trials, "n_warmup_steps": self.n_warmup_steps,
+                "percentile": self.percentile, "min_resource": self.min_resource, "reduction_factor": self.reduction_factor}
+
+
+@dataclass(frozen=True)
+class SearchSpace:
+    """A parsed search space (see module docstring).
+
+    Attributes:
+        knobs: the searched hyperparameters, in file order.
+        fixed: configuration values held by every trial.
+        defaults: the ``[sweep]`` table's command-line defaults (``pruner`` excluded).
+        pruner: the pruner.
+        source: where the space came from (for messages).
+    """
+
+    knobs: tuple[Knob, ...]
+    fixed: dict[str, Any] = field(default_factory=dict)
+    defaults: dict[str, Any] = field(default_factory=dict)
+    pruner: PrunerSpec = field(default_factory=PrunerSpec)
+    source: str = "<space>"
+
+    @property
+    def names(self) -> list[str]:
+        return [k.name for k in self.knobs]
+
+    def knob(self, name: str) -> Knob:
+        for k in self.knobs:
+            if k.name == name:
+                return k
+        raise KeyError(name)
+
+    def distributions(self) -> dict[str, BaseDistribution]:
+        return {k.name: k.distribution() for k in self.knobs}
+
+    def grid(self) -> dict[str, list[Any]]:
+        """The full grid (every knob's :meth:`Knob.grid_values`)."""
+        return {k.name: list(k.grid_values(self.source)) for k in self.knobs}
+
+    def suggest(self, trial: optuna.Trial) -> dict[str, Any]:
+        """Every knob's value for ``trial``."""
+        return {k.name: k.suggest(trial) for k in self.knobs}
+
+    def check_fields(self, fields: Iterable[str], what: str) -> None:
+        """Raise :class:`SpaceError` unless every knob and fixed key is one of ``fields``."""
+        valid = set(fields)
+        unknown = [n for n in self.names if n not in valid] + [n for n in self.fixed if n not in valid]
+        if unknown:
+            raise SpaceError(f"{self.source}: unknown {what} field(s) {', '.join(unknown)}; valid: {', '.join(sorted(valid))}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "params": {k.name: k.to_dict() for k in self.knobs},
+            "fixed": dict(self.fixed),
+            "pruner": self.pruner.to_dict(),
+        }
+
+    def fingerprint(self) -> str:
+        """Short hash of the knobs, fixed values and pruner (a study refuses a different space)."""
+        return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def _parse_knob(name: str, table: Any, source: str) -> Knob:
+    where = f"{source}: [params.{name}]"
+    if not isinstance(table, dict):
+        raise SpaceError(f"{where} must be a table with `values` or `low`/`high`")
+    unknown = sorted(set(table) - _KNOB_KEYS)
+    if unknown:
+        raise SpaceError(f"{where}: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(_KNOB_KEYS))}")
+    if "values" in table:
+        extra = sorted(set(table) & {"low", "high", "log", "step", "type", "grid", "grid_points"})
+        if extra:
+            raise SpaceError(f"{where}: `values` (categorical) cannot be combined with {', '.join(extra)}")
+        values = table["values"]
+        if not isinstance(values, list) or not values:
+            raise SpaceError(f"{where}: `values` must be a non-empty list")
+        for v in values:
+            if not isinstance(v, (str, int, float, bool)):
+                raise SpaceError(f"{where}: values must be numbers, strings or booleans (got {v!r})")
+        if len(set(map(repr, values))) != len(values):
+            raise SpaceError(f"{where}: `values` has duplicates")
+        return Knob(name, "categorical", values=tuple(values))
+    if "low" not in table or "high" not in table:
+        raise SpaceError(f"{where} needs `values = [...]` or both `low` and `high`")
+    low, high = table["low"], table["high"]
+    if not (_is_number(low) and _is_number(high)):
+        raise SpaceError(f"{where}: `low` and `high` must be finite numbers (got {low!r}, {high!r})")
+    kind = table.get("type", "int" if isinstance(low, int) and isinstance(high, int) else "float")
+    if kind not in ("int", "float"):
+        raise SpaceError(f"{where}: `type` must be \"int\" or \"float\" (got {kind!r})")
+    if kind == "int" and not (float(low).is_integer() and float(high).is_integer()):
+        raise SpaceError(f"{where}: an integer range needs integer bounds (got {low!r}, {high!r})")
+    if kind == "int":
+        low, high = int(low), int(high)
+    else:
+        low, high = float(low), float(high)
+    if not low < high:
+        raise SpaceError(f"{where}: need low < high (got {low!r}, {high!r})")
+    log = table.get("log", False)
+    if not isinstance(log, bool):
+        raise SpaceError(f"{where}: `log` must be true or false (got {log!r})")
+    if log and low <= 0:
+        raise SpaceError(f"{where}: a log range needs low > 0 (got {low!r})")
+    step = table.get("step")
+    if step is not None:
+        if log:
+            raise SpaceError(f"{where}: `step` cannot be combined with `log = true`")
+        if not _is_number(step) or step <= 0 or (kind == "int" and not float(step).is_integer()):
+            raise SpaceError(f"{where}: `step` must be a positive {'integer' if kind == 'int' else 'number'} (got {step!r})")
+        step = int(step) if kind == "int" else float(step)
+    grid_points = table.get("grid_points")
+    if grid_points is not None and (not isinstance(grid_points, int) or isinstance(grid_points, bool) or grid_points < 2):
+        raise SpaceError(f"{where}: `grid_points` must be an integer >= 2 (got {grid_points!r})")
+    grid = table.get("grid", [])
+    if not isinstance(grid, list):
+        raise SpaceError(f"{where}: `grid` must be a list")
+    if grid and grid_points is not None:
+        raise SpaceError(f"{where}: give `grid` or `grid_points`, not both")
+    knob = Knob(name, kind, low=low, high=high, log=log, step=step, grid_points=grid_points)
+    if grid:
+        values = []
+        for v in grid:
+            if not _is_number(v) or (kind == "int" and not float(v).is_integer()):
+                raise SpaceError(f"{where}: grid value {v!r} is not {'an integer' if kind == 'int' else 'a number'}")
+            v = int(v) if kind == "int" else float(v)
+            if not knob.contains(v):
+                raise SpaceError(f"{where}: grid value {v!r} lies outside [{low}, {high}]" + (f" step {step}" if step else ""))
+            values.append(v)
+        if len(set(values)) != len(values):
+            raise SpaceError(f"{where}: `grid` has duplicates")
+        knob = Knob(name, kind, low=low, high=high, log=log, step=step, grid=tuple(values))
+    return knob
+
+
+def _positive_int(value: Any, name: str, source: str, low: int = 1) -> int:
+    if not isinstance(value, int) or isinstance(value, bool) or value < low:
+        raise SpaceError(f"{source}: [sweep] {name} must be an integer >= {low} (got {value!r})")
+    return value
+
+
+def _parse_pruner(table: Any, source: str) -> PrunerSpec:
+    if table is None:
+        return PrunerSpec()
+    if not isinstance(table, dict):
+        raise SpaceError(f"{source}: [sweep.pruner] must be a table")
+    unknown = sorted(set(table) - _PRUNER_KEYS)
+    if unknown:
+        raise SpaceError(f"{source}: [sweep.pruner]: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(_PRUNER_KEYS))}")
+    kind = table.get("kind", "median")
+    if kind not in PRUNERS:
+        raise SpaceError(f"{source}: [sweep.pruner] kind must be one of {', '.join(PRUNERS)} (got {kind!r})")
+    values: dict[str, Any] = {"kind": kind}
+    for key in ("n_startup_trials", "n_warmup_steps"):
+        if key in table:
+            values[key] = _positive_int(table[key], f"pruner.{key}", source, low=0)
+    for key in ("min_resource", "reduction_factor"):
+        if key in table:
+            values[key] = _positive_int(table[key], f"pruner.{key}", source, low=1 if key == "min_resource" else 2)
+    if "percentile" in table:
+        p = table["percentile"]
+        if not _is_number(p) or not 0 < p < 100:
+            raise SpaceError(f"{source}: [sweep.pruner] percentile must be in (0, 100) (got {p!r})")
+        values["percentile"] = float(p)
+    return PrunerSpec(**values)
+
+
+def parse_space(document: Mapping[str, Any], source: str = "<space>") -> SearchSpace:
+    """Build a :class:`SearchSpace` from a parsed TOML document (module docstring)."""
+    unknown = sorted(set(document) - {"sweep", "fixed", "params"})
+    if unknown:
+        raise SpaceError(f"{source}: unknown table(s) {', '.join(unknown)}; valid: [sweep], [fixed], [params.NAME]")
+    params = document.get("params")
+    if not isinstance(params, dict) or not params:
+        raise SpaceError(f"{source}: no knobs to search: add [params.NAME] tables")
+    knobs = tuple(_parse_knob(name, table, source) for name, table in params.items())
+    fixed = document.get("fixed", {})
+    if not isinstance(fixed, dict):
+        raise SpaceError(f"{source}: [fixed] must be a table of configuration values")
+    both = sorted(set(fixed) & set(params))
+    if both:
+        raise SpaceError(f"{source}: {', '.join(both)} both fixed and searched")
+    sweep = document.get("sweep", {})
+    if not isinstance(sweep, dict):
+        raise SpaceError(f"{source}: [sweep] must be a table")
+    unknown = sorted(set(sweep) - _SWEEP_KEYS)
+    if unknown:
+        raise SpaceError(f"{source}: [sweep]: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(_SWEEP_KEYS))}")
+    defaults = {k: v for k, v in sweep.items() if k != "pruner"}
+    if "sampler" in defaults and defaults["sampler"] not in SAMPLERS:
+        raise SpaceError(f"{source}: [sweep] sampler must be one of {', '.join(SAMPLERS)} (got {defaults['sampler']!r})")
+    for key in ("trials", "grid_trials", "top_k"):
+        if key in defaults:
+            _positive_int(defaults[key], key, source)
+    if "seed" in defaults:
+        _positive_int(defaults["seed"], "seed", source, low=0)
+    for key in ("estimator", "scenario"):
+        if key in defaults and not isinstance(defaults[key], str):
+            raise SpaceError(f"{source}: [sweep] {key} must be a string (got {defaults[key]!r})")
+    return SearchSpace(knobs, dict(fixed), defaults, _parse_pruner(sweep.get("pruner"), source), source)
+
+
+def load_space(path: str | Path) -> SearchSpace:
+    """Read a search-space TOML file."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            document = tomllib.load(fh)
+    except FileNotFoundError:
+        raise SpaceError(f"search-space file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SpaceError(f"search-space file {path} is not valid TOML: {exc}") from None
+    return parse_space(document, str(path))
+
+
+def packaged_spaces() -> dict[str, Path]:
+    """The spaces shipped with fkn-bench (``fkn_bench/sweep/spaces/*.toml``) by name."""
+    return {p.stem: p for p in sorted(_SPACES_DIR.glob("*.toml"))}
+
+
+def resolve_space(text: str | Path) -> Path:
+    """A space file path, or the name of a packaged space (``paper``, ``quick``)."""
+    path = Path(text)
+    if path.is_file():
+        return path
+    spaces = packaged_spaces()
+    if str(text) in spaces:
+        return spaces[str(text)]
+    raise SpaceError(f"search-space file not found: {text} (packaged spaces: {', '.join(spaces) or 'none'})")
