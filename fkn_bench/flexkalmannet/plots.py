@@ -47,8 +47,9 @@ def plot_parameters(history: pd.DataFrame, path: str | Path, *, title: str = "")
     figure, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharex=True)
     for axis, tag, label in ((axes[0], "sigma_R_", "measurement noise sigma_R"), (axes[1], "sigma_Q_", "process noise sigma_Q")):
         columns = [c for c in history.columns if c.startswith(tag)]
-        for column in columns:
-            axis.plot(history["epoch"], history[column], label=column[len(tag) :], linewidth=1.2)
+        colours = plt.cm.tab20(range(len(columns)))  # 13 process-noise lines: distinct colours
+        for column, colour in zip(columns, colours):
+            axis.plot(history["epoch"], history[column], label=column[len(tag) :], linewidth=1.2, color=colour)
         axis.set_yscale("log")
         axis.set_xlabel("epoch")
         axis.set_title(label)
