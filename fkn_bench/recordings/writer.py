@@ -58,8 +58,6 @@ from __future__ import annotations
 
 import datetime as _dt
 import json
-import platform
-import subprocess
 import sys
 import time
 from collections.abc import Mapping
@@ -189,23 +187,13 @@ def stamps_from_times(times: ArrayF, start_epoch_ns: int = DEFAULT_START_EPOCH_N
     return int(start_epoch_ns) + np.round(times * 1e9).astype(np.int64)
 
 
-def _git_commit() -> str:
-    try:
-        result = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            cwd=Path(__file__).resolve().parent,
-            capture_output=True,
-            text=True,
-            timeout=5,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return ""
-    return result.stdout.strip() if result.returncode == 0 else ""
-
-
 def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
-    """The ``fkn_bench.provenance`` metadata: versions, platform, command line, git commit, time."""
+    """The ``fkn_bench.provenance`` metadata (MCAP metadata values are strings): the versions,
+    machine and git commit of :func:`fkn_bench.harness.provenance.environment`, the mcap
+    packages' versions, the command line and the time."""
     from importlib.metadata import PackageNotFoundError, version
+
+    from fkn_bench.harness.provenance import environment
 
     def package_version(name: str) -> str:
         try:
@@ -213,17 +201,16 @@ def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
         except PackageNotFoundError:
             return ""
 
-    from fkn_bench import __version__
-
+    env = environment()
     record = {
-        "fkn_bench_version": __version__,
-        "python": platform.python_version(),
-        "platform": platform.platform(),
-        "numpy": np.__version__,
+        "fkn_bench_version": str(env["fkn_bench"]),
+        "python": str(env["python"]),
+        "platform": str(env["machine"]["platform"]),
+        "numpy": str(env["numpy"]),
         "mcap": package_version("mcap"),
         "mcap_ros2_support": package_version("mcap-ros2-support"),
         "command": json.dumps(sys.argv),
-        "git_commit": _git_commit(),
+        "git_commit": env["git_commit"] or "",
         "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
     for key, value in (extra or {}).items():
