@@ -1,0 +1,604 @@
+"""The adaptive EKF recursion shared by the online adaptive baselines, and its estimator.
+
+An adaptive filter is the paper's additive EKF (FlexKalmanNet eqs. 1-5) whose noise covariances
+are re-estimated while it filters. The recursion is common; what differs between methods is a
+small strategy object, a :class:`NoiseRule`, that decides which ``R`` (and ``P-``) the update
+uses and how the noise estimates change after it:
+
+* :class:`~fkn_bench.baselines.sage_husa.SageHusaRule` (Sage & Husa 1969, with a forgetting
+  factor);
+* :class:`~fkn_bench.baselines.akhlaghi.AkhlaghiRule` (Akhlaghi, Zhou & Huang 2017);
+* :class:`~fkn_bench.baselines.vbakf.VBAKFRule` (Huang, Zhang, Wu & Chambers 2018, IEEE TAC
+  63(2)).
+
+Conventions (those of :meth:`fkn_bench.filters.KalmanFilter.run`):
+
+* step ``t`` predicts from ``t - 1`` (not at ``t = 0``), ``x- = f(x+)``, ``P- = F P+ F^T + Q``,
+  and then updates with measurement ``t`` where it is usable; a step without one is
+  predict-only;
+* each sequence initialises at its first usable measurement (state from the model's
+  ``initial_state``, covariance ``P0``) and that measurement is not used again; before it, the
+  sequence reports the model's prior state propagated by the model;
+* measurements are cleaned once by the model's ``sanitize`` rule (non-finite measurements and,
+  for the pose model, quaternions of norm below 1e-6 are skipped; quaternions are renormalised);
+* before every innovation the measurement is aligned with the prediction (the pose model flips
+  the measured quaternion when ``z_q . q- < 0``);
+* the update is the Joseph form followed by the model's normalisation and its covariance
+  projection (the pose model: unit quaternion, ``N = (I - u u^T) / |q|``), in one product
+  ``P+ = G blockdiag(P-, R) G^T`` with ``G = T [I - K H | K]``; ``P+`` is symmetrised.
+
+The noise starts from the filter's configured standard deviations (by default the model's
+layout: for the pose model the paper's manual tuning, ``sigma_R = 0.1``, ``sigma_Q = 0.005``
+for ``q`` and ``w`` and ``1e-4`` for ``r`` and ``v``, FlexKalmanNet section 4.3).
+
+Multi-rate measurements. The papers update their noise estimates at every step; the benchmark
+measures every ``M`` steps (10 on ds1). Process-noise rules that compare an update's correction
+with one step's ``Q`` divide it by the number ``M`` of predictions since the previous update
+(for ``F`` near the identity the prediction adds about ``M Q``); with a measurement at every
+step (``M = 1``) they are the published rules exactly.
+
+Everything runs in numpy on a leading batch axis: :meth:`AdaptiveKalmanFilter.run` filters all
+sequences of a batch at once, and :meth:`AdaptiveKalmanFilter.step` is the same code that the
+online ``step()`` of :class:`AdaptiveEKFEstimator` runs with a batch of one (the tests hold the
+two to 1e-12).
+"""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from scipy.linalg import lapack
+
+from fkn_bench.baselines.numpy_models import NumpyModel, numpy_model
+from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, parse_observation
+from fkn_bench.filters.models import StateSpaceModel
+from fkn_bench.filters.pose import error_covariance_from_state, pose_innovation, with_unit_quaternion
+from fkn_bench.types import ArrayB, ArrayF
+
+__all__ = [
+    "AdaptiveEKFEstimator",
+    "AdaptiveKalmanFilter",
+    "AdaptiveResult",
+    "AdaptiveState",
+    "KalmanUpdate",
+    "NoiseRule",
+    "UpdateContext",
+    "clamp_eigenvalues",
+    "kalman_update",
+    "outer",
+]
+
+Noise = dict[str, ArrayF]
+"""A rule's adapted quantities, each an array with the batch axis first."""
+
+
+# ---------------------------------------------------------------------------------------------
+# small batched helpers
+def outer(a: ArrayF) -> ArrayF:
+    """``a a^T`` for vectors ``(B, k)`` -> ``(B, k, k)``."""
+    return a[:, :, None] * a[:, None, :]
+
+
+def symmetrize(M: ArrayF) -> ArrayF:
+    return 0.5 * (M + M.swapaxes(-1, -2))
+
+
+SOLVE_LOOP_ROWS = 64
+"""Batches up to this many rows solve ``S X = M`` row by row with LAPACK's Cholesky solver
+(``dposv``), so that a batch row and the same sequence stepped online run identical arithmetic;
+larger batches use one batched ``numpy.linalg.solve`` (the same result to rounding)."""
+
+
+def solve_spd(S: ArrayF, M: ArrayF) -> ArrayF:
+    """``S^-1 M`` for symmetric positive definite ``S (b, m, m)`` and ``M (b, m, k)``; raises
+    ``numpy.linalg.LinAlgError`` when some ``S`` is not positive definite."""
+    batch = S.shape[0]
+    if batch > SOLVE_LOOP_ROWS:
+        return np.linalg.solve(S, M)
+    out = np.empty(M.shape)
+    for row in range(batch):
+        _, out[row], info = lapack.dposv(S[row], M[row], lower=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
+    return out
+
+
+_TEMPLATES: dict[tuple[str, int, int], ArrayF] = {}
+
+
+def _template(kind: str, n: int, m: int) -> ArrayF:
+    """Cached constant arrays: ``G0 = [I_n | 0]`` (``n x (n + m)``) and ``I_m``."""
+    key = (kind, n, m)
+    value = _TEMPLATES.get(key)
+    if value is None:
+        value = np.concatenate((np.eye(n), np.zeros((n, m))), axis=1) if kind == "G" else np.eye(m)
+        value.flags.writeable = False
+        _TEMPLATES[key] = value
+    return value
+
+
+def clamp_eigenvalues(M: ArrayF, floor: ArrayF) -> ArrayF:
+    """Symmetric ``M (B, k, k)`` with its eigenvalues raised to at least ``floor (B,)``: the
+    nearest matrix (in the Frobenius norm) whose eigenvalues are all ``>= floor``. Rows whose
+    eigenvalues are all above the floor come back unchanged."""
+    w, V = np.linalg.eigh(M)
+    low = w < floor[:, None]
+    if not low.any():
+        return M
+    clamped = (V * np.maximum(w, floor[:, None])[:, None, :]) @ V.swapaxes(1, 2)
+    return np.where(low.any(1)[:, None, None], symmetrize(clamped), M)
+
+
+@dataclass(frozen=True, eq=False)
+class KalmanUpdate:
+    """Result of one measurement update of a batch of ``b`` rows.
+
+    Attributes:
+        x: ``(b, n)`` posterior means (normalised by the model).
+        P: ``(b, n, n)`` posterior covariances (Joseph form, projected, symmetrised).
+        S: ``(b, m, m)`` innovation covariances ``H P- H^T + R`` of the gain.
+        K: ``(b, n, m)`` gains.
+    """
+
+    x: ArrayF
+    P: ArrayF
+    S: ArrayF
+    K: ArrayF
+
+
+def kalman_update(model: NumpyModel, x: ArrayF, P: ArrayF, nu: ArrayF, R: ArrayF) -> KalmanUpdate:
+    """Kalman update of ``x (b, n)``, ``P (b, n, n)`` with innovation ``nu (b, m)`` and
+    measurement noise ``R (b, m, m)``: gain ``K = P H^T S^-1``, Joseph form and the model's
+    normalisation in one product (see module docstring; Bucy & Joseph 1968; Simon, Optimal State
+    Estimation, 2006, eq. 5.19)."""
+    batch, n = x.shape
+    m = nu.shape[1]
+    observed = model.observed
+    if observed is not None:
+        HP = P[:, observed]  # (b, m, n)
+        S = HP[:, :, observed] + R
+    else:
+        HP = model.H @ P
+        S = HP @ model.H.T + R
+    Kt = solve_spd(S, HP)  # K^T = S^-1 H P   (b, m, n)
+    K = Kt.swapaxes(1, 2)
+    x_post = x + (nu[:, None, :] @ Kt)[:, 0]
+    x_post, block, N = model.normalize(x_post)
+    G = np.empty((batch, n, n + m))
+    G[:] = _template("G", n, m)
+    if observed is not None:
+        G[:, :, observed] -= K
+    else:
+        G[:, :, :n] -= K @ model.H
+    G[:, :, n:] = K
+    if block is not None and N is not None:
+        G[:, block] = N @ G[:, block]
+    D = np.zeros((batch, n + m, n + m))
+    D[:, :n, :n] = P
+    D[:, n:, n:] = R
+    return KalmanUpdate(x_post, symmetrize(G @ D @ G.swapaxes(1, 2)), S, K)
+
+
+def projected_covariance(model: NumpyModel, P: ArrayF) -> ArrayF:
+    """``H P H^T`` for ``P (b, n, n)``."""
+    if model.observed is not None:
+        return P[:, model.observed, model.observed]
+    return model.H @ P @ model.H.T
+
+
+# ---------------------------------------------------------------------------------------------
+# noise rules
+@dataclass(frozen=True, eq=False)
+class UpdateContext:
+    """What a :class:`NoiseRule` sees at a measurement update of ``b`` rows.
+
+    Attributes:
+        model: the numpy model.
+        x_pred: ``(b, n)`` predicted means.
+        P_pred: ``(b, n, n)`` predicted covariances (with the rule's current ``Q``).
+        z: ``(b, m)`` measurements, sanitised and aligned with the prediction.
+        nu: ``(b, m)`` innovations ``z - H x-``.
+        steps: ``(b,)`` predictions since the previous update (or the initialisation), >= 1.
+    """
+
+    model: NumpyModel
+    x_pred: ArrayF
+    P_pred: ArrayF
+    z: ArrayF
+    nu: ArrayF
+    steps: ArrayF
+
+
+class NoiseRule(ABC):
+    """How a method adapts the noise (see module docstring)."""
+
+    name: ClassVar[str] = "rule"
+    adapts_q: bool = False
+
+    @abstractmethod
+    def initial(self, batch: int, Q0: ArrayF, R0: ArrayF) -> Noise:
+        """The rule's quantities for ``batch`` fresh sequences from the starting ``Q0 (n, n)``,
+        ``R0 (m, m)``."""
+
+    @abstractmethod
+    def process_noise(self, noise: Noise) -> ArrayF:
+        """``Q (B, n, n)`` the prediction uses."""
+
+    @abstractmethod
+    def measurement_noise(self, noise: Noise) -> ArrayF:
+        """The current estimate of ``R (B, m, m)`` (reported in the estimates' extras)."""
+
+    @abstractmethod
+    def update(self, ctx: UpdateContext, noise: Noise) -> tuple[KalmanUpdate, Noise]:
+        """The measurement update of ``ctx``'s rows and their new noise quantities."""
+
+    @abstractmethod
+    def config(self) -> dict[str, Any]:
+        """The rule's knobs (JSON-compatible)."""
+
+
+def floor_from(matrix: ArrayF, fraction: float) -> float:
+    """Eigenvalue floor: ``fraction`` times the smallest diagonal entry of ``matrix``."""
+    return float(fraction) * float(np.min(np.diag(matrix)))
+
+
+def check_fraction(name: str, value: float, *, low: float = 0.0, high: float = 1.0, closed_low: bool = False, closed_high: bool = True) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a number (got {value!r})") from None
+    ok_low = number >= low if closed_low else number > low
+    ok_high = number <= high if closed_high else number < high
+    if not (math.isfinite(number) and ok_low and ok_high):
+        lo, hi = ("[" if closed_low else "("), ("]" if closed_high else ")")
+        raise ValueError(f"{name} must be in {lo}{low}, {high}{hi} (got {value!r})")
+    return number
+
+
+# ---------------------------------------------------------------------------------------------
+# the recursion
+@dataclass(frozen=True, eq=False)
+class AdaptiveState:
+    """A batch of adaptive-filter states at one time (an immutable value).
+
+    Attributes:
+        x: ``(B, n)`` means.
+        P: ``(B, n, n)`` covariances.
+        initialised: ``(B,)`` True once a sequence initialised from a measurement.
+        since: ``(B,)`` predictions since the last update or initialisation.
+        noise: the rule's adapted quantities (:data:`Noise`).
+    """
+
+    x: ArrayF
+    P: ArrayF
+    initialised: ArrayB
+    since: ArrayF
+    noise: Mapping[str, ArrayF]
+
+
+@dataclass(frozen=True, eq=False)
+class StepOutput:
+    """Per-step outputs of :meth:`AdaptiveKalmanFilter.step` (``B`` rows): the prior mean, the
+    innovation and its covariance (zero and identity in rows without an update; both None when
+    no row updated) and which rows updated."""
+
+    prior_mean: ArrayF
+    innovation: ArrayF | None
+    innovation_covariance: ArrayF | None
+    updated: ArrayB
+
+
+@dataclass(frozen=True, eq=False)
+class AdaptiveResult:
+    """Output of :meth:`AdaptiveKalmanFilter.run` (batch first, numpy).
+
+    Attributes:
+        means: ``(B, T, n)`` posterior means.
+        covariances: ``(B, T, n, n)``.
+        innovations: ``(B, T, m)`` (zero where no update).
+        innovation_covariances: ``(B, T, m, m)`` (identity where no update).
+        prior_means: ``(B, T, n)``.
+        updated, initialised: ``(B, T)``.
+        r_diag: ``(B, T, m)`` diagonal of the current ``R`` estimate after each step.
+        q_diag: ``(B, T, n)`` diagonal of the current ``Q`` after each step (None when the rule
+            keeps ``Q`` fixed).
+        final: the state after the last step.
+    """
+
+    means: ArrayF
+    covariances: ArrayF
+    innovations: ArrayF
+    innovation_covariances: ArrayF
+    prior_means: ArrayF
+    updated: ArrayB
+    initialised: ArrayB
+    r_diag: ArrayF
+    q_diag: ArrayF | None
+    final: AdaptiveState
+
+
+def _take(noise: Mapping[str, ArrayF], rows: ArrayF) -> Noise:
+    return {key: value[rows] for key, value in noise.items()}
+
+
+def _put(noise: Mapping[str, ArrayF], rows: ArrayF, values: Mapping[str, ArrayF]) -> Noise:
+    out = {}
+    for key, value in noise.items():
+        copy = value.copy()
+        copy[rows] = values[key]
+        out[key] = copy
+    return out
+
+
+def _std_matrix(name: str, values: Sequence[float] | None, default: Sequence[float]) -> ArrayF:
+    array = np.array(default if values is None else values, dtype=float)
+    if array.shape != (len(default),):
+        raise ValueError(f"{name} needs {len(default)} values (got shape {array.shape})")
+    if not np.all(np.isfinite(array)) or np.any(array <= 0):
+        raise ValueError(f"{name} values must be finite and > 0 (got {array.tolist()})")
+    return np.diag(array * array)
+
+
+class AdaptiveKalmanFilter:
+    """The adaptive EKF recursion over a model (see module docstring).
+
+    Args:
+        rule: the method's :class:`NoiseRule`.
+        model: a :class:`~fkn_bench.filters.models.StateSpaceModel` (or its numpy twin; default
+            the paper's pose-and-twist model).
+        q_std, r_std, p0_std: starting standard deviations of ``Q``, ``R`` and ``P0`` (default:
+            the model layout's, for the pose model the paper's manual tuning).
+    """
+
+    def __init__(
+        self,
+        rule: NoiseRule,
+        *,
+        model: StateSpaceModel | NumpyModel | None = None,
+        q_std: Sequence[float] | None = None,
+        r_std: Sequence[float] | None = None,
+        p0_std: Sequence[float] | None = None,
+    ) -> None:
+        self.rule = rule
+        self.model = numpy_model(model)
+        layout = self.model.layout
+        self.Q0 = _std_matrix("q_std", q_std, layout.q_default)
+        self.R0 = _std_matrix("r_std", r_std, layout.r_default)
+        self.P0 = _std_matrix("p0_std", p0_std, layout.p0_default)
+
+    def initial_state(self, batch: int) -> AdaptiveState:
+        """``batch`` sequences before their first measurement (the model's prior, ``P0``)."""
+        return AdaptiveState(
+            x=self.model.prior_state(batch),
+            P=np.broadcast_to(self.P0, (batch,) + self.P0.shape).copy(),
+            initialised=np.zeros(batch, dtype=bool),
+            since=np.zeros(batch),
+            noise=self.rule.initial(batch, self.Q0, self.R0),
+        )
+
+    def step(self, state: AdaptiveState, z: ArrayF, usable: ArrayB, dt: float, *, predict: bool = True) -> tuple[AdaptiveState, StepOutput]:
+        """One step of every row: predict over ``dt`` (unless ``predict`` is False, as at
+        ``t = 0``), then initialise or update the rows whose measurement ``z (B, m)`` is usable
+        (already sanitised: see :meth:`sanitize`)."""
+        model, rule = self.model, self.rule
+        x, P, since, noise = state.x, state.P, state.since, state.noise
+        if predict:
+            x, F = model.transition(x, dt)
+            P = F @ P @ F.swapaxes(1, 2) + rule.process_noise(noise)
+            since = since + 1.0
+        prior = x
+        if not usable.any():
+            return AdaptiveState(x, P, state.initialised, since, noise), StepOutput(prior, None, None, usable)
+        batch, m = x.shape[0], model.measurement_dim
+        nu = S = None
+        update_rows = usable & state.initialised
+        init_rows = usable & ~state.initialised
+        if update_rows.any():
+            every = bool(update_rows.all())
+            rows = slice(None) if every else np.flatnonzero(update_rows)
+            x_rows, P_rows = x[rows], P[rows]
+            z_rows = model.align(z[rows], x_rows)
+            nu_rows = z_rows - model.measure(x_rows)
+            ctx = UpdateContext(model, x_rows, P_rows, z_rows, nu_rows, np.maximum(since[rows], 1.0))
+            result, noise_rows = rule.update(ctx, dict(noise) if every else _take(noise, rows))
+            if every:
+                x, P, noise, nu, S = result.x, result.P, noise_rows, nu_rows, result.S
+                since = np.zeros(batch)
+            else:
+                nu, S = np.zeros((batch, m)), np.empty((batch, m, m))
+                S[:] = _template("I", m, m)
+                x, P = x.copy(), P.copy()
+                x[rows], P[rows], nu[rows], S[rows] = result.x, result.P, nu_rows, result.S
+                noise = _put(noise, rows, noise_rows)
+                since = np.where(update_rows, 0.0, since)
+        if init_rows.any():
+            x, P = x.copy(), P.copy()
+            x[init_rows] = model.initial_state(z[init_rows])
+            P[init_rows] = self.P0
+            since = np.where(init_rows, 0.0, since)
+        new = AdaptiveState(x, P, state.initialised | usable, since, noise)
+        return new, StepOutput(prior, nu, S, update_rows)
+
+    def sanitize(self, z: ArrayF, mask: ArrayB) -> tuple[ArrayF, ArrayB]:
+        """Measurements cleaned by the model's rules, and which are usable."""
+        return self.model.sanitize(np.asarray(z, dtype=float), np.asarray(mask, dtype=bool))
+
+    def run(self, measurements: ArrayF, mask: ArrayB, *, dt: float) -> AdaptiveResult:
+        """Filter a batch of sequences ``measurements (B, T, m)`` with validity ``mask (B, T)``."""
+        measurements = np.asarray(measurements, dtype=float)
+        mask = np.asarray(mask, dtype=bool)
+        m, n = self.model.measurement_dim, self.model.state_dim
+        if measurements.ndim != 3 or measurements.shape[-1] != m:
+            raise ValueError(f"measurements must have shape (B, T, {m}) (got {measurements.shape})")
+        if mask.shape != measurements.shape[:2]:
+            raise ValueError(f"mask must have shape {measurements.shape[:2]} (got {mask.shape})")
+        batch, steps, _ = measurements.shape
+        z_all, usable = self.sanitize(measurements, mask)
+        # time-major buffers: one contiguous block per step
+        means = np.empty((steps, batch, n))
+        covariances = np.empty((steps, batch, n, n))
+        innovations = np.empty((steps, batch, m))
+        innovation_covs = np.empty((steps, batch, m, m))
+        prior_means = np.empty((steps, batch, n))
+        updated = np.empty((steps, batch), dtype=bool)
+        initialised = np.empty((steps, batch), dtype=bool)
+        r_diag = np.empty((steps, batch, m))
+        q_diag = np.empty((steps, batch, n)) if self.rule.adapts_q else None
+        state = self.initial_state(batch)
+        for t in range(steps):
+            state, out = self.step(state, z_all[:, t], usable[:, t], dt, predict=t > 0)
+            means[t], covariances[t] = state.x, state.P
+            prior_means[t] = out.prior_mean
+            if out.innovation is None or out.innovation_covariance is None:
+                innovations[t], innovation_covs[t] = 0.0, _template("I", m, m)
+            else:
+                innovations[t], innovation_covs[t] = out.innovation, out.innovation_covariance
+            updated[t], initialised[t] = out.updated, state.initialised
+            r_diag[t] = np.diagonal(self.rule.measurement_noise(state.noise), axis1=1, axis2=2)
+            if q_diag is not None:
+                q_diag[t] = np.diagonal(self.rule.process_noise(state.noise), axis1=1, axis2=2)
+        batch_first = lambda a: None if a is None else np.swapaxes(a, 0, 1)  # noqa: E731
+        return AdaptiveResult(
+            means=batch_first(means),
+            covariances=batch_first(covariances),
+            innovations=batch_first(innovations),
+            innovation_covariances=batch_first(innovation_covs),
+            prior_means=batch_first(prior_means),
+            updated=batch_first(updated),
+            initialised=batch_first(initialised),
+            r_diag=batch_first(r_diag),
+            q_diag=batch_first(q_diag),
+            final=state,
+        )
+
+
+# ---------------------------------------------------------------------------------------------
+# the estimator
+_TIME_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class _Online:
+    time: float
+    state: AdaptiveState
+
+
+class AdaptiveEKFEstimator(Estimator):
+    """An adaptive EKF on the paper's pose-and-twist model as an estimator of the common API.
+
+    Subclasses set ``name``, ``description``, ``rule_class`` (a :class:`NoiseRule` built from
+    the knobs) and ``knobs`` (the names of the rule's keyword arguments). Keyword-only arguments:
+    the rule's knobs, ``q_std``, ``r_std``, ``p0_std`` (starting noise and ``P0``; default the
+    paper's manual tuning), ``name`` and ``description``.
+
+    ``estimate`` runs every sequence of the batch at once; ``reset``/``step`` run the same
+    recursion on one sequence (observation times handled as by
+    :class:`~fkn_bench.estimators.KalmanEstimator`: an interval that differs from ``dt`` by more
+    than 1e-6 s is predicted over its actual length). The estimates' ``extras`` hold
+    ``r_diag (B, T, 7)``, the adapted ``R``'s diagonal after each step, and for rules that adapt
+    ``Q`` ``q_diag (B, T, 13)``.
+    """
+
+    rule_class: ClassVar[type[NoiseRule]]
+    knobs: ClassVar[tuple[str, ...]] = ()
+
+    def __init__(
+        self,
+        *,
+        q_std: Sequence[float] | None = None,
+        r_std: Sequence[float] | None = None,
+        p0_std: Sequence[float] | None = None,
+        name: str | None = None,
+        description: str | None = None,
+        **knobs: Any,
+    ) -> None:
+        unknown = sorted(set(knobs) - set(self.knobs))
+        if unknown:
+            raise ValueError(f"unknown {type(self).__name__} options {unknown}; valid: {sorted(self.knobs + ('q_std', 'r_std', 'p0_std', 'name', 'description'))}")
+        self.rule = self.rule_class(**knobs)
+        self.filter = AdaptiveKalmanFilter(self.rule, q_std=q_std, r_std=r_std, p0_std=p0_std)
+        self._stds = {
+            key: (None if value is None else [float(v) for v in value])
+            for key, value in (("q_std", q_std), ("r_std", r_std), ("p0_std", p0_std))
+        }
+        if name is not None:
+            self.name = name
+        if description is not None:
+            self.description = description
+        self._dt: float | None = None
+        self._online: _Online | None = None
+
+    # ------------------------------------------------------------------ batch
+    def _estimates(self, result: AdaptiveResult) -> Estimates:
+        means = with_unit_quaternion(result.means)
+        covariances = result.covariances
+        innovations, innovation_covs = pose_innovation(result.prior_means[..., 0:4], result.innovations, result.innovation_covariances)
+        extras = {"r_diag": result.r_diag}
+        if result.q_diag is not None:
+            extras["q_diag"] = result.q_diag
+        return Estimates(
+            means=means,
+            covariances=covariances,
+            error_covariances=error_covariance_from_state(means[..., 0:4], covariances),
+            innovations=innovations,
+            innovation_covariances=innovation_covs,
+            innovation_mask=result.updated,
+            initialised=result.initialised,
+            extras=extras,
+        )
+
+    def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
+        z, m, step = check_batch_inputs(measurements, mask, dt)
+        return self._estimates(self.filter.run(z, m, dt=step))
+
+    # ------------------------------------------------------------------ online
+    def reset(self, *, dt: float) -> None:
+        try:
+            step = float(dt)
+        except (TypeError, ValueError):
+            raise ValueError(f"dt must be a number (got {dt!r})") from None
+        if not np.isfinite(step) or step <= 0:
+            raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
+        self._dt = step
+        self._online = None
+
+    def step(self, observation: Any) -> Estimate:
+        if self._dt is None:
+            raise RuntimeError("call reset(dt=...) before step()")
+        pose, time = parse_observation(observation)
+        if pose is None:
+            z, usable = np.zeros((1, 7)), np.zeros(1, dtype=bool)
+        else:
+            z, usable = self.filter.sanitize(pose[None], np.ones(1, dtype=bool))
+        previous = self._online
+        if previous is None:
+            now = 0.0 if time is None else time
+            state, out = self.filter.step(self.filter.initial_state(1), z, usable, self._dt, predict=False)
+        else:
+            now = previous.time + self._dt if time is None else time
+            interval = now - previous.time
+            if interval <= 0:
+                raise ValueError(f"observation time {now} does not increase (previous {previous.time})")
+            if abs(interval - self._dt) <= _TIME_TOLERANCE:
+                interval = self._dt
+            state, out = self.filter.step(previous.state, z, usable, interval)
+        self._online = _Online(now, state)
+        mean = state.x[0].copy()
+        mean[0:4] /= math.sqrt(mean[0:4] @ mean[0:4])
+        return Estimate(time=now, mean=mean, native_covariance=state.P[0].copy(), initialised=bool(state.initialised[0]), updated=bool(out.updated[0]))
+
+    # ------------------------------------------------------------------ config
+    def to_config(self) -> dict[str, Any]:
+        config: dict[str, Any] = dict(self.rule.config())
+        config.update({key: value for key, value in self._stds.items() if value is not None})
+        config.update(name=self.name, description=self.description)
+        return config
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any]) -> AdaptiveEKFEstimator:
+        return cls(**dict(config))

@@ -1,0 +1,71 @@
+"""Registers the baselines with the estimator registry (imported lazily by the registry).
+
+Online adaptive filters (no training): ``sage-husa``, ``akhlaghi``, ``vbakf``. Offline-tuned
+constant filters (trainable with ``fkn-bench train``; run from the committed artefacts in
+``baselines/params/``): ``nll-tuned-ekf``, ``direct-tuned-ekf``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from fkn_bench.estimators.registry import register_estimator
+from fkn_bench.scenarios import Scenario
+
+__all__: list[str] = []
+
+
+def _adaptive(module: str, cls: str) -> Any:
+    def factory(scenario: Scenario | None = None, **options: Any) -> Any:
+        import importlib
+
+        return getattr(importlib.import_module(module), cls)(**options)
+
+    return factory
+
+
+def _tuned(name: str) -> Any:
+    def factory(scenario: Scenario | None = None, **options: Any) -> Any:
+        from fkn_bench.baselines.tuned import tuned_factory
+
+        return tuned_factory(name)(scenario, **options)
+
+    return factory
+
+
+def _train(name: str) -> Any:
+    def train(scenario: Scenario, **kwargs: Any) -> dict[str, Any]:
+        from fkn_bench.baselines.tuned import train_for_cli
+
+        return train_for_cli(name)(scenario, **kwargs)
+
+    return train
+
+
+register_estimator(
+    "sage-husa",
+    _adaptive("fkn_bench.baselines.sage_husa", "SageHusaEstimator"),
+    description="Sage-Husa adaptive EKF: forgetting factor 0.99, R by innovation covariance matching, eigenvalue clamping",
+)
+register_estimator(
+    "akhlaghi",
+    _adaptive("fkn_bench.baselines.akhlaghi", "AkhlaghiEstimator"),
+    description="Adaptive EKF of Akhlaghi, Zhou & Huang 2017: alpha 0.3, residual-based R, innovation-based Q",
+)
+register_estimator(
+    "vbakf",
+    _adaptive("fkn_bench.baselines.vbakf", "VBAKFEstimator"),
+    description="Variational Bayesian adaptive EKF of Huang et al. 2018 (TAC 63(2)): inverse-Wishart P- and R, 10 iterations",
+)
+register_estimator(
+    "nll-tuned-ekf",
+    _tuned("nll-tuned-ekf"),
+    description="EKF with its 20 noise standard deviations fitted by innovation maximum likelihood (no ground truth)",
+    train=_train("nll-tuned-ekf"),
+)
+register_estimator(
+    "direct-tuned-ekf",
+    _tuned("direct-tuned-ekf"),
+    description="EKF with its 20 noise standard deviations fitted to the truth through the filter (EKFNet-style)",
+    train=_train("direct-tuned-ekf"),
+)

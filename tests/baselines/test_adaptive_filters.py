@@ -1,0 +1,229 @@
+"""The adaptive baselines as estimators on the paper's pose-and-twist model: the shared recursion
+against the manual EKF, online vs batch, hostile input, outputs, configuration and registry."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fkn_bench.baselines.adaptive import AdaptiveKalmanFilter, clamp_eigenvalues
+from fkn_bench.baselines.akhlaghi import AkhlaghiEstimator, AkhlaghiRule
+from fkn_bench.baselines.numpy_models import NumpyPoseTwistModel, TorchModelAdapter, numpy_model
+from fkn_bench.baselines.sage_husa import SageHusaEstimator
+from fkn_bench.baselines.vbakf import VBAKFEstimator
+from fkn_bench.envs import generate_episodes
+from fkn_bench.estimators import estimator_spec, load_estimator, make_estimator
+from fkn_bench.filters import PoseTwistModel
+from fkn_bench.filters.pose import error_covariance_from_state
+from fkn_bench.scenarios import get_scenario
+
+DT = 0.1
+ADAPTIVE = ("sage-husa", "akhlaghi", "vbakf")
+
+
+@pytest.fixture(scope="module")
+def hostile() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Three 300-step ds1-flips sequences (sign flips, 1% outliers) made worse: NaN and inf
+    inside the mask, a zero and non-unit quaternions, garbage outside the mask, and a row that
+    initialises late. Returns measurements, mask and times."""
+    episodes = generate_episodes("ds1-flips", [0, 1, 2], split="test").window(0, 300)
+    z, mask = episodes.measurements.copy(), episodes.valid.copy()
+    steps = np.flatnonzero(mask[0])
+    z[0, steps[2], 3] = np.nan
+    z[0, steps[4], 5] = np.inf
+    z[0, steps[6], :4] = 0.0
+    z[0, steps[8], :4] *= 3.0
+    z[1, mask[1], :4] *= 0.25
+    z[~mask] = np.nan
+    z[1, ~mask[1]] = 7.0  # garbage outside the mask
+    mask[2, :45] = False  # initialises at its fifth measurement
+    return z, mask, episodes.times
+
+
+def test_frozen_noise_is_the_manual_ekf(hostile) -> None:
+    """alpha = 1 freezes Akhlaghi's noise: the shared numpy recursion then reproduces the torch
+    EKF with the manual tuning (means, covariances, innovations, flags)."""
+    z, mask, _ = hostile
+    ours = AkhlaghiEstimator(alpha=1.0).estimate(z, mask, DT)
+    manual = make_estimator("manual-ekf").estimate(z, mask, DT)
+    for name in ("means", "covariances", "error_covariances", "innovations", "innovation_covariances"):
+        np.testing.assert_allclose(getattr(ours, name), getattr(manual, name), rtol=0, atol=1e-12, err_msg=name)
+    np.testing.assert_array_equal(ours.innovation_mask, manual.innovation_mask)
+    np.testing.assert_array_equal(ours.initialised, manual.initialised)
+
+
+@pytest.mark.parametrize("name", ADAPTIVE)
+def test_online_steps_equal_batch_estimates(name: str, hostile) -> None:
+    """reset()/step() runs the batch recursion on a batch of one: the same numbers to 1e-12,
+    with observation dicts (times) and plain arrays (NaN when missing)."""
+    z, mask, times = hostile
+    estimator = make_estimator(name)
+    if name == "sage-husa":
+        estimator = make_estimator(name, adapt_q=True)  # the optional branch too
+    batch = estimator.estimate(z, mask, DT)
+    for b in range(z.shape[0]):
+        estimator.reset(dt=DT)
+        for t in range(z.shape[1]):
+            observation = {"pose": z[b, t], "valid": mask[b, t], "time": times[t]} if b != 1 else (z[b, t] if mask[b, t] else np.full(7, np.nan))
+            estimate = estimator.step(observation)
+            np.testing.assert_allclose(estimate.mean, batch.means[b, t], rtol=0, atol=1e-12, err_msg=f"{name} b={b} t={t}")
+            np.testing.assert_allclose(estimate.native_covariance, batch.covariances[b, t], rtol=0, atol=1e-12)
+            assert estimate.initialised == batch.initialised[b, t]
+            assert estimate.updated == batch.innovation_mask[b, t]
+
+
+@pytest.mark.parametrize("name", ADAPTIVE)
+def test_hostile_input_follows_the_documented_rules(name: str, hostile) -> None:
+    z, mask, _ = hostile
+    estimator = make_estimator(name)
+    result = estimator.estimate(z, mask, DT)
+    for array in (result.means, result.covariances, result.error_covariances, result.innovations, result.innovation_covariances, result.extras["r_diag"]):
+        assert np.isfinite(array).all()
+    steps = np.flatnonzero(mask[0])
+    # NaN / inf / zero-norm quaternion inside the mask: the update is skipped
+    assert not result.innovation_mask[0, steps[[2, 4, 6]]].any()
+    skipped = mask.copy()
+    skipped[0, steps[[2, 4, 6]]] = False
+    reference = estimator.estimate(np.nan_to_num(z, nan=0.0, posinf=0.0), skipped, DT)
+    np.testing.assert_allclose(result.means, reference.means, rtol=0, atol=1e-12)
+    # quaternions are renormalised: scaling them changes nothing
+    rescaled = z.copy()
+    rescaled[..., :4] *= 10.0
+    np.testing.assert_allclose(estimator.estimate(rescaled, mask, DT).means, result.means, rtol=0, atol=1e-11)
+    # sign flips at every step are aligned away before every innovation
+    flipped = z.copy()
+    flipped[..., :4] *= np.where(np.arange(z.shape[1]) % 2 == 0, -1.0, 1.0)[None, :, None]
+    other = estimator.estimate(flipped, mask, DT).means
+    np.testing.assert_allclose(other[..., 4:], result.means[..., 4:], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(np.abs(other[..., :4]), np.abs(result.means[..., :4]), rtol=0, atol=1e-11)
+    # the late row reports the prior until its first usable measurement
+    first = np.flatnonzero(mask[2])[0]
+    assert not result.initialised[2, :first].any() and result.initialised[2, first:].all()
+
+
+@pytest.mark.parametrize("name", ADAPTIVE)
+def test_estimates_are_well_formed(name: str) -> None:
+    episodes = generate_episodes("ds1", [3, 4], split="test")
+    result = make_estimator(name).estimate(episodes.measurements, episodes.valid, DT)
+    assert result.means.shape == (2, 1600, 13) and result.innovations.shape == (2, 1600, 6)
+    np.testing.assert_allclose(np.linalg.norm(result.means[..., :4], axis=-1), 1.0, atol=1e-12)
+    np.testing.assert_allclose(result.error_covariances, error_covariance_from_state(result.means[..., :4], result.covariances), atol=1e-15)
+    np.testing.assert_array_equal(result.innovation_mask, episodes.valid & (np.arange(1600) > 0))
+    assert result.extras["r_diag"].shape == (2, 1600, 7) and (result.extras["r_diag"] > 0).all()
+    assert ("q_diag" in result.extras) == (name == "akhlaghi")
+    # at least as good as the raw position measurements over the scored window
+    position_error = np.sqrt(((result.means[:, 100:, 4:7] - episodes.truth[:, 100:, 4:7]) ** 2).mean())
+    assert position_error < 0.1
+
+
+def test_eigenvalue_clamping() -> None:
+    rng = np.random.default_rng(0)
+    V = np.linalg.qr(rng.normal(size=(5, 5)))[0]
+    M = np.stack([V @ np.diag([-1.0, 1e-9, 0.5, 2.0, 3.0]) @ V.T, np.diag([1.0, 2.0, 3.0, 4.0, 5.0])])
+    out = clamp_eigenvalues(M, np.array([1e-3, 1e-3]))
+    np.testing.assert_allclose(np.linalg.eigvalsh(out[0]), [1e-3, 1e-3, 0.5, 2.0, 3.0], atol=1e-12)
+    assert out[1] is not M[1] and np.array_equal(out[1], M[1])  # untouched row
+
+
+def test_numpy_twins_match_the_torch_models() -> None:
+    import torch
+
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(5, 13))
+    torch_model = PoseTwistModel()
+    twin, adapter = numpy_model(torch_model), TorchModelAdapter(torch_model)
+    assert isinstance(twin, NumpyPoseTwistModel)
+    for dt in (0.1, 0.37):
+        mean, F = twin.transition(x, dt)
+        reference_mean, reference_F = torch_model.transition(torch.from_numpy(x), dt)
+        np.testing.assert_allclose(mean, reference_mean.numpy(), atol=1e-15)
+        np.testing.assert_allclose(F, reference_F.numpy(), atol=1e-15)
+        np.testing.assert_allclose(adapter.transition(x, dt)[0], mean, atol=1e-15)
+    z = np.concatenate((rng.normal(size=(5, 4)), rng.normal(size=(5, 3))), axis=1)
+    z[1, 2] = np.nan
+    z[2, :4] = 0.0
+    z[3, :4] = 1e160
+    mask = np.ones(5, dtype=bool)
+    ours, usable = twin.sanitize(z, mask)
+    theirs, their_usable = adapter.sanitize(z, mask)
+    np.testing.assert_array_equal(usable, their_usable)
+    np.testing.assert_allclose(ours, theirs, atol=1e-15)
+    y = twin.align(ours, x[:5])
+    assert (np.einsum("bi,bi->b", y[:, :4], x[:5, :4]) >= 0).all()
+    normalised, block, N = twin.normalize(x)
+    t_normalised, _, t_N = torch_model.normalize(torch.from_numpy(x))
+    np.testing.assert_allclose(normalised, t_normalised.numpy(), atol=1e-15)
+    np.testing.assert_allclose(N, t_N.numpy(), atol=1e-15)
+
+
+def test_generic_models_run_through_the_torch_adapter() -> None:
+    """A model without a numpy twin runs through its torch hooks: same numbers as the twin."""
+
+    class Wrapped(PoseTwistModel):
+        pass
+
+    episodes = generate_episodes("ds1", [0], split="test").window(0, 200)
+    results = []
+    for model in (PoseTwistModel(), Wrapped()):
+        adaptive = AdaptiveKalmanFilter(AkhlaghiRule(), model=model)
+        assert isinstance(adaptive.model, NumpyPoseTwistModel if type(model) is PoseTwistModel else TorchModelAdapter)
+        results.append(adaptive.run(episodes.measurements, episodes.valid, dt=DT).means)
+    np.testing.assert_allclose(results[0], results[1], rtol=0, atol=1e-12)
+
+
+# ---------------------------------------------------------------------------- configuration
+def test_registry_descriptions_and_knobs(tmp_path: Path) -> None:
+    scenario = get_scenario("ds1")
+    for name, cls in (("sage-husa", SageHusaEstimator), ("akhlaghi", AkhlaghiEstimator), ("vbakf", VBAKFEstimator)):
+        spec = estimator_spec(name)
+        assert spec.description and not spec.trainable
+        estimator = make_estimator(name, scenario=scenario)
+        assert isinstance(estimator, cls) and estimator.name == name
+    assert make_estimator("sage-husa").to_config()["forgetting"] == 0.99
+    assert make_estimator("akhlaghi").to_config()["alpha"] == 0.3
+    vb = make_estimator("vbakf").to_config()
+    assert (vb["tau_p"], vb["tau_r"], vb["iterations"]) == (3.0, 3.0, 10) and vb["rho"] == pytest.approx(1 - np.exp(-4))
+    tuned = make_estimator("vbakf", iterations=3, r_std=[0.05] * 7, name="vb3")
+    again = load_estimator(tuned.save(tmp_path / "vb3.json"))
+    assert isinstance(again, VBAKFEstimator) and again.to_config() == tuned.to_config() and again.name == "vb3"
+    episodes = generate_episodes("ds1", [0], split="test").window(0, 200)
+    np.testing.assert_array_equal(again.estimate(episodes.measurements, episodes.valid, DT).means, tuned.estimate(episodes.measurements, episodes.valid, DT).means)
+
+
+@pytest.mark.parametrize(
+    ("name", "options", "message"),
+    [
+        ("sage-husa", {"forgetting": 1.5}, "forgetting must be in"),
+        ("sage-husa", {"forgetting": 0.0}, "forgetting must be in"),
+        ("sage-husa", {"floor": 0.0}, "floor must be in"),
+        ("sage-husa", {"warmup": -1}, "warmup must be an integer"),
+        ("akhlaghi", {"alpha": -0.1}, "alpha must be in"),
+        ("vbakf", {"tau_p": 0.0}, "tau_p must be"),
+        ("vbakf", {"iterations": 0}, "iterations must be an integer"),
+        ("vbakf", {"rho": 1.01}, "rho must be in"),
+        ("vbakf", {"r_std": [0.1] * 6}, "r_std needs 7 values"),
+        ("akhlaghi", {"q_std": [-1.0] * 13}, "q_std values must be finite and > 0"),
+        ("akhlaghi", {"gamma": 1.0}, "unknown AkhlaghiEstimator options"),
+    ],
+)
+def test_bad_knobs_are_refused(name: str, options: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        make_estimator(name, **options)
+
+
+def test_online_api_errors() -> None:
+    estimator = make_estimator("vbakf")
+    with pytest.raises(RuntimeError, match=r"call reset\(dt=...\) before step\(\)"):
+        estimator.step(np.full(7, np.nan))
+    for dt in (0.0, np.nan, "x"):
+        with pytest.raises(ValueError, match="dt must be"):
+            estimator.reset(dt=dt)  # type: ignore[arg-type]
+    estimator.reset(dt=DT)
+    estimator.step({"pose": np.r_[1.0, 0, 0, 0, 0, 0, 0], "valid": 1, "time": 2.0})
+    with pytest.raises(ValueError, match="does not increase"):
+        estimator.step({"pose": np.r_[1.0, 0, 0, 0, 0, 0, 0], "valid": 1, "time": 2.0})
+    # an irregular interval is predicted over its actual length and stays finite
+    estimate = estimator.step({"pose": np.r_[1.0, 0, 0, 0, 0.1, 0, 0], "valid": 1, "time": 2.35})
+    assert estimate.updated and np.isfinite(estimate.native_covariance).all()
