@@ -11,8 +11,8 @@ report). ``--config TOML`` trains with another configuration, e.g. the ``best.to
 
 Examples::
 
-    fkn-bench reproduce --out reproduction
-    fkn-bench reproduce --quick --out /tmp/reproduction-quick
+    fkn-bench reproduce                 # report in runs/reproduce/index.md
+    fkn-bench reproduce --quick --out /tmp/reproduce-quick
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--out", type=Path, default=Path("reproduction"), metavar="DIR",
-                        help="report directory (default: reproduction)")
+    parser.add_argument("--out", type=Path, metavar="DIR",
+                        help="report directory (default: runs/reproduce, with --quick runs/reproduce-quick)")
     parser.add_argument("--quick", action="store_true", help="small network, few epochs, 5 seeds: a pipeline check")
     parser.add_argument("--seed", type=int, default=0, help="training seed (default: 0, the paper's)")
     parser.add_argument("--seeds", type=int, metavar="N",
@@ -57,12 +57,14 @@ def run(args: argparse.Namespace) -> int:
             config = FlexKalmanNetConfig.from_toml(args.config)
         except (ValueError, TypeError) as exc:
             raise UsageError(str(exc)) from None
-    settings = ReproduceSettings(seed=args.seed, eval_seeds=args.seeds, quick=args.quick, config=config)
+    settings = ReproduceSettings(seed=args.seed, eval_seeds=args.seeds, quick=args.quick, config=config,
+                                 config_source=str(args.config) if args.config is not None else None)
     try:
         settings.training_config()
     except (ValueError, TypeError) as exc:
         raise UsageError(str(exc)) from None
-    reproduction = run_reproduction(args.out, settings, progress=not args.no_progress,
+    out = args.out if args.out is not None else Path("runs") / ("reproduce-quick" if args.quick else "reproduce")
+    reproduction = run_reproduction(out, settings, progress=not args.no_progress,
                                     log=None if args.no_progress else _log)
     print(reproduction.out / "index.md")
     print(reproduction.out / "index.html")

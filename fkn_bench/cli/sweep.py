@@ -11,14 +11,14 @@ journal file (``--storage``, default ``OUT/study.journal``) or any RDB URL
 ``--workers N`` runs N processes here; run the same command elsewhere with the same
 ``--storage`` and ``--study-name`` to add machines.
 
-Outputs in ``--out`` (default ``sweeps/<study name>``): ``best.toml`` (for ``fkn-bench train
+Outputs in ``--out`` (default ``runs/sweep-<study name>``): ``best.toml`` (for ``fkn-bench train
 --config`` and ``fkn-bench reproduce --config``), ``trials.csv``, ``parallel_coordinates.png``
 and ``sweep.json``.
 
 Examples::
 
     fkn-bench sweep --space quick --workers 2
-    fkn-bench sweep --space paper --workers 2 --storage sweeps/paper.journal --study-name paper
+    fkn-bench sweep --space paper --workers 2 --storage runs/paper.journal --study-name paper
 """
 
 from __future__ import annotations
@@ -45,7 +45,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="search-space file, or a packaged space name (paper, quick)")
     parser.add_argument("--estimator", help="trainable estimator (default: the space's, else flexkalmannet)")
     parser.add_argument("--scenario", help="training scenario (default: the space's, else ds1)")
-    parser.add_argument("--trials", type=int, metavar="N", help="trials of the random (or only) stage (default: the space's, else 20)")
+    parser.add_argument("--trials", type=int, metavar="N",
+                        help="trials of the random (or only) stage; with --sampler grid, at most this many grid "
+                             "points (default: the space's, else 20)")
     parser.add_argument("--grid-trials", type=int, metavar="N",
                         help="random-grid: most points of the reduced grid (default: the space's, else --trials)")
     parser.add_argument("--top-k", type=int, metavar="K",
@@ -56,7 +58,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="journal file or RDB URL shared by the workers (default: OUT/study.journal)")
     parser.add_argument("--study-name", metavar="NAME", help="study name (default: <estimator>-<scenario>)")
     parser.add_argument("--seed", type=int, help="sampler seed (default: the space's, else 0)")
-    parser.add_argument("--out", type=Path, metavar="DIR", help="output directory (default: sweeps/<study name>)")
+    parser.add_argument("--out", type=Path, metavar="DIR", help="output directory (default: runs/sweep-<study name>)")
     parser.add_argument("--no-progress", action="store_true", help="no per-trial messages")
     add_scenario_file_option(parser)
     parser.set_defaults(handler=run)
@@ -66,7 +68,16 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.cli import UsageError
     from fkn_bench.estimators import UnknownEstimatorError, estimator_spec, estimator_specs
     from fkn_bench.scenarios import get_scenario
-    from fkn_bench.sweep import SearchSpace, SpaceError, SweepError, SweepSettings, load_space, resolve_space, run_sweep, trial_config
+    from fkn_bench.sweep import (
+        SearchSpace,
+        SpaceError,
+        SweepError,
+        SweepSettings,
+        load_space,
+        resolve_space,
+        run_sweep,
+        trial_config,
+    )
 
     load_scenario_files(args)
     try:
@@ -98,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from None
     trials = args.trials if args.trials is not None else defaults.get("trials", 20)
     study_name = args.study_name or f"{estimator}-{scenario.name}"
-    out = args.out if args.out is not None else Path("sweeps") / study_name
+    out = args.out if args.out is not None else Path("runs") / f"sweep-{study_name}"
     try:
         settings = SweepSettings(
             space=space,

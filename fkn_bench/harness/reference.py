@@ -1,7 +1,7 @@
 """Numbers quoted from the FlexKalmanNet paper, shown on the leaderboards as labelled reference
 rows (never ranked: they come from the paper's own recording, not from this benchmark's runs).
 
-Source: P. Pinheiro-Torres Vogt, L. Huwald, M. K. Ben-Larbi and E. Stoll, "FlexKalmanNet: A
+Source: M. D. Pinheiro-Torres Vogt, M. Huwald, M. K. Ben-Larbi and E. Stoll, "FlexKalmanNet: A
 Modular AI-Enhanced Kalman Filter Framework Applied to Spacecraft Motion Estimation", table
 "RMSE of each variable of the state vector for EKF runs using learned parameters from DS1 and
 using the manually tuned parameters, both run on DS1" (REFERENCE.md, "Reported"). The paper gives

@@ -97,6 +97,7 @@ class ReproduceSettings:
         quick: the ``--quick`` pipeline (:data:`QUICK_OVERRIDES`).
         config: base training configuration (default ``FlexKalmanNetConfig()``, read when the
             settings are used, so that new defaults apply).
+        config_source: where ``config`` came from (a file name, for the report).
         figure_seed: seed of the episodes the figures show.
         uncertainty_steps: samples of the angular-rate uncertainty figure (the paper: 500).
     """
@@ -105,6 +106,7 @@ class ReproduceSettings:
     eval_seeds: int | None = None
     quick: bool = False
     config: FlexKalmanNetConfig | None = None
+    config_source: str | None = None
     figure_seed: int = 0
     uncertainty_steps: int = 500
 
@@ -231,9 +233,10 @@ def _uncertainty_steps(trace: Any, window: int) -> float:
 
 
 def _config_summary(config: FlexKalmanNetConfig, quick: bool) -> str:
-    text = (f"{config.layers} layers of {config.hidden}, lr {config.lr:g}, up to {config.epochs} epochs "
-            f"(early stop {config.patience}), windows of {config.window} samples, {config.episodes} training "
-            f"episode(s), variant {config.variant}")
+    plural = lambda n, word: f"{n} {word}" + ("" if n == 1 else "s")  # noqa: E731
+    text = (f"{plural(config.layers, 'hidden layer')} of {config.hidden}, lr {config.lr:g}, up to "
+            f"{plural(config.epochs, 'epoch')} (early stop {config.patience}), windows of {config.window} samples, "
+            f"{plural(config.episodes, 'training recording')}, variant {config.variant}")
     return ("quick run: " if quick else "") + text
 
 
@@ -268,11 +271,10 @@ def run_reproduction(
     # 2. evaluation
     say(f"[reproduce] evaluating on {len(seeds)} test seeds")
     t0 = time.perf_counter()
-    manual_name = f"manual-{config.variant}" if config.variant in ("ekf", "ukf", "mekf") else "manual-ekf"
     constant: dict[str, Estimator] = {
         "learned-ds1": trained["ds1"].estimator,
         "learned-ds2": trained["ds2"].estimator,
-        "manual": make_estimator(manual_name),
+        "manual": make_estimator(f"manual-{config.variant}"),  # the paper's manual tuning, same variant
     }
     plan = {
         "ds1": ("learned-ds1", "learned-ds2", "manual", "oracle"),
@@ -304,10 +306,11 @@ def run_reproduction(
     seed = settings.figure_seed
     ds1, ds2 = get_scenario("ds1"), get_scenario("ds2")
     ds1_trace = run_trace(constant["learned-ds1"], "learned DS1", ds1, seed)
-    figs.save(figs.states_figure_titled(ds1_trace, f"EKF with the parameters learned from DS1, on DS1 (test split, seed {seed}){quick_tag}"),
-              fig_dir / "states_ds1.png")
-    figs.save(figs.omega_uncertainty_figure(ds1_trace, steps=settings.uncertainty_steps,
-                                            title=f"Angular-rate estimates with 2σ bands, DS1 parameters on DS1, first {settings.uncertainty_steps} samples{quick_tag}"),
+    title = f"EKF with the parameters learned from DS1, on DS1 (test split, seed {seed}){quick_tag}"
+    figs.save(figs.states_figure_titled(ds1_trace, title), fig_dir / "states_ds1.png")
+    title = (f"Angular-rate estimates with 2σ bands, DS1 parameters on DS1, first {settings.uncertainty_steps} "
+             f"samples{quick_tag}")
+    figs.save(figs.omega_uncertainty_figure(ds1_trace, steps=settings.uncertainty_steps, title=title),
               fig_dir / "omega_uncertainty_ds1.png")
     uncertainty_steps = _uncertainty_steps(ds1_trace, settings.uncertainty_steps)
     for scenario_name, label, stem, title in (
@@ -318,14 +321,17 @@ def run_reproduction(
         ("ds1", "learned-ds2", "states_ds2_params_on_ds1", "DS2 parameters on DS1 (cross-data-set)"),
     ):
         trace = run_trace(constant[label], LABELS[label], get_scenario(scenario_name), seed)
-        figs.save(figs.states_figure_titled(trace, f"EKF, {title} (test split, seed {seed}){quick_tag}"), fig_dir / f"{stem}.png")
+        figs.save(figs.states_figure_titled(trace, f"EKF, {title} (test split, seed {seed}){quick_tag}"),
+                  fig_dir / f"{stem}.png")
     captions = {
         "training_loss_ds2": "Paper Fig. 3: training (blue) and validation (orange) RMSE per epoch, DS2.",
         "parameters_ds2": "Paper Fig. 4: the 20 learned standard deviations over the epochs, DS2.",
         "training_loss_ds1": "Training and validation loss per epoch, DS1 (not shown in the paper).",
         "parameters_ds1": "The learned standard deviations over the epochs, DS1 (not shown in the paper).",
-        "states_ds1": "Paper Fig. 5: EKF with the DS1 parameters on DS1: estimate, measurement and truth of the four state groups.",
-        "omega_uncertainty_ds1": f"Paper Fig. 6: angular-rate estimates with their 2σ band over the first {settings.uncertainty_steps} samples of DS1.",
+        "states_ds1": "Paper Fig. 5: EKF with the DS1 parameters on DS1: estimate, measurement and truth of the four "
+                      "state groups.",
+        "omega_uncertainty_ds1": "Paper Fig. 6: angular-rate estimates with their 2σ band over the first "
+                                 f"{settings.uncertainty_steps} samples of DS1.",
         "states_ds1_noise5x": "Paper Fig. 7: DS1 parameters on DS1 with five times the measurement noise.",
         "states_ds1_gap100": "Paper Fig. 8: DS1 parameters on DS1 with a measurement every 100 steps.",
         "states_ds2": "DS2 parameters on DS2 (the paper omits this plot for brevity).",
@@ -357,6 +363,9 @@ def run_reproduction(
         uncertainty_window=settings.uncertainty_steps,
         quick=settings.quick,
         config_summary=_config_summary(config, settings.quick),
+        epoch_summary=(f"{trained['ds1'].windows} training windows of {config.window} samples from "
+                       f"{_recordings(config.episodes)}, {config.windows_per_batch} per step, plus one validation "
+                       "pass"),
     )
     bullets = differences(context)
     seconds["total"] = time.perf_counter() - began
@@ -367,6 +376,10 @@ def run_reproduction(
     return reproduction
 
 
+def _recordings(count: int) -> str:
+    return "recording 0" if count == 1 else f"recordings 0-{count - 1}"
+
+
 def _figure(reproduction: Reproduction, stem: str) -> list[Block]:
     return [f for f in reproduction.figures if f.path == f"figures/{stem}.png"]
 
@@ -375,7 +388,8 @@ def _blocks(r: Reproduction) -> list[Block]:
     s = r.settings
     quick = s.quick
     title = "Reproduction of FlexKalmanNet's results" + (" — QUICK RUN (not a reproduction)" if quick else "")
-    command = "fkn-bench reproduce" + (" --quick" if quick else "") + f" --seed {s.seed} --seeds {s.n_eval_seeds}"
+    command = ("fkn-bench reproduce" + (" --quick" if quick else "") + f" --seed {s.seed} --seeds {s.n_eval_seeds}"
+               + (f" --config {s.config_source}" if s.config_source else ""))
     blocks: list[Block] = [Heading(title, 1)]
     if quick:
         blocks.append(Paragraph(
@@ -387,9 +401,10 @@ def _blocks(r: Reproduction) -> list[Block]:
             f"Every table and figure of the results section of {PAPER_TITLE}, regenerated from scratch (simulated data, "
             f"training, evaluation) by `{command}` in {r.seconds.get('total', math.nan):.0f} s. Columns and rows marked "
             "\"paper (quoted)\" are the paper's printed numbers; everything else was computed by this run. Training: "
-            f"{_config_summary(r.config, quick)}, seed {r.config.seed}. Evaluation: the test split of {s.n_eval_seeds} "
-            f"seeds (seed 0 is the held-out tenth of the training recording), a measurement every 10 steps, scored "
-            f"from step 100 (the paper's protocol); figures from seed {s.figure_seed}."
+            f"{_config_summary(r.config, quick)}, seed {r.config.seed}, on the train splits (first 80%) of "
+            f"{_recordings(r.config.episodes)} of each data set. Evaluation: the test splits (last 10%, never trained "
+            f"on) of {_recordings(s.n_eval_seeds)}, a measurement every 10 steps, scored from step 100 (the paper's "
+            f"protocol); figures from recording {s.figure_seed}."
         ),
         Heading("Differences from the paper (generated from the numbers)"),
         Bullets(tuple(r.differences)),
@@ -418,8 +433,8 @@ def _blocks(r: Reproduction) -> list[Block]:
         Heading("Files"),
         Bullets((
             "`training/ds1/`, `training/ds2/`: checkpoint, `history.csv` and the learned parameters "
-            "(`parameters.json`, usable as `fkn-bench run --estimator flexkalmannet` input via "
-            "`make_estimator(\"flexkalmannet\", parameters=...)`)",
+            "(`parameters.json`: `make_estimator(\"flexkalmannet\", parameters=\"training/ds1/parameters.json\")` "
+            "runs the learned filter)",
             "`tables/*.csv`: every table above; `results.json`: every number, the configuration, timings and provenance",
             "`figures/*.png`: the figures above; `index.html`: this report as HTML",
         )),
@@ -435,6 +450,7 @@ def _write(r: Reproduction) -> None:
     write_json_atomic(r.out / "results.json", {
         "quick": r.settings.quick,
         "seed": r.settings.seed,
+        "config_source": r.settings.config_source,
         "eval_seeds": r.settings.n_eval_seeds,
         "figure_seed": r.settings.figure_seed,
         "config": r.config.to_dict(),

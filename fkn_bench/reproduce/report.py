@@ -97,9 +97,8 @@ def render_markdown(blocks: Sequence[Block]) -> str:
             lines.append("| " + " | ".join(_md_cell(c) for c in block.columns) + " |")
             lines.append("|" + "|".join(":---" if a == "l" else "---:" for a in align) + "|")
             lines.extend("| " + " | ".join(_md_cell(c) for c in row) + " |" for row in block.rows)
-            if block.notes:
-                lines.append("")
-                lines.extend(f"*{note}*" if not note.startswith("*") else note for note in block.notes)
+            for note in block.notes:  # plain paragraphs: notes may hold '*' of their own
+                lines += ["", note]
             lines.append(f"\n(CSV: [`tables/{block.name}.csv`](tables/{block.name}.csv))")
             out.append("\n".join(lines) + "\n")
         elif isinstance(block, FigureRef):
@@ -154,7 +153,7 @@ def render_html(blocks: Sequence[Block], *, title: str) -> str:
                 "<tr>" + "".join(f'<td class="{a}">{_inline(c)}</td>' for c, a in zip(row, align)) + "</tr>"
                 for row in block.rows
             )
-            notes = "".join(f'<p class="note">{_inline(n.strip("*"))}</p>' for n in block.notes)
+            notes = "".join(f'<p class="note">{_inline(n)}</p>' for n in block.notes)
             link = f'<p class="note">CSV: <a href="tables/{block.name}.csv">tables/{block.name}.csv</a></p>'
             body.append(f"<table><caption>{_inline(block.title)}</caption><thead><tr>{head}</tr></thead>"
                         f"<tbody>{rows}</tbody></table>{notes}{link}")

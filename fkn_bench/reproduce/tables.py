@@ -122,8 +122,8 @@ def training_table(trained: Mapping[str, TrainedModel]) -> Table:
                      fmt(quoted.test_rmse), f"{quoted.seconds_per_epoch:.2f}", DASH))
     notes = (
         "Ours: 13-state RMSE in SI units (quaternion components, m, rad/s, m/s) of the deployed parameters over the "
-        "validation split (best epoch) and the test split of the training recording, scored after the loss cut, "
-        "with a measurement every 10 steps.",
+        "validation splits of the training recordings (best epoch) and the test split of recording 0, scored after "
+        "the loss cut, with a measurement every 10 steps.",
         "Not comparable with the paper's losses: the paper trains and reports on z-score-normalised positions, "
         "while its per-variable table gives position RMSEs of ~0.10 m (a 13-state RMSE of ~0.055 in SI units).",
         "s/epoch: measured on this machine (the paper: 4 virtual cores of an AMD EPYC 7452, no GPU); the only "

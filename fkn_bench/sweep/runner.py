@@ -13,7 +13,8 @@ Outputs in ``out``:
   ``FlexKalmanNetConfig.from_toml`` and ``fkn-bench train --config best.toml`` (for other
   estimators: their training options at the top level);
 * ``trials.csv``: every trial of every stage (stage, number, state, value, params, user
-  attributes such as ``best_epoch``, ``epochs_run`` and ``error``, the last reported epoch);
+  attributes such as ``best_epoch``, ``epochs_run``, ``error`` and the ``process`` id that ran
+  it, the last reported epoch);
 * ``parallel_coordinates.png``: the completed trials' hyperparameters mapped to their validation
   RMSE (like the paper's sweep figure; drawn with ``optuna.visualization.matplotlib``);
 * ``sweep.json``: settings, the reduced grid of ``random-grid``, counts per state and the best
@@ -25,6 +26,7 @@ from __future__ import annotations
 import json
 import math
 import multiprocessing
+import os
 import sys
 import time
 import warnings
@@ -169,8 +171,14 @@ def _worker_main(job: _WorkerJob) -> None:
         print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {_describe(trial)}",
               file=sys.stderr, flush=True)
 
-    study.optimize(make_objective(job.task), n_trials=job.n_trials, catch=CATCH, callbacks=[report],
-                   gc_after_trial=False, show_progress_bar=False)
+    inner = make_objective(job.task)
+
+    def objective(trial: optuna.Trial) -> float:
+        trial.set_user_attr("process", os.getpid())
+        return inner(trial)
+
+    study.optimize(objective, n_trials=job.n_trials, catch=CATCH, callbacks=[report], gc_after_trial=False,
+                   show_progress_bar=False)
 
 
 class _Workers:
@@ -412,12 +420,15 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         f"Best configuration of fkn-bench sweep study {settings.name!r} ({settings.sampler}), {stage} trial "
         f"{trial.number}\nvalidation 13-state RMSE {trial.value:.6g} on scenario {settings.scenario.name}\n"
         f"searched: {', '.join(f'{k} = {v!r}' for k, v in trial.params.items())}\n"
-        f"use: fkn-bench train --estimator {settings.estimator} --scenario {settings.scenario.name} --config best.toml"
+        + (f"fixed by the search space: {', '.join(f'{k} = {v!r}' for k, v in settings.space.fixed.items())}\n"
+           if settings.space.fixed else "")
+        + f"use: fkn-bench train --estimator {settings.estimator} --scenario {settings.scenario.name} --config best.toml"
     )
     best_config = write_toml(out / "best.toml", config, table=table, header=header)
     figure = parallel_coordinates(
         everything, settings.space, out / "parallel_coordinates.png",
-        f"{settings.name}: hyperparameters vs validation RMSE ({settings.sampler}, {len(completed(everything))} completed trials)",
+        f"{settings.name}: hyperparameters vs validation RMSE ({settings.sampler}, "
+        f"{len(completed(everything))} completed trials)",
     )
     result = SweepResult(
         out=out, best_value=float(trial.value), best_params=dict(trial.params), best_stage=stage,  # type: ignore[arg-type]

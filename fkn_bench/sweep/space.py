@@ -125,17 +125,21 @@ class Knob:
         """The optuna distribution of the knob (the same in every stage of a sweep)."""
         if self.kind == "categorical":
             return CategoricalDistribution(self.values)
+        low, high = self.low, self.high
+        assert low is not None and high is not None
         if self.kind == "int":
-            return IntDistribution(int(self.low), int(self.high), log=self.log, step=int(self.step or 1))  # type: ignore[arg-type]
-        return FloatDistribution(float(self.low), float(self.high), log=self.log, step=self.step)  # type: ignore[arg-type]
+            return IntDistribution(int(low), int(high), log=self.log, step=int(self.step or 1))
+        return FloatDistribution(float(low), float(high), log=self.log, step=self.step)
 
     def suggest(self, trial: optuna.Trial) -> Any:
         """Ask ``trial`` for a value (the sampler decides which)."""
         if self.kind == "categorical":
             return trial.suggest_categorical(self.name, list(self.values))
+        low, high = self.low, self.high
+        assert low is not None and high is not None
         if self.kind == "int":
-            return trial.suggest_int(self.name, int(self.low), int(self.high), log=self.log, step=int(self.step or 1))  # type: ignore[arg-type]
-        return trial.suggest_float(self.name, float(self.low), float(self.high), log=self.log, step=self.step)  # type: ignore[arg-type]
+            return trial.suggest_int(self.name, int(low), int(high), log=self.log, step=int(self.step or 1))
+        return trial.suggest_float(self.name, float(low), float(high), log=self.log, step=self.step)
 
     def contains(self, value: Any) -> bool:
         distribution = self.distribution()

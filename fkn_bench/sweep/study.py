@@ -80,7 +80,9 @@ def stage_names(study_name: str, sampler: str) -> list[tuple[str, str]]:
     return [(sampler, study_name)]
 
 
-def make_sampler(kind: str, *, seed: int, worker: int = 0, grid: dict[str, list[Any]] | None = None) -> optuna.samplers.BaseSampler:
+def make_sampler(
+    kind: str, *, seed: int, worker: int = 0, grid: dict[str, list[Any]] | None = None
+) -> optuna.samplers.BaseSampler:
     """The sampler of a stage for worker ``worker`` (random and TPE samplers get ``seed + worker``
     so that parallel workers draw different points; the grid sampler gets the same seed in every
     worker, as optuna recommends, and picks grid points by trial number)."""

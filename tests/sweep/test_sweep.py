@@ -1,0 +1,192 @@
+"""Sweeps end to end: a tiny two-stage sweep with two worker processes on one journal file (with
+pruning), invalid and failing trials, a generic trainable estimator, and the CLI's usage errors."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import optuna
+import pandas as pd
+import pytest
+from optuna.storages import JournalStorage
+from optuna.storages.journal import JournalFileBackend
+from optuna.trial import TrialState
+
+from fkn_bench.cli import main
+from fkn_bench.flexkalmannet import FlexKalmanNetConfig
+from fkn_bench.scenarios import get_scenario
+from fkn_bench.sweep import SweepTask, make_objective, parse_space
+from fkn_bench.sweep.objective import CATCH
+
+SCENARIO_FILE = """
+[scenario.sweep-tiny]
+base = "ds1"
+n_steps = 3000
+"""
+
+# a small network on 3000 samples: a trial takes about a second per epoch
+FIXED = """
+[fixed]
+hidden = 8
+layers = 1
+epochs = 2
+window = 200
+loss_cut = 50
+samples_per_window = 8
+windows_per_batch = 4
+episodes = 1
+"""
+
+SPACE = FIXED + """
+[sweep]
+scenario = "sweep-tiny"
+sampler = "random-grid"
+trials = 4
+grid_trials = 2
+top_k = 2
+
+[sweep.pruner]
+kind = "median"
+n_startup_trials = 1
+n_warmup_steps = 0
+
+[params.lr]
+values = [1e-6, 0.1]
+
+[params.patience]
+values = [2, 3]
+"""
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.fixture(scope="module")
+def sweep(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """The tiny sweep, run once. Its random stage is seeded through the journal with two good
+    trials (lr 0.1: the validation RMSE drops in the first epoch; they differ only in the early-
+    stopping patience, which two epochs never reach, so their losses are identical and neither
+    prunes the other) followed by two that cannot learn (lr 1e-6): with two workers each bad trial
+    starts after a good one finished, so the median pruner stops it after its first epoch whatever
+    the scheduling."""
+    root = tmp_path_factory.mktemp("sweep")
+    (root / "scenarios.toml").write_text(SCENARIO_FILE)
+    (root / "space.toml").write_text(SPACE)
+    journal = root / "study.journal"
+    storage = JournalStorage(JournalFileBackend(str(journal)))
+    study = optuna.create_study(storage=storage, study_name="tiny.random", direction="minimize")
+    for lr, patience in ((0.1, 2), (0.1, 3), (1e-6, 2), (1e-6, 3)):
+        study.enqueue_trial({"lr": lr, "patience": patience})
+    argv = ["sweep", "--space", str(root / "space.toml"), "--scenario-file", str(root / "scenarios.toml"),
+            "--workers", "2", "--storage", str(journal), "--study-name", "tiny", "--out", str(root / "out"),
+            "--no-progress"]
+    code = main(argv)
+    return {"root": root, "out": root / "out", "journal": journal, "code": code, "argv": argv}
+
+
+def test_tiny_sweep_with_two_workers_on_one_journal(sweep: dict[str, Any]) -> None:
+    assert sweep["code"] == 0
+    out = sweep["out"]
+    rows = _rows(out / "trials.csv")
+    random_stage = [r for r in rows if r["stage"] == "random"]
+    grid_stage = [r for r in rows if r["stage"] == "grid"]
+    assert len(random_stage) == 4 and len(grid_stage) == 2
+    states = [(float(r["params_lr"]), r["state"]) for r in random_stage]
+    assert sorted(states) == [(1e-6, "PRUNED"), (1e-6, "PRUNED"), (0.1, "COMPLETE"), (0.1, "COMPLETE")]
+    pruned = [r for r in random_stage if r["state"] == "PRUNED"]
+    assert all(r["last_epoch_reported"] == "1" for r in pruned)
+    assert all(r["state"] == "COMPLETE" for r in grid_stage)
+    # every trial ran in a worker process, not in the test's
+    assert all(int(float(r["user_attrs_process"])) != os.getpid() for r in rows)
+    # the reduced grid spans the best two random trials within the budget of 2 points
+    summary = json.loads((out / "sweep.json").read_text())
+    assert summary["grid"] == {"lr": [0.1], "patience": [2, 3]}
+    assert summary["counts"]["random"]["pruned"] == 2
+    names = optuna.get_all_study_names(JournalStorage(JournalFileBackend(str(sweep["journal"]))))
+    assert sorted(names) == ["tiny.grid", "tiny.random"]
+
+
+def test_sweep_outputs_best_config_csv_and_figure(sweep: dict[str, Any]) -> None:
+    out = sweep["out"]
+    config = FlexKalmanNetConfig.from_toml(out / "best.toml")
+    assert config.hidden == 8 and config.window == 200 and config.lr == 0.1 and config.patience in (2, 3)
+    rows = [r for r in _rows(out / "trials.csv") if r["state"] == "COMPLETE"]
+    best = min(rows, key=lambda r: float(r["value"]))
+    assert float(best["params_lr"]) == config.lr and int(best["params_patience"]) == config.patience
+    assert (out / "parallel_coordinates.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    header = (out / "best.toml").read_text().splitlines()[0]
+    assert header.startswith("# Best configuration of fkn-bench sweep study 'tiny'")
+
+
+def test_rerunning_a_finished_sweep_adds_no_trials(sweep: dict[str, Any]) -> None:
+    assert main(sweep["argv"]) == 0
+    assert len(_rows(sweep["out"] / "trials.csv")) == 6
+
+
+def test_an_invalid_trial_fails_without_stopping_the_study(tmp_path: Path) -> None:
+    text = FIXED.replace("loss_cut = 50\n", "") + "\n[params.loss_cut]\nvalues = [50, 300]\n"
+    space = parse_space(tomllib.loads(text), "inline")
+    task = SweepTask("flexkalmannet", get_scenario("ds1", n_steps=3000), space, tmp_path)
+    study = optuna.create_study(direction="minimize")
+    study.enqueue_trial({"loss_cut": 300})  # loss_cut >= window: refused
+    study.enqueue_trial({"loss_cut": 50})
+    study.optimize(make_objective(task), n_trials=2, catch=CATCH)
+    failed, done = study.trials
+    assert failed.state == TrialState.FAIL and "loss_cut" in failed.user_attrs["error"]
+    assert done.state == TrialState.COMPLETE and done.user_attrs["epochs_run"] == 2
+    assert sorted(done.intermediate_values) == [1, 2] and done.value == min(done.intermediate_values.values())
+
+
+def test_a_generic_trainable_estimator_is_swept_through_its_train_function(tmp_path: Path) -> None:
+    from fkn_bench.estimators import registry
+    from fkn_bench.estimators.builtin import manual_estimator
+
+    def train(scenario: Any, *, out: Path, options: dict[str, Any], resume: bool = False,
+              progress: bool = True) -> dict[str, Any]:
+        if options["alpha"] < 0:
+            raise ValueError("alpha must be >= 0")
+        out.mkdir(parents=True, exist_ok=True)
+        losses = [1.0 + abs(options["alpha"] - 0.3) / epoch for epoch in (1, 2, 3)]
+        pd.DataFrame({"epoch": [1, 2, 3], "val_loss": losses}).to_csv(out / "history.csv", index=False)
+        return {"best_epoch": 3}
+
+    registry.register_estimator("sweep-test-estimator", manual_estimator("ekf"), train=train, overwrite=True)
+    try:
+        space = parse_space({"fixed": {"beta": 1}, "params": {"alpha": {"values": [-1.0, 0.0, 0.3]}}}, "inline")
+        study = optuna.create_study(direction="minimize")
+        for alpha in (-1.0, 0.0, 0.3):
+            study.enqueue_trial({"alpha": alpha})
+        study.optimize(make_objective(SweepTask("sweep-test-estimator", get_scenario("ds1"), space, tmp_path)),
+                       n_trials=3, catch=CATCH)
+        assert [t.state for t in study.trials] == [TrialState.FAIL, TrialState.COMPLETE, TrialState.COMPLETE]
+        assert study.best_params == {"alpha": 0.3} and study.best_value == pytest.approx(1.0)
+        assert study.trials[1].intermediate_values == {1: pytest.approx(1.3), 2: pytest.approx(1.15), 3: pytest.approx(1.1)}
+        assert (tmp_path / "trials" / "00001" / "history.csv").is_file()
+    finally:
+        registry._REGISTRY.pop("sweep-test-estimator", None)
+
+
+def test_cli_usage_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    space = tmp_path / "space.toml"
+    space.write_text("[params.hiddn]\nvalues = [8, 16]\n")
+    assert main(["sweep", "--space", str(space), "--out", str(tmp_path / "o")]) == 2
+    assert "hiddn" in capsys.readouterr().err
+    assert main(["sweep", "--space", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "o")]) == 2
+    assert "not found" in capsys.readouterr().err
+    space.write_text("[params.lr]\nlow = 1e-4\nhigh = 1e-2\n")
+    assert main(["sweep", "--space", str(space), "--sampler", "grid", "--out", str(tmp_path / "o")]) == 2
+    assert "grid_points" in capsys.readouterr().err
+    assert main(["sweep", "--space", "quick", "--estimator", "manual-ekf", "--out", str(tmp_path / "o")]) == 2
+    assert "not trainable" in capsys.readouterr().err
+    assert main(["sweep", "--space", "quick", "--workers", "0", "--out", str(tmp_path / "o")]) == 2
+    assert "workers" in capsys.readouterr().err
+    space.write_text("[fixed]\nepochs = 0\n[params.lr]\nvalues = [0.01]\n")
+    assert main(["sweep", "--space", str(space), "--out", str(tmp_path / "o")]) == 2
+    assert "epochs" in capsys.readouterr().err
