@@ -17,6 +17,7 @@ Examples::
     fkn-bench bench run -k "filter or online"      # a part of it
     fkn-bench bench report bench.json
     fkn-bench bench gate --check ekf-forward --check train-epoch
+    fkn-bench bench gate --check online-step:my-filter --calibrate 10   # ratios and a threshold
 """
 
 from __future__ import annotations
@@ -56,6 +57,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     gate.add_argument("--check", action="append", metavar="NAME", help="only this check (repeatable; default: all)")
     gate.add_argument("--attempts", type=int, default=3, help="measurements before a check fails (default: 3)")
     gate.add_argument("--list", action="store_true", help="list the checks and thresholds, measure nothing")
+    gate.add_argument("--calibrate", type=int, metavar="N",
+                      help="measure each check N times and with its work doubled; print the ratios and a threshold")
     gate.add_argument("--json", action="store_true")
     gate.set_defaults(handler=run_gate)
 
@@ -221,6 +224,18 @@ def run_gate(args: argparse.Namespace) -> int:
     if args.list:
         for check in checks:
             print(f"{check.name:28s} min ratio {check.min_ratio:<7g} {check.description}")
+        return 0
+    if args.calibrate is not None:
+        if args.calibrate < 1:
+            raise UsageError("--calibrate needs N >= 1")
+        entries = {}
+        for check in checks:
+            entries[check.name] = speed.calibrate(check, runs=args.calibrate, doubled_runs=max(1, args.calibrate // 2))
+            if not args.json:
+                print(f"{check.name}: {json.dumps({k: round(v, 4) for k, v in entries[check.name].items()})} "
+                      f"(threshold now {check.min_ratio:g})", flush=True)
+        if args.json:
+            print(json.dumps(entries, indent=2))
         return 0
     outcomes = []
     for check in checks:

@@ -1,0 +1,72 @@
+"""``fkn-bench bench report`` / ``gate`` (the speed suite's summary and the speed gate's CLI)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from fkn_bench.cli import main
+from fkn_bench.cli.bench import summarize_benchmarks
+
+DOCUMENT = {
+    "machine_info": {"machine": "x86_64", "python_implementation": "CPython", "python_version": "3.11.7",
+                     "cpu": {"brand_raw": "Test CPU", "count": 2}},
+    "commit_info": {"id": "0123456789abcdef", "dirty": True},
+    "datetime": "2026-01-01T00:00:00",
+    "version": "5.3.1",
+    "benchmarks": [
+        {"name": "test_filter_forward[ekf]", "group": None, "extra_info": {"steps": 12800, "what": "ekf run()"},
+         "stats": {"min": 0.09, "max": 0.2, "mean": 0.11, "stddev": 0.011, "rounds": 5, "median": 0.1}},
+        {"name": "test_without_steps", "group": None, "extra_info": {},
+         "stats": {"min": 2e-6, "max": 3e-6, "mean": 2.5e-6, "stddev": 1e-7, "rounds": 100, "median": 2.5e-6}},
+    ],
+}
+
+
+def test_summary_rows_have_throughputs() -> None:
+    rows = summarize_benchmarks(DOCUMENT)
+    assert rows[0]["steps_per_s"] == pytest.approx(128000.0)
+    assert rows[1]["steps"] is None and rows[1]["steps_per_s"] is None
+
+
+def test_report_prints_a_table_with_steps_per_second(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    path = tmp_path / "bench.json"
+    path.write_text(json.dumps(DOCUMENT))
+    assert main(["bench", "report", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "Test CPU, 2 CPUs, CPython 3.11.7; commit 0123456789ab (dirty)" in out
+    line = next(l for l in out.splitlines() if l.startswith("test_filter_forward[ekf]"))
+    assert "100 ms" in line and "110 ms" in line and "12800" in line and "128 k" in line and "10%" in line
+    assert main(["bench", "report", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["benchmarks"][0]["steps_per_s"] == pytest.approx(128000.0)
+
+
+def test_report_errors(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert main(["bench", "report", str(tmp_path / "missing.json")]) == 2
+    assert "not found" in capsys.readouterr().err
+    (tmp_path / "other.json").write_text('{"results": []}')
+    assert main(["bench", "report", str(tmp_path / "other.json")]) == 2
+    assert "--benchmark-json" in capsys.readouterr().err
+
+
+def test_gate_lists_checks_and_rejects_unknown_ones(capsys: pytest.CaptureFixture) -> None:
+    assert main(["bench", "gate", "--list"]) == 0
+    out = capsys.readouterr().out
+    assert "ekf-forward" in out and "train-epoch" in out and "online-step:manual-ekf" in out
+    assert main(["bench", "gate", "--check", "nonsense"]) == 2
+    assert "valid checks" in capsys.readouterr().err
+
+
+def test_gate_measures_one_check(capsys: pytest.CaptureFixture) -> None:
+    assert main(["bench", "gate", "--check", "online-step:manual-ekf", "--json"]) == 0
+    (outcome,) = json.loads(capsys.readouterr().out)
+    assert outcome["check"] == "online-step:manual-ekf" and outcome["passed"]
+    assert outcome["attempts"][0]["ratio"] >= outcome["min_ratio"]
+
+
+def test_gate_calibration_prints_ratios_and_a_threshold(capsys: pytest.CaptureFixture) -> None:
+    assert main(["bench", "gate", "--check", "online-step:manual-ekf", "--calibrate", "2", "--json"]) == 0
+    entry = json.loads(capsys.readouterr().out)["online-step:manual-ekf"]
+    assert entry["n"] == 2 and entry["doubled_max"] < entry["suggested_min_ratio"] < entry["min"]

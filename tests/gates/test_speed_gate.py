@@ -1,0 +1,103 @@
+"""The speed-ratio gate (:mod:`fkn_bench.gates.speed`), run by the default test command.
+
+For every check with a regression threshold: the real implementation passes three gate
+evaluations in a row, and the same implementation made to do its work twice (injected here with
+:func:`~fkn_bench.gates.speed.doubled`) fails the gate. Nothing here compares a time with a stored
+time: each check is a ratio against a reference timed beside it in this process.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import pytest
+
+from fkn_bench.gates import speed
+from fkn_bench.runtime import torch_threads
+
+CONSECUTIVE_PASSES = 3
+
+
+def _checks() -> list[speed.RatioCheck]:
+    return speed.all_checks()
+
+
+def _gated() -> list[speed.RatioCheck]:
+    """Checks that detect a 2x regression: the built-in ones and the estimators with their own
+    threshold (the others get only the generous default budget)."""
+    return [c for c in _checks() if not c.name.startswith("online-step:") or c.name.split(":", 1)[1] in speed.ONLINE_STEP_MIN_RATIOS]
+
+
+@pytest.fixture(scope="module")
+def workloads() -> Iterator[dict[str, speed.Workloads]]:
+    """Workloads built once per check (data generation and model construction are not timed)."""
+    built: dict[str, speed.Workloads] = {}
+    yield built
+
+
+def _workloads(cache: dict[str, speed.Workloads], check: speed.RatioCheck) -> speed.Workloads:
+    if check.name not in cache:
+        with torch_threads():
+            cache[check.name] = check.setup()
+    return cache[check.name]
+
+
+@pytest.mark.parametrize("check", _checks(), ids=lambda c: c.name)
+def test_real_implementation_passes_three_evaluations_in_a_row(check: speed.RatioCheck, workloads: dict) -> None:
+    built = _workloads(workloads, check)
+    outcomes = [speed.evaluate(check, workloads=built) for _ in range(CONSECUTIVE_PASSES)]
+    print("\n" + speed.format_outcomes(outcomes))
+    assert all(o.passed for o in outcomes), (
+        f"{check.name} is slower than its reference allows ({check.description}):\n"
+        + speed.format_outcomes(outcomes)
+        + "\nEvery attempt of an evaluation was below the threshold: a real slowdown, not noise "
+        "(see fkn_bench/gates/speed.py; print the ratios with `fkn-bench bench gate`)."
+    )
+
+
+@pytest.mark.parametrize("check", _gated(), ids=lambda c: c.name)
+def test_implementation_doing_its_work_twice_trips_the_gate(check: speed.RatioCheck, workloads: dict) -> None:
+    built = _workloads(workloads, check)
+    with speed.doubled(check.hotspot, check.combine):
+        outcome = speed.evaluate(check, workloads=built)
+    print("\n" + speed.format_outcomes([outcome]))
+    assert not outcome.passed, (
+        f"{check.name}: a 2x slower {check.hotspot} still passed the gate:\n" + speed.format_outcomes([outcome])
+    )
+    assert len(outcome.attempts) == 3  # measured again each time before failing
+
+
+def test_doubled_restores_the_original() -> None:
+    from fkn_bench.filters.ekf import ExtendedKalmanFilter
+    from fkn_bench.filters.base import KalmanFilter
+
+    assert "run" not in vars(ExtendedKalmanFilter)  # inherited: shadowed, then removed again
+    with speed.doubled("fkn_bench.filters.ekf:ExtendedKalmanFilter.run"):
+        assert "run" in vars(ExtendedKalmanFilter)
+    assert "run" not in vars(ExtendedKalmanFilter)
+    assert ExtendedKalmanFilter.run is KalmanFilter.run
+
+
+def test_numpy_reference_matches_the_batched_filter() -> None:
+    """The reference does the same work as the candidate: same numbers, to rounding."""
+    import numpy as np
+    import torch
+
+    from fkn_bench.filters import make_filter
+
+    z, m, dt = speed.episodes_for("ds1", 4, 120)
+    noise = speed.manual_noise("ekf")
+    reference = speed.numpy_ekf_loop(z, m, *(t.numpy() for t in (noise.process, noise.measurement, noise.initial)), dt)
+    with torch.no_grad():
+        batched = make_filter("ekf").run(noise, torch.from_numpy(np.array(z)), torch.from_numpy(np.array(m)), dt=dt)
+    initialised = batched.initialised.numpy()
+    np.testing.assert_allclose(reference[initialised], batched.means.numpy()[initialised], rtol=0, atol=1e-10)
+
+
+def test_thresholds_separate_the_measured_ratios() -> None:
+    """Each threshold lies below every ratio measured for the real code and above every ratio
+    measured with the work doubled (:data:`~fkn_bench.gates.speed.MEASURED`)."""
+    for check in _gated():
+        measured = speed.MEASURED.get(check.name)
+        assert measured is not None, f"{check.name}: record its measured ratios in speed.MEASURED"
+        assert measured["doubled_max"] < check.min_ratio < measured["min"], check.name
