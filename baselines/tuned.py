@@ -51,7 +51,7 @@ from fkn_bench.filters import KalmanFilter, ParameterSet, make_filter
 from fkn_bench.io import atomic_path
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.training import DirectParameters, NoiseModel, TrainConfig, Trainer, TrainingData
-from fkn_bench.training.artifacts import ArtifactError, artifact_path, read_artifact, write_artifact
+from fkn_bench.training.artifacts import ArtifactError, artifact_label, artifact_path, read_artifact, write_artifact
 from fkn_bench.training.objectives import aligned_state_error, state_mse
 from fkn_bench.types import STATE_NAMES
 
@@ -107,7 +107,7 @@ class TunedEKFEstimator(KalmanEstimator):
     def from_artifact(cls, path: str | Path, *, name: str | None = None) -> TunedEKFEstimator:
         document = read_artifact(path)
         metadata = {k: document.get(k) for k in ("family", "scenario", "training", "provenance")}
-        metadata["artifact"] = str(path)
+        metadata["artifact"] = artifact_label(path)
         config = dict(document["estimator_config"])
         estimator = name or document["estimator"]
         config["name"] = estimator

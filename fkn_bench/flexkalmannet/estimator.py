@@ -27,7 +27,7 @@ from fkn_bench.filters.pose import with_unit_quaternion
 from fkn_bench.flexkalmannet.checkpoint import model_from_checkpoint
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
-from fkn_bench.training.artifacts import ArtifactError, artifact_path, read_artifact
+from fkn_bench.training.artifacts import ArtifactError, artifact_label, artifact_path, read_artifact
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["FlexKalmanNetEstimator", "AdaptiveFlexKalmanNetEstimator", "flexkalmannet_factory", "deployed_estimator_config"]
@@ -65,7 +65,7 @@ class FlexKalmanNetEstimator(KalmanEstimator):
     def from_artifact(cls, path: str | Path) -> FlexKalmanNetEstimator:
         document = read_artifact(path)
         metadata = {k: document.get(k) for k in ("family", "scenario", "training", "provenance")}
-        metadata["artifact"] = str(path)
+        metadata["artifact"] = artifact_label(path)
         return cls(metadata=metadata, **document["estimator_config"])
 
     @classmethod

@@ -26,6 +26,7 @@ __all__ = [
     "ARTIFACT_FORMAT_VERSION",
     "ArtifactError",
     "artifact_path",
+    "artifact_label",
     "write_artifact",
     "read_artifact",
     "run_provenance",
@@ -42,6 +43,19 @@ class ArtifactError(ValueError):
 def artifact_path(estimator: str, family: str) -> Path:
     """Where the committed artefact of ``estimator`` for model family ``family`` lives."""
     return Path(str(resources.files("fkn_bench.baselines"))) / "params" / f"{estimator}-{family}.json"
+
+
+def artifact_label(path: str | Path) -> str:
+    """How an estimator's config names the artefact it was built from: ``fkn_bench.baselines/
+    params/<file>`` for a committed one (independent of where the package is installed, so that
+    configuration fingerprints, and with them the committed leaderboards, do not change with the
+    checkout's location), else the path as the user gave it."""
+    committed = Path(str(resources.files("fkn_bench.baselines"))) / "params"
+    try:
+        relative = Path(path).resolve().relative_to(committed.resolve())
+    except (OSError, ValueError):
+        return str(path)
+    return f"fkn_bench.baselines/params/{relative.as_posix()}"
 
 
 def run_provenance() -> dict[str, Any]:

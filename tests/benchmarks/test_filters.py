@@ -1,4 +1,5 @@
-"""Batched filter forward and forward + backward (EKF, UKF, MEKF), and the plain numpy reference."""
+"""Batched filter forward and forward + backward (EKF, UKF, MEKF; the EKF also at B = 1024, the
+filter core's throughput target), and the plain numpy reference."""
 
 from __future__ import annotations
 
@@ -60,3 +61,47 @@ def test_numpy_reference_loop(benchmark: Any) -> None:
     batch = 4
     benchmark.pedantic(lambda: numpy_ekf_loop(z[:batch], m[:batch], Q, R, P0, dt), rounds=5, warmup_rounds=1)
     benchmark.extra_info.update(steps=batch * STEPS, what=f"numpy EKF loop, {batch} x {STEPS}")
+
+
+LARGE_BATCH, LARGE_STEPS = 1024, 200
+
+
+@pytest.fixture(scope="module")
+def large_data() -> tuple[torch.Tensor, torch.Tensor, float]:
+    """ds1 (a measurement every 10 steps), 1024 test-split sequences of 200 steps."""
+    z, m, dt = episodes_for("ds1", LARGE_BATCH, LARGE_STEPS)
+    return torch.from_numpy(np.array(z)), torch.from_numpy(np.array(m)), dt
+
+
+@pytest.mark.parametrize("outputs", ["means", "means+covariances"])
+def test_ekf_forward_batch_1024(benchmark: Any, large_data: Any, outputs: str) -> None:
+    """The filter core's throughput target (B = 1024, float64, one torch thread), with and
+    without storing the per-step covariances and innovations."""
+    z, m, dt = large_data
+    noise = manual_noise("ekf")
+    filt = make_filter("ekf")
+    store = outputs != "means"
+
+    def run() -> Any:
+        with torch.no_grad():
+            return filt.run(noise, z, m, dt=dt, store_covariances=store, store_innovations=store)
+
+    benchmark.pedantic(run, rounds=3, warmup_rounds=1)
+    benchmark.extra_info.update(steps=LARGE_BATCH * LARGE_STEPS, what=f"ekf run(), {LARGE_BATCH} x {LARGE_STEPS}, {outputs}")
+
+
+def test_ekf_forward_backward_batch_1024(benchmark: Any, large_data: Any) -> None:
+    z, m, dt = large_data
+    noise = manual_noise("ekf")
+    filt = make_filter("ekf")
+    log_std = torch.log(torch.diagonal(noise.process)).mul(0.5).clone().requires_grad_(True)
+
+    def run() -> Any:
+        process = torch.diag_embed(torch.exp(2.0 * log_std))
+        result = filt.run(NoiseParameters(process, noise.measurement, noise.initial), z, m, dt=dt,
+                          store_covariances=False, store_innovations=False)
+        return torch.autograd.grad(result.means.square().mean(), log_std)
+
+    benchmark.pedantic(run, rounds=2, warmup_rounds=1)
+    benchmark.extra_info.update(steps=LARGE_BATCH * LARGE_STEPS,
+                                what=f"ekf run() + gradient of sigma_Q, {LARGE_BATCH} x {LARGE_STEPS}")

@@ -31,3 +31,23 @@ def test_online_step(benchmark: Any, name: str) -> None:
 
     benchmark.pedantic(run, rounds=5, warmup_rounds=1)
     benchmark.extra_info.update(steps=STEPS, what=f"{name} reset() + step(), ds1 seed 0")
+
+
+def test_online_ekf_predict_update(benchmark: Any) -> None:
+    """One predict + update of the lean numpy EKF (:mod:`fkn_bench.filters.online_ekf`) that the
+    EKF estimators' ``step()`` runs: the filter core's online target is measured on this."""
+    from fkn_bench.filters import online_ekf
+
+    z, m, dt = episodes_for("ds1", 1, STEPS)
+    noise = make_estimator("manual-ekf").noise_parameters()
+    Q, R, P0 = (t.numpy() for t in (noise.process, noise.measurement, noise.initial))
+    z0 = online_ekf.sanitize_measurement(z[0, 0])
+    x0 = online_ekf.initial_state(z0)
+    measurement = online_ekf.sanitize_measurement(z[0, int(np.flatnonzero(m[0])[1])])
+
+    def predict_update() -> Any:
+        x, P = online_ekf.predict(x0, P0, Q, dt)
+        return online_ekf.update(x, P, measurement, R)
+
+    benchmark(predict_update)
+    benchmark.extra_info.update(steps=1, what="online_ekf.predict + update (numpy), one step")

@@ -200,3 +200,23 @@ def test_tolerances(group: str, metric: str, committed: float, now: float, ok: b
 def test_tolerance_text() -> None:
     assert str(tolerance_for("stability", "failed")) == "exact"
     assert str(Tolerance(1e-6, 1e-12)) == "1e-12 + 1e-06 rel"
+
+
+def test_configurations_do_not_depend_on_the_checkout_location() -> None:
+    """The committed results carry each estimator's configuration fingerprint; a fingerprint that
+    included an absolute path would make every other checkout (CI's clean clone) look stale."""
+    import json
+
+    from fkn_bench.estimators import make_estimator
+    from fkn_bench.scenarios import get_scenario
+    from fkn_bench.training.artifacts import artifact_path
+
+    package_root = str(artifact_path("x", "y").parents[2])
+    for name in [n for n in estimator_names() if n not in EXCLUDED]:
+        for scenario in ("ds1", "ds2"):
+            try:
+                config = make_estimator(name, scenario=get_scenario(scenario)).to_config()
+            except Exception:  # noqa: BLE001 - unavailable for this scenario
+                continue
+            text = json.dumps(config, default=str)
+            assert package_root not in text and str(REPO) not in text, f"{name} on {scenario}: {text[:300]}"

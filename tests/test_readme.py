@@ -1,0 +1,54 @@
+"""README.md stays true: its leaderboard excerpt is copied from the committed ``leaderboards/ds1.md``
+(the same estimators in the same order with the same numbers), and the test command that
+``.ci/run`` extracts is the one README shows."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+README = REPO / "README.md"
+
+
+def _markdown_table_after(text: str, marker: str) -> list[dict[str, str]]:
+    """Rows (header -> cell) of the first Markdown table after ``marker``."""
+    lines = text[text.index(marker):].splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("|"))
+    table = []
+    for line in lines[start:]:
+        if not line.startswith("|"):
+            break
+        table.append([cell.strip() for cell in line.strip().strip("|").split("|")])
+    header, rows = table[0], table[2:]
+    return [dict(zip(header, row)) for row in rows]
+
+
+def _column(header: str) -> str:
+    """README's column name without its explanation in brackets: ``ANEES (12 if consistent)``."""
+    return re.sub(r"\s*\(.*\)$", "", header)
+
+
+def test_leaderboard_excerpt_matches_the_committed_ds1_leaderboard() -> None:
+    excerpt = _markdown_table_after(README.read_text(), "Excerpt of")
+    committed = _markdown_table_after((REPO / "leaderboards" / "ds1.md").read_text(), "## Ranking")
+    by_estimator = {row["estimator"]: row for row in committed}
+    assert excerpt, "README has no leaderboard excerpt"
+    ranked = [row["estimator"] for row in committed if row["rank"] != "–"]
+    shown = [row["estimator"] for row in excerpt if row["rank"] != "–"]
+    assert shown == ranked[: len(shown)], "README's excerpt must show the top of the ds1 ranking in order"
+    for row in excerpt:
+        assert row["estimator"] in by_estimator, f"{row['estimator']} is not on leaderboards/ds1.md"
+        for header, value in row.items():
+            assert by_estimator[row["estimator"]][_column(header)] == value, (
+                f"README excerpt, {row['estimator']}, {header}: {value} but leaderboards/ds1.md has "
+                f"{by_estimator[row['estimator']][_column(header)]} (copy the regenerated table)"
+            )
+
+
+def test_ci_runs_the_readme_test_command() -> None:
+    awk = re.search(r"command=\$\(awk '([^']*)' README.md\)", (REPO / ".ci" / "run").read_text())
+    assert awk, ".ci/run no longer extracts the command with awk"
+    extracted = subprocess.run(["awk", awk.group(1), str(README)], capture_output=True, text=True, check=True).stdout
+    assert extracted.strip() == 'python -m pip install torch==2.13.0 -e ".[dev]" && python -m pytest'
