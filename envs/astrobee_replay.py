@@ -10,7 +10,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fkn_bench.envs.astrobee_tumble import EPISODE_SEED_BOUND, _check_weights
+from fkn_bench.envs.astrobee_tumble import _check_weights, episode_seed_for_reset
 from fkn_bench.envs.rewards import estimate_cost_scalar
 from fkn_bench.envs.spaces import MeasuredPose, action_space, observation_space, validate_actions
 from fkn_bench.scenarios import Scenario
@@ -149,12 +149,7 @@ class AstrobeeReplayEnv(gym.Env[dict[str, Any], ArrayF]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, Any]]:
         super().reset(seed=seed)
-        if seed is not None:
-            if seed < 0:
-                raise ValueError(f"seed must be a non-negative integer (got {seed})")
-            self.episode_seed = int(seed)
-        else:
-            self.episode_seed = int(self.np_random.integers(EPISODE_SEED_BOUND))
+        self.episode_seed = episode_seed_for_reset(seed, self.np_random)
         episodes = self.trajectory.episodes(self.episode_seed)
         self._meas, self._valid = episodes.measurements[0], episodes.valid[0]
         self._index = 0

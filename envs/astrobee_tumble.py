@@ -15,10 +15,20 @@ from fkn_bench.envs.spaces import MeasuredPose, action_space, observation_space,
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.types import ArrayF
 
-__all__ = ["AstrobeeTumbleEnv", "EPISODE_SEED_BOUND"]
+__all__ = ["AstrobeeTumbleEnv", "EPISODE_SEED_BOUND", "episode_seed_for_reset"]
 
 EPISODE_SEED_BOUND = 2**31
 """Episode seeds drawn by an unseeded ``reset()`` lie in ``[0, EPISODE_SEED_BOUND)``."""
+
+
+def episode_seed_for_reset(seed: int | None, np_random: np.random.Generator) -> int:
+    """The episode seed of ``reset(seed=...)``: ``seed`` itself (a non-negative integer), else one
+    drawn from the environment's ``np_random`` (seeded by Gymnasium on the first reset)."""
+    if seed is None:
+        return int(np_random.integers(EPISODE_SEED_BOUND))
+    if seed < 0:
+        raise ValueError(f"seed must be a non-negative integer (got {seed})")
+    return int(seed)
 
 
 class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
@@ -145,12 +155,7 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, Any]]:
         super().reset(seed=seed)
-        if seed is not None:
-            if seed < 0:
-                raise ValueError(f"seed must be a non-negative integer (got {seed})")
-            self.episode_seed = int(seed)
-        else:
-            self.episode_seed = int(self.np_random.integers(EPISODE_SEED_BOUND))
+        self.episode_seed = episode_seed_for_reset(seed, self.np_random)
         self._stream = EpisodeStream(self.scenario, [self.episode_seed])
         self._index = 0
         self._load_chunk()

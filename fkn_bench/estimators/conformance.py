@@ -1,0 +1,110 @@
+"""Conformance checks of the estimator API's input rules, for the project's estimators and yours.
+
+Every estimator of fkn-bench follows the same documented rules for bad measurements
+(:mod:`fkn_bench.estimators.api`): a measurement inside the mask that is non-finite or has a
+(near) zero-norm quaternion is skipped (predict only); measured quaternions are renormalised, so
+their scale changes nothing; q and -q are the same attitude, so sign flips change nothing but the
+sign of the estimated quaternion; a sequence reports the prior until its first usable
+measurement; nothing outside the mask is read; and no output is ever NaN or infinite.
+
+:func:`hostile_measurements` builds a small batch that breaks every one of those at once, and
+:func:`check_input_rules` runs an estimator on it and raises ``AssertionError`` naming the rule it
+breaks. Use it in your own tests::
+
+    from fkn_bench.estimators.conformance import check_input_rules
+
+    def test_my_filter_follows_the_input_rules():
+        check_input_rules(MyEstimator())
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fkn_bench.types import ArrayB, ArrayF
+
+__all__ = ["HostileInput", "hostile_measurements", "check_input_rules"]
+
+
+@dataclass(frozen=True)
+class HostileInput:
+    """Measurements ``(B, T, 7)``, mask ``(B, T)``, times ``(T,)`` in s, the time step ``dt`` (s),
+    and the ``(sequence, step)`` indices of the unusable measurements placed inside the mask."""
+
+    measurements: ArrayF
+    mask: ArrayB
+    times: ArrayF
+    dt: float
+    unusable: tuple[tuple[int, int], ...]
+    late_sequence: int | None
+
+
+def hostile_measurements(seeds: tuple[int, ...] = (0, 1, 2), steps: int = 300, late_start: int | None = 45) -> HostileInput:
+    """ds1-flips test-split sequences (random sign flips, 1% gross outliers) made worse: in
+    sequence 0 a NaN, an inf and a zero quaternion inside the mask (its 3rd, 5th and 7th
+    measurements) and a quaternion scaled by 3 (9th); in sequence 1 every quaternion scaled by
+    0.25 and the value 7.0 everywhere outside the mask; and, with ``late_start``, sequence 2
+    masked until that step (it initialises late). Needs at least three seeds with ``late_start``."""
+    from fkn_bench.envs import generate_episodes
+
+    if late_start is not None and len(seeds) < 3:
+        raise ValueError(f"late_start needs at least three seeds (got {len(seeds)})")
+    episodes = generate_episodes("ds1-flips", list(seeds), split="test").window(0, steps)
+    z, mask = episodes.measurements.copy(), episodes.valid.copy()
+    measured = np.flatnonzero(mask[0])
+    z[0, measured[2], 3] = np.nan
+    z[0, measured[4], 5] = np.inf
+    z[0, measured[6], :4] = 0.0
+    z[0, measured[8], :4] *= 3.0
+    z[1, mask[1], :4] *= 0.25
+    z[~mask] = np.nan
+    z[1, ~mask[1]] = 7.0  # garbage outside the mask
+    if late_start is not None:
+        mask[2, :late_start] = False
+    unusable = tuple((0, int(measured[i])) for i in (2, 4, 6))
+    return HostileInput(z, mask, np.asarray(episodes.times), float(episodes.scenario.dt), unusable,
+                        2 if late_start is not None else None)
+
+
+def _close(actual: ArrayF, expected: ArrayF, atol: float, rule: str) -> None:
+    np.testing.assert_allclose(actual, expected, rtol=0, atol=atol, err_msg=f"input rule broken: {rule}")
+
+
+def check_input_rules(estimator: object, hostile: HostileInput | None = None, *, atol: float = 1e-11) -> None:
+    """Run ``estimator.estimate`` on ``hostile`` (default :func:`hostile_measurements`) and check
+    the rules of the module docstring; raises ``AssertionError`` naming the first rule broken.
+    ``atol`` bounds the differences that rounding may leave between equivalent inputs."""
+    data = hostile if hostile is not None else hostile_measurements()
+    z, mask, dt = data.measurements, data.mask, data.dt
+    result = estimator.estimate(z, mask, dt)  # type: ignore[attr-defined]
+    for name in ("means", "covariances", "error_covariances", "innovations", "innovation_covariances"):
+        array = getattr(result, name, None)
+        if array is not None:
+            assert np.isfinite(array).all(), f"input rule broken: {name} must be finite"
+    innovation_mask = getattr(result, "innovation_mask", None)
+    if innovation_mask is not None:
+        for b, t in data.unusable:
+            assert not innovation_mask[b, t], f"input rule broken: the unusable measurement at ({b}, {t}) was used"
+    skipped = mask.copy()
+    for b, t in data.unusable:
+        skipped[b, t] = False
+    reference = estimator.estimate(np.nan_to_num(z, nan=0.0, posinf=0.0), skipped, dt)  # type: ignore[attr-defined]
+    _close(result.means, reference.means, atol, "unusable measurements are skipped (same as masked)")
+    rescaled = z.copy()
+    rescaled[..., :4] *= 10.0
+    _close(estimator.estimate(rescaled, mask, dt).means, result.means, atol,  # type: ignore[attr-defined]
+           "measured quaternions are renormalised (their scale changes nothing)")
+    flipped = z.copy()
+    flipped[..., :4] *= np.where(np.arange(z.shape[1]) % 2 == 0, -1.0, 1.0)[None, :, None]
+    other = estimator.estimate(flipped, mask, dt).means  # type: ignore[attr-defined]
+    _close(other[..., 4:], result.means[..., 4:], atol, "sign flips change no position, rate or velocity")
+    _close(np.abs(other[..., :4]), np.abs(result.means[..., :4]), atol, "sign flips change only the quaternion's sign")
+    initialised = getattr(result, "initialised", None)
+    if data.late_sequence is not None and initialised is not None:
+        first = int(np.flatnonzero(mask[data.late_sequence])[0])
+        row = initialised[data.late_sequence]
+        assert not row[:first].any() and row[first:].all(), (
+            "input rule broken: a sequence reports the prior until its first usable measurement"
+        )
