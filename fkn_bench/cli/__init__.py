@@ -43,9 +43,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     from fkn_bench.scenarios import ConfigError
 
     parser = build_parser()
-    if not (sys.argv[1:] if argv is None else list(argv)):  # bare `fkn-bench`: show what there is
-        parser.print_help()
-        return 0
     args = parser.parse_args(argv)
     try:
         return int(args.handler(args) or 0)
