@@ -131,14 +131,19 @@ class PoseTwistModel(StateSpaceModel):
 
         ``E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]`` (the quaternion rows of ``F - A``, with
         ``A`` the identity plus ``r += dt v``) is linear in the state: ``E = x @ B`` for a
-        constant basis ``B``. Since ``Omega(w) q = Theta(q) w``, ``E x = dt Theta(q) w`` is twice
-        the quaternion increment, so ``f(x) = (A + E/2) x`` and ``F = A + E``.
+        constant basis ``B``, and ``F = A + E``. The quaternion increment is
+        ``dt/2 Theta(q) w = dt/2 Omega(w) q``, the first block of ``E`` times ``q``, so
+        ``f(x) = A x + [dt/2 Omega(w) q, 0]``. Only ``E``'s four rows are formed and multiplied:
+        a (B, 13, 13) product for the mean would cost a (B, 13, 13) outer product in the backward
+        pass at every step.
         """
         batch = x.shape[0]
         A, basis, zeros = self._transition_constants(x.dtype, dt)
-        E = torch.cat(((x @ basis).view(batch, 4, 13), zeros.expand(batch, 9, 13)), dim=1)
-        mean = (torch.add(A, E, alpha=0.5) @ x.unsqueeze(-1)).squeeze(-1)
-        return mean, A + E
+        E = (x @ basis).view(batch, 4, 13)  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
+        increment = (E[:, :, 0:4] @ x[:, 0:4].unsqueeze(-1)).squeeze(-1)  # dt/2 Omega(w) q
+        mean = torch.addmm(torch.cat((increment, zeros[:, 0].expand(batch, 9)), dim=1), x, A.T)
+        F = torch.cat((A[0:4] + E, A[4:13].expand(batch, 9, 13)), dim=1)
+        return mean, F
 
     def _transition_constants(self, dtype: torch.dtype, dt: float) -> tuple[Tensor, Tensor, Tensor]:
         key = ("transition", dtype, float(dt))
