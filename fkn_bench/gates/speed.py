@@ -81,6 +81,7 @@ __all__ = [
     "doubled",
     "format_outcomes",
     "numpy_ekf_loop",
+    "forward_backward_workload",
 ]
 
 Workload = Callable[[], Any]
@@ -366,25 +367,38 @@ FILTER_STEPS = 100
 """Steps per sequence of the filter checks (10 measurements at ds1's one per 10 steps)."""
 
 
+def forward_backward_workload(variant_filter: Any, noise: Any, z: Any, mask: Any, dt: float) -> Workload:
+    """A call that runs ``variant_filter`` on ``z (B, T, 7)``, ``mask (B, T)`` (tensors) with the
+    process noise parameterised by its log standard deviations, and returns the gradient of the
+    mean squared estimate with respect to them: the forward + backward work of training."""
+    import torch
+
+    from fkn_bench.filters import NoiseParameters
+
+    log_std = torch.log(torch.diagonal(noise.process)).mul(0.5).clone().requires_grad_(True)
+
+    def forward_backward() -> Any:
+        process = torch.diag_embed(torch.exp(2.0 * log_std))
+        result = variant_filter.run(NoiseParameters(process, noise.measurement, noise.initial), z, mask, dt=dt,
+                                    store_covariances=False, store_innovations=False)
+        (gradient,) = torch.autograd.grad(result.means.square().mean(), log_std)
+        return gradient
+
+    return forward_backward
+
+
 def _filter_setup(variant: str, *, backward: bool = False) -> Callable[[], Workloads]:
     def setup() -> Workloads:
         import torch
 
-        from fkn_bench.filters import NoiseParameters, make_filter
+        from fkn_bench.filters import make_filter
 
         z, m, dt = episodes_for("ds1", FILTER_BATCH, FILTER_STEPS)
         noise = manual_noise(variant)
         variant_filter = make_filter(variant)
         zt, mt = torch.from_numpy(np.array(z)), torch.from_numpy(np.array(m))
         if backward:
-            log_std = torch.log(torch.diagonal(noise.process)).mul(0.5).clone().requires_grad_(True)
-
-            def candidate() -> Any:
-                process = torch.diag_embed(torch.exp(2.0 * log_std))
-                result = variant_filter.run(NoiseParameters(process, noise.measurement, noise.initial), zt, mt, dt=dt,
-                                            store_covariances=False, store_innovations=False)
-                (gradient,) = torch.autograd.grad(result.means.square().mean(), log_std)
-                return gradient
+            candidate = forward_backward_workload(variant_filter, noise, zt, mt, dt)
         else:
             def candidate() -> Any:
                 with torch.no_grad():

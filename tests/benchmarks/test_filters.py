@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from fkn_bench.filters import NoiseParameters, make_filter
-from fkn_bench.gates.speed import episodes_for, manual_noise, numpy_ekf_loop
+from fkn_bench.filters import make_filter
+from fkn_bench.gates.speed import episodes_for, forward_backward_workload, manual_noise, numpy_ekf_loop
 
 
 BATCH, STEPS = 32, 400
@@ -39,16 +39,7 @@ def test_filter_forward(benchmark: Any, data: Any, variant: str) -> None:
 @pytest.mark.parametrize("variant", ["ekf", "ukf", "mekf"])
 def test_filter_forward_backward(benchmark: Any, data: Any, variant: str) -> None:
     z, m, dt = data
-    noise = manual_noise(variant)
-    filt = make_filter(variant)
-    log_std = torch.log(torch.diagonal(noise.process)).mul(0.5).clone().requires_grad_(True)
-
-    def run() -> Any:
-        process = torch.diag_embed(torch.exp(2.0 * log_std))
-        result = filt.run(NoiseParameters(process, noise.measurement, noise.initial), z, m, dt=dt,
-                          store_covariances=False, store_innovations=False)
-        return torch.autograd.grad(result.means.square().mean(), log_std)
-
+    run = forward_backward_workload(make_filter(variant), manual_noise(variant), z, m, dt)
     benchmark.pedantic(run, rounds=3, warmup_rounds=1)
     benchmark.extra_info.update(steps=BATCH * STEPS, what=f"{variant} run() + gradient of sigma_Q, {BATCH} x {STEPS}")
 
@@ -92,16 +83,7 @@ def test_ekf_forward_batch_1024(benchmark: Any, large_data: Any, outputs: str) -
 
 def test_ekf_forward_backward_batch_1024(benchmark: Any, large_data: Any) -> None:
     z, m, dt = large_data
-    noise = manual_noise("ekf")
-    filt = make_filter("ekf")
-    log_std = torch.log(torch.diagonal(noise.process)).mul(0.5).clone().requires_grad_(True)
-
-    def run() -> Any:
-        process = torch.diag_embed(torch.exp(2.0 * log_std))
-        result = filt.run(NoiseParameters(process, noise.measurement, noise.initial), z, m, dt=dt,
-                          store_covariances=False, store_innovations=False)
-        return torch.autograd.grad(result.means.square().mean(), log_std)
-
+    run = forward_backward_workload(make_filter("ekf"), manual_noise("ekf"), z, m, dt)
     benchmark.pedantic(run, rounds=2, warmup_rounds=1)
     benchmark.extra_info.update(steps=LARGE_BATCH * LARGE_STEPS,
                                 what=f"ekf run() + gradient of sigma_Q, {LARGE_BATCH} x {LARGE_STEPS}")
