@@ -1,7 +1,7 @@
 """Conformance checks of the estimator API's input rules, for the project's estimators and yours.
 
 Every estimator of fkn-bench follows the same documented rules for bad measurements
-(:mod:`fkn_bench.estimators.api`): a measurement inside the mask that is non-finite or has a
+(:mod:`fkn_bench.estimators.base`): a measurement inside the mask that is non-finite or has a
 (near) zero-norm quaternion is skipped (predict only); measured quaternions are renormalised, so
 their scale changes nothing; q and -q are the same attitude, so sign flips change nothing but the
 sign of the estimated quaternion; a sequence reports the prior until its first usable
