@@ -55,7 +55,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from fkn_bench.baselines.numpy_models import NumpyModel, numpy_model
-from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, parse_observation
+from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, check_dt, parse_observation
 from fkn_bench.filters.models import StateSpaceModel
 from fkn_bench.filters.pose import error_covariance_from_state, pose_innovation, with_unit_quaternion
 from fkn_bench.types import ArrayB, ArrayF
@@ -558,13 +558,7 @@ class AdaptiveEKFEstimator(Estimator):
 
     # ------------------------------------------------------------------ online
     def reset(self, *, dt: float) -> None:
-        try:
-            step = float(dt)
-        except (TypeError, ValueError):
-            raise ValueError(f"dt must be a number (got {dt!r})") from None
-        if not np.isfinite(step) or step <= 0:
-            raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
-        self._dt = step
+        self._dt = check_dt(dt)
         self._online = None
 
     def step(self, observation: Any) -> Estimate:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -12,7 +11,7 @@ import numpy as np
 
 from fkn_bench.envs.astrobee_tumble import _check_weights, episode_seed_for_reset
 from fkn_bench.envs.rewards import estimate_cost_scalar
-from fkn_bench.envs.spaces import MeasuredPose, action_space, observation_space, validate_actions
+from fkn_bench.envs.spaces import MeasuredPose, action_space, action_values, observation_space
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
 
@@ -160,12 +159,7 @@ class AstrobeeReplayEnv(gym.Env[dict[str, Any], ArrayF]):
             raise gym.error.ResetNeeded("call reset() before step()")
         if self._index >= self.scenario.n_steps - 1:
             raise gym.error.ResetNeeded("the episode was truncated; call reset() before step()")
-        if type(action) is np.ndarray and action.shape == (13,) and action.dtype == np.float64:
-            values = action.tolist()
-            if not all(map(math.isfinite, values)) or sum(v * v for v in values[:4]) < 1e-12:
-                validate_actions(action)
-        else:
-            values = validate_actions(action).tolist()
+        values = action_values(action)
         reward = -estimate_cost_scalar(self._truth_rows[self._index], values, self.reward_weights)
         self._index += 1
         truncated = self._index == self.scenario.n_steps - 1

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -11,7 +10,7 @@ import numpy as np
 
 from fkn_bench.envs.episodes import EpisodeStream
 from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, estimate_cost_scalar
-from fkn_bench.envs.spaces import MeasuredPose, action_space, observation_space, validate_actions
+from fkn_bench.envs.spaces import MeasuredPose, action_space, action_values, observation_space
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.types import ArrayF
 
@@ -166,12 +165,7 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
             raise gym.error.ResetNeeded("call reset() before step()")
         if self._index >= self.scenario.n_steps - 1:
             raise gym.error.ResetNeeded("the episode was truncated; call reset() before step()")
-        if type(action) is np.ndarray and action.shape == (13,) and action.dtype == np.float64:
-            values = action.tolist()
-            if not all(map(math.isfinite, values)) or sum(v * v for v in values[:4]) < 1e-12:
-                validate_actions(action)  # raises with a message naming the problem
-        else:
-            values = validate_actions(action).tolist()
+        values = action_values(action)
         truth = self._truth_rows[self._index - self._chunk_start]
         reward = -estimate_cost_scalar(truth, values, self.reward_weights)
         self._index += 1

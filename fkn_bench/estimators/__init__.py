@@ -6,6 +6,7 @@ from fkn_bench.estimators.base import (
     Estimator,
     EstimatorFileError,
     check_batch_inputs,
+    check_dt,
     parse_observation,
 )
 from fkn_bench.estimators.kalman import KalmanEstimator
@@ -31,6 +32,7 @@ __all__ = [
     "KalmanEstimator",
     "UnknownEstimatorError",
     "check_batch_inputs",
+    "check_dt",
     "estimator_names",
     "estimator_spec",
     "estimator_specs",

@@ -151,13 +151,18 @@ def check_batch_inputs(measurements: Any, mask: Any, dt: Any) -> tuple[ArrayF, A
         if not np.isin(m, (0, 1)).all():
             raise ValueError("mask must be boolean (or 0/1)")
         m = m.astype(bool)
+    return z, m, check_dt(dt)
+
+
+def check_dt(dt: Any) -> float:
+    """The time step ``dt`` (s) as a float; ``ValueError`` unless it is a finite number > 0."""
     try:
         step = float(dt)
     except (TypeError, ValueError):
         raise ValueError(f"dt must be a number (got {dt!r})") from None
     if not np.isfinite(step) or step <= 0:
         raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
-    return z, m, step
+    return step
 
 
 def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, parse_observation
+from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, check_dt, parse_observation
 from fkn_bench.filters import VARIANTS, FilterState, KalmanFilter, NoiseParameters, make_filter
 from fkn_bench.filters import online_ekf
 from fkn_bench.filters.base import FilterResult
@@ -176,13 +176,7 @@ class KalmanEstimator(Estimator):
 
     # ------------------------------------------------------------------ online
     def reset(self, *, dt: float) -> None:
-        try:
-            step = float(dt)
-        except (TypeError, ValueError):
-            raise ValueError(f"dt must be a number (got {dt!r})") from None
-        if not np.isfinite(step) or step <= 0:
-            raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
-        self._dt = step
+        self._dt = check_dt(dt)
         self._online = None
 
     def _predict(self, x: ArrayF, P: ArrayF, dt: float) -> tuple[ArrayF, ArrayF]:
