@@ -7,7 +7,10 @@
 * ``loss.png`` and ``parameters.png``: the paper's two training figures (loss curves; the learned
   standard deviations over epochs);
 * ``parameters.json``: the learned-parameter artefact of the best epoch (the format of the
-  committed ``baselines/params/flexkalmannet-<family>.json``), with the test metrics.
+  committed ``baselines/params/flexkalmannet-<family>.json``), with the test metrics and the
+  per-epoch history (``training.history``: losses, learning rate and the deployed standard
+  deviations after every epoch, without the seconds), so that a committed artefact can be checked
+  against a short retraining without rerunning all of it.
 """
 
 from __future__ import annotations
@@ -87,6 +90,12 @@ def test_split_rmse(model: FlexKalmanNet, config: FlexKalmanNetConfig, scenario:
 
 def _history_frame(history: list[EpochRecord]) -> pd.DataFrame:
     return pd.DataFrame([record.flat() for record in history])
+
+
+def history_for_artifact(history: pd.DataFrame) -> dict[str, list[float]]:
+    """The per-epoch history as ``{column: [value per epoch]}`` for the artefact: every column of
+    ``history.csv`` but the wall-clock ``seconds`` (not reproducible)."""
+    return {str(c): history[c].tolist() for c in history.columns if c != "seconds"}
 
 
 def train_flexkalmannet(
@@ -169,6 +178,7 @@ def train_flexkalmannet(
         "seconds_total": seconds,
         "seconds_per_epoch": float(epochs.mean()) if len(epochs) else None,
         **test,
+        "history": history_for_artifact(history),
     }
     write_artifact(
         out / "parameters.json",

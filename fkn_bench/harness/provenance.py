@@ -45,6 +45,19 @@ def _version(module: str) -> str | None:
         return None
 
 
+def _cpu_model() -> str | None:
+    """The CPU's model name (Linux ``/proc/cpuinfo``; None elsewhere): results that are equal only
+    to rounding differ between CPU vendors (BLAS and SIMD code paths), so provenance names it."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip() or None
+    except OSError:
+        pass
+    return None
+
+
 @lru_cache(maxsize=1)
 def environment() -> dict[str, Any]:
     """Versions and machine description of this process (cached)."""
@@ -61,7 +74,7 @@ def environment() -> dict[str, Any]:
         "machine": {
             "platform": platform.platform(),
             "machine": platform.machine(),
-            "processor": platform.processor() or None,
+            "processor": platform.processor() or _cpu_model(),
             "cpu_count": os.cpu_count(),
             "implementation": sys.implementation.name,
         },
