@@ -13,8 +13,8 @@ uses and how the noise estimates change after it:
 
 Conventions (those of :meth:`fkn_bench.filters.KalmanFilter.run`):
 
-* step ``t`` predicts from ``t - 1`` (not at ``t = 0``), ``x- = f(x+)``, ``P- = F P+ F^T + Q``,
-  and then updates with measurement ``t`` where it is usable; a step without one is
+* step ``t`` predicts from ``t - 1`` (not at ``t = 0``), ``x- = f(x+)``, ``P- = F P+ F^T + Q``
+  (symmetrised), and then updates with measurement ``t`` where it is usable; a step without one is
   predict-only;
 * each sequence initialises at its first usable measurement (state from the model's
   ``initial_state``, covariance ``P0``) and that measurement is not used again; before it, the
@@ -58,6 +58,7 @@ from fkn_bench.baselines.numpy_models import NumpyModel, numpy_model
 from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, check_dt, parse_observation
 from fkn_bench.filters.models import StateSpaceModel
 from fkn_bench.filters.pose import error_covariance_from_state, pose_innovation, with_unit_quaternion
+from fkn_bench.linalg import symmetrize
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = [
@@ -82,10 +83,6 @@ Noise = dict[str, ArrayF]
 def outer(a: ArrayF) -> ArrayF:
     """``a a^T`` for vectors ``(B, k)`` -> ``(B, k, k)``."""
     return a[:, :, None] * a[:, None, :]
-
-
-def symmetrize(M: ArrayF) -> ArrayF:
-    return 0.5 * (M + M.swapaxes(-1, -2))
 
 
 SOLVE_LOOP_ROWS = 64
@@ -161,10 +158,10 @@ def kalman_update(model: NumpyModel, x: ArrayF, P: ArrayF, nu: ArrayF, R: ArrayF
     observed = model.observed
     if observed is not None:
         HP = P[:, observed]  # (b, m, n)
-        S = HP[:, :, observed] + R
+        S = HP[:, :, observed] + R  # a block of P plus R: exactly symmetric, as they are
     else:
         HP = model.H @ P
-        S = HP @ model.H.T + R
+        S = symmetrize(HP @ model.H.T + R)
     Kt = solve_spd(S, HP)  # K^T = S^-1 H P   (b, m, n)
     K = Kt.swapaxes(1, 2)
     x_post = x + (nu[:, None, :] @ Kt)[:, 0]
@@ -185,10 +182,10 @@ def kalman_update(model: NumpyModel, x: ArrayF, P: ArrayF, nu: ArrayF, R: ArrayF
 
 
 def projected_covariance(model: NumpyModel, P: ArrayF) -> ArrayF:
-    """``H P H^T`` for ``P (b, n, n)``."""
+    """``H P H^T`` for ``P (b, n, n)`` (exactly symmetric when ``P`` is)."""
     if model.observed is not None:
         return P[:, model.observed, model.observed]
-    return model.H @ P @ model.H.T
+    return symmetrize(model.H @ P @ model.H.T)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -389,7 +386,7 @@ class AdaptiveKalmanFilter:
         x, P, since, noise = state.x, state.P, state.since, state.noise
         if predict:
             x, F = model.transition(x, dt)
-            P = F @ P @ F.swapaxes(1, 2) + rule.process_noise(noise)
+            P = symmetrize(F @ P @ F.swapaxes(1, 2) + rule.process_noise(noise))
             since = since + 1.0
         prior = x
         if not usable.any():

@@ -92,6 +92,8 @@ class AkhlaghiRule(NoiseRule):
         result = kalman_update(ctx.model, ctx.x_pred, ctx.P_pred, ctx.nu, noise["R"])
         a = self.alpha
         R, Q = noise["R"], noise["Q"]
+        # R and Q stay exactly symmetric: weighted sums of symmetric matrices (R, Q, the floors,
+        # the symmetrised P+ block) and outer products a a^T (a_i a_j == a_j a_i)
         if self.adapt_r and a < 1.0:
             residual = ctx.z - ctx.model.measure(result.x)
             R = a * R + (1.0 - a) * (outer(residual) + projected_covariance(ctx.model, result.P) + noise["r_floor"])

@@ -112,13 +112,15 @@ class SageHusaRule(NoiseRule):
         d = np.where(k >= 1.0, self.weight(np.maximum(k, 1.0)), 0.0)[:, None, None]
         R, Q = noise["R"], noise["Q"]
         if self.adapt_r:
+            # sums of exactly symmetric terms; clamp_eigenvalues symmetrises what it rebuilds
             sample = outer(ctx.nu) - projected_covariance(ctx.model, ctx.P_pred)
             R = clamp_eigenvalues((1.0 - d) * R + d * sample, noise["r_floor"])
         result = kalman_update(ctx.model, ctx.x_pred, ctx.P_pred, ctx.nu, R)
         if self.adapt_q:
             correction = (result.K @ ctx.nu[:, :, None])[:, :, 0]
+            # exactly symmetric: an outer product plus the symmetrised P+ and P- (no symmetrisation needed)
             excess = (outer(correction) + result.P - ctx.P_pred) / ctx.steps[:, None, None]
-            Q = clamp_eigenvalues((1.0 - d) * Q + d * (Q + 0.5 * (excess + excess.swapaxes(1, 2))), noise["q_floor"])
+            Q = clamp_eigenvalues((1.0 - d) * Q + d * (Q + excess), noise["q_floor"])
         return result, {**noise, "R": R, "Q": Q, "k": k}
 
     def config(self) -> dict[str, Any]:

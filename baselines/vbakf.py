@@ -68,6 +68,7 @@ from fkn_bench.baselines.adaptive import (
     projected_covariance,
     solve_spd,
 )
+from fkn_bench.linalg import symmetrize
 from fkn_bench.types import ArrayF
 
 __all__ = ["VBAKFRule", "VBAKFEstimator", "DEFAULT_RHO"]
@@ -150,10 +151,12 @@ class VBAKFRule(NoiseRule):
                 S = HP[:, :, model.observed] + R_hat
             else:
                 HP = model.H @ P_hat
-                S = HP @ model.H.T + R_hat
+                S = symmetrize(HP @ model.H.T + R_hat)
             Kt = solve_spd(S, HP)  # K^T (b, m, n)
             x = x_pred + (nu[:, None, :] @ Kt)[:, 0]
-            P = P_hat - HP.swapaxes(1, 2) @ Kt
+            # symmetrised: P feeds P^ and U (R's posterior), which then stay exactly symmetric
+            # (sums of symmetric matrices and outer products)
+            P = symmetrize(P_hat - HP.swapaxes(1, 2) @ Kt)
         result = kalman_update(model, x_pred, P_hat, nu, R_hat)
         return result, {**noise, "u": u, "U": U}
 

@@ -31,6 +31,7 @@ from fkn_bench.filters.pose import (
     state_covariance_from_error,
     with_unit_quaternion,
 )
+from fkn_bench.linalg import symmetrize
 from fkn_bench.runtime import torch_threads
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -159,9 +160,10 @@ class KalmanEstimator(Estimator):
             raise ValueError(f"{name} must be a {dim}x{dim} matrix (got shape {array.shape})")
         if not np.all(np.isfinite(array)) or not np.allclose(array, array.T, rtol=1e-10, atol=1e-14):
             raise ValueError(f"{name} must be finite and symmetric")
-        if np.linalg.eigvalsh(0.5 * (array + array.T)).min() <= 0:
+        symmetric = symmetrize(array)
+        if np.linalg.eigvalsh(symmetric).min() <= 0:
             raise ValueError(f"{name} must be positive definite")
-        return 0.5 * (array + array.T)
+        return symmetric
 
     # ------------------------------------------------------------------ batch
     def noise_parameters(self) -> NoiseParameters:
@@ -185,7 +187,7 @@ class KalmanEstimator(Estimator):
             return online_ekf.predict(x, P, Q, dt)
         with torch.no_grad():  # torch.tensor copies: P is shared read-only with the last Estimate
             state = self.filter.predict(FilterState(torch.tensor(x)[None], torch.tensor(P)[None]), torch.tensor(Q), dt)
-        return state.mean[0].numpy(), state.covariance[0].numpy()
+        return state.mean[0].numpy(), state.covariance[0].numpy()  # symmetrised by predict
 
     def _update(self, x: ArrayF, P: ArrayF, z: ArrayF) -> tuple[ArrayF, ArrayF]:
         R = self._numpy_noise[1]
@@ -196,9 +198,7 @@ class KalmanEstimator(Estimator):
             state, _, _ = self.filter.update(
                 FilterState(torch.tensor(x)[None], torch.tensor(P)[None]), torch.tensor(z)[None], torch.tensor(R)
             )
-            P_new = state.covariance[0]
-            P_new = 0.5 * (P_new + P_new.T)
-        return state.mean[0].numpy(), P_new.numpy()
+        return state.mean[0].numpy(), state.covariance[0].numpy()  # symmetrised by update
 
     def step(self, observation: Any) -> Estimate:
         if self._dt is None:

@@ -17,7 +17,9 @@ Conventions of :meth:`KalmanFilter.run`:
 * Inputs are cleaned once by the model's ``sanitize`` (non-finite or unusable measurements are
   dropped from the mask: the documented rule is "skip the update"), so no NaN reaches the
   arithmetic, neither forward nor backward.
-* Covariances are symmetrised after every update (``(P + P^T) / 2``).
+* Covariances are exactly symmetric: every variant's ``predict`` and ``update`` return their
+  covariance symmetrised (``(P + P^T) / 2``, :func:`fkn_bench.linalg.symmetrize`), once each per
+  step, so ``run`` adds no symmetrisation of its own.
 
 Everything is a differentiable torch operation; gradients flow into every tensor of ``noise``
 (and ``initial``). float64 by default: the dtype of ``measurements`` decides.
@@ -159,13 +161,15 @@ class KalmanFilter(ABC):
 
     @abstractmethod
     def predict(self, state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
-        """One prediction over ``dt`` seconds with process noise ``Q`` ``(B or 1, k, k)``."""
+        """One prediction over ``dt`` seconds with process noise ``Q`` ``(B or 1, k, k)``; the
+        predicted covariance is exactly symmetric (symmetrised)."""
 
     @abstractmethod
     def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
         """One measurement update of every batch row with ``z (B, m)``.
 
-        Returns the posterior state, the innovation ``(B, m)`` and its covariance ``(B, m, m)``.
+        Returns the posterior state, the innovation ``(B, m)`` and its covariance ``(B, m, m)``;
+        both covariances exactly symmetric (the posterior symmetrised).
         """
 
     def initial_state(self, z: Tensor, initial_covariance: Tensor) -> FilterState:
@@ -274,8 +278,7 @@ class KalmanFilter(ABC):
                         _select(update_rows, posterior.covariance, state.covariance),
                     )
                     nu, S = _select(update_rows, nu_t, nu), _select(update_rows, S_t, S)
-                P = state.covariance
-                state = FilterState(state.mean, P.add(P.transpose(1, 2)).mul_(0.5))
+                # no symmetrisation here: predict and update return symmetrised covariances
             else:
                 update_rows = torch.zeros_like(update_rows)
             means.put(t, state.mean)

@@ -6,6 +6,10 @@ Joseph form ``P+ = (I - K H) P- (I - K H)^T + K R K^T`` (Bucy & Joseph 1968; Sim
 Estimation, 2006, eq. 5.19), which stays symmetric positive semi-definite for any gain. The model
 then aligns, renormalises and projects (see :class:`~fkn_bench.filters.models.PoseTwistModel`).
 When the model measures a slice of the state (``H = [I 0]``), products with ``H`` are slices.
+
+Products such as ``F P F^T`` are symmetric only to rounding; ``predict`` and the update
+symmetrise the covariance they return (:func:`fkn_bench.linalg.symmetrize`, once each), so that
+every covariance leaving them is symmetric bit for bit on any machine.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from torch import Tensor
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
+from fkn_bench.linalg import symmetrize
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
 
@@ -37,16 +42,17 @@ def joseph_update(
     dense ``H (m, n)`` must be given. ``normalize`` maps the posterior mean to its manifold and
     returns the projection's Jacobian ``T`` (identity but for one diagonal block); the covariance
     then becomes ``(T A) P (T A)^T + (T K) R (T K)^T`` with ``A = I - K H``: the Joseph form
-    followed by the projection ``T P T^T``, in one pass. Returns ``(x+, P+, S)``.
+    followed by the projection ``T P T^T``, in one pass. Returns ``(x+, P+, S)``, ``P+``
+    symmetrised, and ``S`` exactly symmetric when ``P`` and ``R`` are.
     """
     batch, n = x.shape
     if observed is not None:
         PHt = P[:, :, observed]
-        S = P[:, observed, observed] + R
+        S = P[:, observed, observed] + R  # a block of P plus R: exactly symmetric, as they are
     else:
         assert H is not None
         PHt = P @ H.T
-        S = H @ PHt + R
+        S = symmetrize(H @ PHt + R)
     # S is symmetric positive definite (R is); its inverse gives K with one batched product
     K = PHt @ torch.linalg.inv_ex(S)[0]  # (B, n, m)
     x_post = torch.baddbmm(x.unsqueeze(-1), K, nu.unsqueeze(-1)).squeeze(-1)
@@ -63,7 +69,7 @@ def joseph_update(
     else:
         TA = T - TK @ H
     P_post = torch.baddbmm(TA @ P @ TA.transpose(1, 2), TK @ R.expand(batch, -1, -1), TK.transpose(1, 2))
-    return x_post, P_post, S
+    return x_post, symmetrize(P_post), S
 
 
 def _pad_columns(M: Tensor, columns: slice, n: int) -> Tensor:
@@ -118,7 +124,7 @@ class ExtendedKalmanFilter(KalmanFilter):
         mean, F = self.model.transition(state.mean, dt)
         FP = F @ state.covariance
         Q = process_noise.expand(FP.shape[0], -1, -1)
-        return FilterState(mean, torch.baddbmm(Q, FP, F.transpose(1, 2)))
+        return FilterState(mean, symmetrize(torch.baddbmm(Q, FP, F.transpose(1, 2))))
 
     def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
         return linear_measurement_update(self.model, state, z, measurement_noise)

@@ -4,13 +4,16 @@
 ``P- = A P+ A^T + Q``; update ``K = P- H^T (H P- H^T + R)^-1``, ``x+ = x- + K (y - H x-)``,
 ``P+ = (I - K H) P-`` (Kalman 1960; Simon, Optimal State Estimation, 2006, eqs. 5.17-5.19).
 Deliberately independent of torch and of the rest of the core: the tests check that the EKF and
-the UKF on a :class:`~fkn_bench.filters.models.LinearGaussianModel` reproduce it.
+the UKF on a :class:`~fkn_bench.filters.models.LinearGaussianModel` reproduce it. The covariances
+it returns are symmetrised (:func:`fkn_bench.linalg.symmetrize`; the textbook ``(I - K H) P-`` is
+symmetric only to rounding).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from fkn_bench.linalg import symmetrize
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["linear_kalman_filter"]
@@ -46,5 +49,6 @@ def linear_kalman_filter(
             K = P @ H.T @ np.linalg.inv(S)
             x = x + K @ (measurements[t] - H @ x)
             P = (identity - K @ H) @ P
+        P = symmetrize(P)  # once per step, before it is stored (covers predict-only steps)
         means[t], covariances[t] = x, P
     return means, covariances

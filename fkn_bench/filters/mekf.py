@@ -29,6 +29,7 @@ from fkn_bench.filters.ekf import joseph_update
 from fkn_bench.filters.models import PoseTwistModel
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_torch as qt
+from fkn_bench.linalg import symmetrize
 from fkn_bench.types import ERROR_NAMES
 
 __all__ = ["MultiplicativeEKF", "MEKF_MANUAL_LAYOUT", "left_jacobian"]
@@ -108,7 +109,8 @@ class MultiplicativeEKF(KalmanFilter):
         q = qt.multiply(qt.from_rotation_vector(dt * x[:, 7:10]), x[:, 0:4])
         mean = torch.cat((q, x[:, 4:7] + dt * x[:, 10:13], x[:, 7:]), dim=1)
         PhiP = Phi @ P
-        return FilterState(mean, torch.baddbmm(process_noise.expand(x.shape[0], -1, -1), PhiP, Phi.transpose(1, 2)))
+        P_pred = torch.baddbmm(process_noise.expand(x.shape[0], -1, -1), PhiP, Phi.transpose(1, 2))
+        return FilterState(mean, symmetrize(P_pred))
 
     def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
         x, P = state.mean, state.covariance
@@ -121,6 +123,7 @@ class MultiplicativeEKF(KalmanFilter):
             return dx, slice(0, 3), eye3 + 0.5 * qt.skew(dx[:, 0:3])
 
         error = torch.zeros(x.shape[0], 12, dtype=x.dtype)
+        # P_post comes back symmetrised (the reset's G P G^T is part of joseph_update's product)
         dx, P_post, S = joseph_update(error, P, nu, measurement_noise, observed=slice(0, 6), normalize=reset)
         q_post = qt.multiply(qt.from_rotation_vector(dx[:, 0:3]), q)
         q_post = q_post / q_post.norm(dim=1, keepdim=True)

@@ -14,6 +14,7 @@ import math
 import numpy as np
 from scipy.linalg import lapack
 
+from fkn_bench.linalg import symmetrize
 from fkn_bench.types import ArrayF
 
 __all__ = ["predict", "update", "initial_state", "sanitize_measurement", "MIN_QUATERNION_NORM"]
@@ -63,7 +64,8 @@ def predict(x: ArrayF, P: ArrayF, Q: ArrayF, dt: float) -> tuple[ArrayF, ArrayF]
     """``x- = f(x)``, ``P- = F P F^T + Q`` for the paper's model (FlexKalmanNet eqs. 1-2, 8-11).
 
     ``F`` is ``A`` (``r += dt v``) plus ``dt/2 Omega(w)`` and ``dt/2 Theta(q)`` in its quaternion
-    rows; the mean is ``A x`` plus ``dt/2 Omega(w) q`` in the quaternion.
+    rows; the mean is ``A x`` plus ``dt/2 Omega(w) q`` in the quaternion. ``P-`` is symmetrised,
+    as in the torch EKF.
     """
     A, basis = _template(dt)
     rows = (x @ basis).reshape(4, 13)  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
@@ -71,7 +73,7 @@ def predict(x: ArrayF, P: ArrayF, Q: ArrayF, dt: float) -> tuple[ArrayF, ArrayF]
     x_pred[0:4] += rows[:, 0:4] @ x[0:4]
     F = A.copy()
     F[0:4] += rows
-    return x_pred, F @ P @ F.T + Q
+    return x_pred, symmetrize(F @ P @ F.T + Q)
 
 
 _FLIP = np.array([-1.0, -1.0, -1.0, -1.0, 1.0, 1.0, 1.0])
@@ -88,7 +90,7 @@ def update(x: ArrayF, P: ArrayF, z: ArrayF, R: ArrayF) -> tuple[ArrayF, ArrayF, 
     if z[0:4] @ x[0:4] < 0.0:
         z = z * _FLIP
     nu = z - x[0:7]
-    S = P[0:7, 0:7] + R
+    S = P[0:7, 0:7] + R  # exactly symmetric: P and R are
     factor, info = lapack.dpotrf(S, lower=1, clean=0)
     if info != 0:
         raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dpotrf info {info})")
@@ -105,8 +107,7 @@ def update(x: ArrayF, P: ArrayF, z: ArrayF, R: ArrayF) -> tuple[ArrayF, ArrayF, 
     D = np.zeros((20, 20))
     D[0:13, 0:13] = P
     D[13:20, 13:20] = R
-    M = G @ D @ G.T
-    return x_post, 0.5 * (M + M.T), nu, S
+    return x_post, symmetrize(G @ D @ G.T), nu, S
 
 
 def initial_state(z: ArrayF) -> ArrayF:

@@ -23,6 +23,8 @@ import torch
 import torch.nn.functional as functional
 from torch import Tensor
 
+from fkn_bench.linalg import symmetrize
+
 __all__ = [
     "NoiseParameters",
     "NoiseLayout",
@@ -61,7 +63,7 @@ class NoiseParameters:
         *,
         dtype: torch.dtype = torch.float64,
     ) -> NoiseParameters:
-        """Diagonal covariances from standard deviations (``(..., k)`` each)."""
+        """Diagonal covariances from standard deviations (``(..., k)`` each; exactly symmetric)."""
 
         def diag(std: Tensor | Sequence[float]) -> Tensor:
             t = torch.as_tensor(std, dtype=dtype)
@@ -217,7 +219,8 @@ class ParameterSet:
                 matrices[e.name[:-4]] = torch.diag_embed(std * std)
             else:
                 factor = self._cholesky(chunk, e.dim)
-                matrices[e.name[:-5]] = factor @ factor.transpose(-1, -2)
+                # L L^T is symmetric only to rounding on some CPUs / BLAS builds: symmetrise
+                matrices[e.name[:-5]] = symmetrize(factor @ factor.transpose(-1, -2))
         for name in ("q", "r", "p0"):
             if name not in matrices:
                 std = raw.new_tensor(self.fixed[f"{name}_std"])

@@ -5,6 +5,8 @@ For a unit quaternion ``q``, a small change ``dq`` is the world-frame rotation
 ``dtheta = 2 Theta(q)^T dq`` and conversely ``dq = Theta(q) dtheta / 2`` (``Theta`` is the paper's
 eq. 11; REFERENCE.md: map the quaternion block with ``J = 2 Xi(q)^T``). The additive EKF's 13x13
 covariance is singular along ``q``; the 12x12 error covariance is what consistency (NEES) uses.
+The congruences ``T P T^T`` are symmetric only to rounding: every covariance returned here is
+symmetrised (:func:`fkn_bench.linalg.symmetrize`).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from fkn_bench.geometry.quaternion import theta_matrix
+from fkn_bench.linalg import symmetrize
 from fkn_bench.types import ArrayF
 
 __all__ = ["error_covariance_from_state", "state_covariance_from_error", "pose_innovation", "with_unit_quaternion"]
@@ -28,7 +31,7 @@ def _state_to_error_map(q: ArrayF) -> ArrayF:
 def error_covariance_from_state(q: ArrayF, covariance: ArrayF) -> ArrayF:
     """12x12 error covariance ``T P T^T`` of a 13x13 state covariance at attitude ``q``."""
     T = _state_to_error_map(q)
-    return T @ covariance @ np.swapaxes(T, -1, -2)
+    return symmetrize(T @ covariance @ np.swapaxes(T, -1, -2))
 
 
 def state_covariance_from_error(q: ArrayF, error_covariance: ArrayF) -> ArrayF:
@@ -36,7 +39,7 @@ def state_covariance_from_error(q: ArrayF, error_covariance: ArrayF) -> ArrayF:
     J = np.zeros(q.shape[:-1] + (13, 12))
     J[..., 0:4, 0:3] = 0.5 * theta_matrix(q)
     J[..., 4:13, 3:12] = np.eye(9)
-    return J @ error_covariance @ np.swapaxes(J, -1, -2)
+    return symmetrize(J @ error_covariance @ np.swapaxes(J, -1, -2))
 
 
 def pose_innovation(q_prior: ArrayF, innovation: ArrayF, covariance: ArrayF) -> tuple[ArrayF, ArrayF]:
@@ -46,7 +49,7 @@ def pose_innovation(q_prior: ArrayF, innovation: ArrayF, covariance: ArrayF) -> 
     T[..., 0:3, 0:4] = 2.0 * np.swapaxes(theta_matrix(q_prior), -1, -2)
     T[..., 3:6, 4:7] = np.eye(3)
     nu = np.einsum("...ij,...j->...i", T, innovation)
-    return nu, T @ covariance @ np.swapaxes(T, -1, -2)
+    return nu, symmetrize(T @ covariance @ np.swapaxes(T, -1, -2))
 
 
 def with_unit_quaternion(states: ArrayF) -> ArrayF:

@@ -28,6 +28,7 @@ from torch import Tensor
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.ekf import linear_measurement_update
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
+from fkn_bench.linalg import symmetrize
 
 __all__ = ["UnscentedKalmanFilter", "sigma_point_weights"]
 
@@ -80,7 +81,7 @@ class UnscentedKalmanFilter(KalmanFilter):
         direction = self.model.null_direction(x)
         if direction is not None:
             eps = max(1e-10, 100.0 * torch.finfo(P.dtype).eps) * P.diagonal(dim1=1, dim2=2).amax(1)
-            P = P + eps[:, None, None] * (direction[:, :, None] * direction[:, None, :])
+            P = P + eps[:, None, None] * (direction[:, :, None] * direction[:, None, :])  # e e^T: exactly symmetric
         L = _safe_cholesky(P) * self._scale
         spread = L.transpose(1, 2)  # rows are the columns of L
         points = torch.cat((x[:, None, :], x[:, None, :] + spread, x[:, None, :] - spread), dim=1)
@@ -89,7 +90,7 @@ class UnscentedKalmanFilter(KalmanFilter):
         mean = torch.einsum("p,bpn->bn", wm, moved)
         deviation = moved - mean[:, None, :]
         covariance = torch.einsum("bpi,p,bpj->bij", deviation, wc, deviation) + process_noise
-        return FilterState(mean, covariance)
+        return FilterState(mean, symmetrize(covariance))  # the weighted sum is symmetric only to rounding
 
     def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
         return linear_measurement_update(self.model, state, z, measurement_noise)

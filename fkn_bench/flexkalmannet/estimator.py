@@ -154,9 +154,7 @@ class AdaptiveFlexKalmanNetEstimator(Estimator):
                 if not initialised:
                     state, initialised = self.filter.initial_state(zt, noise.initial[0]), True
                 else:
-                    state, _, _ = self.filter.update(state, zt, noise.measurement)
-                    P = state.covariance
-                    state = FilterState(state.mean, 0.5 * (P + P.transpose(1, 2)))
+                    state, _, _ = self.filter.update(state, zt, noise.measurement)  # P+ symmetrised
                     updated = True
         self._state = (now, state, initialised)
         return Estimate(

@@ -23,6 +23,7 @@ from torch import Tensor
 
 from fkn_bench.flexkalmannet.network import FlexKalmanNet
 from fkn_bench.geometry import quaternion_torch as qt
+from fkn_bench.linalg import symmetrize
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import aligned_state_error
 
@@ -64,8 +65,7 @@ def _textbook_step(x: Tensor, P: Tensor, z: Tensor | None, Q: Tensor, R: Tensor,
         T = torch.block_diag((torch.eye(4, dtype=x.dtype) - torch.outer(unit, unit)) / norm, torch.eye(9, dtype=x.dtype))
         x = torch.cat((unit, x[4:]))
         P = T @ P @ T.T
-        P = 0.5 * (P + P.T)
-    return x, P
+    return x, symmetrize(P)  # once per step: P leaves symmetric after a prediction or an update
 
 
 def _window_loss(model: FlexKalmanNet, window: Sequences, index: int, dt: float, loss_cut: int) -> Tensor:

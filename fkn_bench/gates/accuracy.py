@@ -97,6 +97,9 @@ class Tolerance:
 EXACT = Tolerance(0.0, 0.0)
 FLOAT = Tolerance(1e-6, 1e-12)
 
+# EXACT applies only to values that are integers stored as floats: the 0/1 flags stability/diverged,
+# stability/<reason>, stability/failed and */settled, and the count consistency/nis_count
+# (harness/rows.py); every computed float metric falls to FLOAT.
 TOLERANCES: tuple[tuple[str, Tolerance], ...] = (
     ("stability/*", EXACT),
     ("*/settled", EXACT),

@@ -58,15 +58,20 @@ class CellResult:
     provenance: dict[str, Any] = field(default_factory=dict)
 
 
-def time_online(estimator: Estimator, measurements: ArrayF, dt: float) -> float:
+def time_online(estimator: Estimator, measurements: ArrayF, dt: float, *, passes: int = 2) -> float:
     """Microseconds per ``step()`` of ``reset(dt=dt)`` then one step per row of
-    ``measurements (n, 7)`` (NaN rows are missing measurements)."""
+    ``measurements (n, 7)`` (NaN rows are missing measurements): the fastest of ``passes`` timed
+    passes, so that one-time costs of a first call (lazy imports, caches filled on the first
+    ``reset``) are not counted as the per-step cost."""
     observations = [np.array(row) for row in measurements]
-    with measure(memory=False) as timing:
-        estimator.reset(dt=dt)
-        for observation in observations:
-            estimator.step(observation)
-    return 1e6 * timing.seconds / max(len(observations), 1)
+    best = float("inf")
+    for _ in range(max(int(passes), 1)):
+        with measure(memory=False) as timing:
+            estimator.reset(dt=dt)
+            for observation in observations:
+                estimator.step(observation)
+        best = min(best, timing.seconds)
+    return 1e6 * best / max(len(observations), 1)
 
 
 def _failure(spec: CellSpec, exc: BaseException) -> CellResult:

@@ -57,10 +57,29 @@ def probe_estimator(name: str, scenario: Scenario, options: dict[str, Any] | Non
     except Exception as exc:  # noqa: BLE001 - reported to the user as unavailability
         return Availability(name, scenario.name, None, f"{type(exc).__name__}: {exc}")
     try:
-        text = json.dumps(to_jsonable(config), sort_keys=True)
+        text = json.dumps(_rounded(to_jsonable(config)), sort_keys=True)
     except (TypeError, ValueError):
         return Availability(name, scenario.name, "", None)
     return Availability(name, scenario.name, hashlib.sha256(text.encode()).hexdigest()[:16], None)
+
+
+FINGERPRINT_DIGITS = 12
+"""Significant digits of the floats a fingerprint hashes. Some configurations hold numbers
+computed from simulated data (the oracle's noise levels), whose last bits may differ between CPUs
+(SIMD paths of ``exp``/``sin``/``cos``); rounding to 12 digits makes the fingerprint the same
+wherever the numbers agree to rounding (a last-bit difference crosses a 12-digit rounding boundary
+with probability ~1e-4 per number), while any real change of a parameter still changes it."""
+
+
+def _rounded(value: Any) -> Any:
+    """``value`` (JSON-compatible) with every float rounded to :data:`FINGERPRINT_DIGITS`."""
+    if isinstance(value, float):
+        return float(f"{value:.{FINGERPRINT_DIGITS}g}")
+    if isinstance(value, dict):
+        return {k: _rounded(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_rounded(v) for v in value]
+    return value
 
 
 def estimator_fingerprint(name: str, scenario: Scenario) -> str:

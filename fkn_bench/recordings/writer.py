@@ -177,7 +177,7 @@ def ros_pose_covariance(error_covariance: ArrayF) -> ArrayF:
     P = np.asarray(error_covariance, dtype=np.float64)
     if P.shape[-2:] != (12, 12):
         raise ValueError(f"error covariances must have shape (..., 12, 12) (got {P.shape})")
-    block = P[..., _ROS_POSE_ORDER, :][..., :, _ROS_POSE_ORDER]
+    block = P[..., _ROS_POSE_ORDER, :][..., :, _ROS_POSE_ORDER]  # same order for rows and columns: symmetric as P is
     return block.reshape(*P.shape[:-2], 36)
 
 

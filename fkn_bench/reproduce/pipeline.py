@@ -100,6 +100,8 @@ class ReproduceSettings:
         config_source: where ``config`` came from (a file name, for the report).
         figure_seed: seed of the episodes the figures show.
         uncertainty_steps: samples of the angular-rate uncertainty figure (the paper: 500).
+        figures: draw the figures (``--no-figures``: tables, report and results only, about 40%
+            faster; the report then lists no figures).
     """
 
     seed: int = 0
@@ -109,6 +111,7 @@ class ReproduceSettings:
     config_source: str | None = None
     figure_seed: int = 0
     uncertainty_steps: int = 500
+    figures: bool = True
 
     def __post_init__(self) -> None:
         if self.seed < 0:
@@ -240,6 +243,35 @@ def _config_summary(config: FlexKalmanNetConfig, quick: bool) -> str:
     return ("quick run: " if quick else "") + text
 
 
+def _draw_figures(settings: ReproduceSettings, trained: dict[str, TrainedModel], constant: dict[str, Estimator],
+                  ds1_trace: Any, fig_dir: Path, quick_tag: str) -> None:
+    """The report's figures (paper Figs. 3-8 and the cross-data-set and training figures) into ``fig_dir``."""
+    for dataset in ("ds2", "ds1"):
+        model = trained[dataset]
+        if len(model.history):
+            plot_losses(model.history, fig_dir / f"training_loss_{dataset}.png",
+                        title=f"Training and validation loss, {dataset.upper()}{quick_tag}", best_epoch=model.best_epoch)
+            plot_parameters(model.history, fig_dir / f"parameters_{dataset}.png",
+                            title=f"Learned standard deviations over epochs, {dataset.upper()}{quick_tag}")
+    seed = settings.figure_seed
+    title = f"EKF with the parameters learned from DS1, on DS1 (test split, seed {seed}){quick_tag}"
+    figs.save(figs.states_figure_titled(ds1_trace, title), fig_dir / "states_ds1.png")
+    title = (f"Angular-rate estimates with 2σ bands, DS1 parameters on DS1, first {settings.uncertainty_steps} "
+             f"samples{quick_tag}")
+    figs.save(figs.omega_uncertainty_figure(ds1_trace, steps=settings.uncertainty_steps, title=title),
+              fig_dir / "omega_uncertainty_ds1.png")
+    for scenario_name, label, stem, title in (
+        ("ds1-noise5x", "learned-ds1", "states_ds1_noise5x", "DS1 parameters on DS1 with five times the noise"),
+        ("ds1-gap100", "learned-ds1", "states_ds1_gap100", "DS1 parameters on DS1 with a measurement every 100 steps"),
+        ("ds2", "learned-ds2", "states_ds2", "DS2 parameters on DS2"),
+        ("ds2", "learned-ds1", "states_ds1_params_on_ds2", "DS1 parameters on DS2 (cross-data-set)"),
+        ("ds1", "learned-ds2", "states_ds2_params_on_ds1", "DS2 parameters on DS1 (cross-data-set)"),
+    ):
+        trace = run_trace(constant[label], LABELS[label], get_scenario(scenario_name), seed)
+        figs.save(figs.states_figure_titled(trace, f"EKF, {title} (test split, seed {seed}){quick_tag}"),
+                  fig_dir / f"{stem}.png")
+
+
 def run_reproduction(
     out: str | Path,
     settings: ReproduceSettings | None = None,
@@ -290,39 +322,18 @@ def run_reproduction(
             evaluations[(label, scenario_name)] = evaluate(estimator, label, scenario, seeds)
     seconds["evaluate"] = time.perf_counter() - t0
 
-    # 3. figures
-    say("[reproduce] drawing figures")
+    # 3. figures (the DS1 trace also feeds the differences section, so it is computed either way)
+    say("[reproduce] drawing figures" if settings.figures else "[reproduce] no figures (--no-figures)")
     t0 = time.perf_counter()
     figure_list: list[FigureRef] = []
     fig_dir = out / "figures"
     quick_tag = " [QUICK RUN]" if settings.quick else ""
-    for dataset in ("ds2", "ds1"):
-        model = trained[dataset]
-        if len(model.history):
-            plot_losses(model.history, fig_dir / f"training_loss_{dataset}.png",
-                        title=f"Training and validation loss, {dataset.upper()}{quick_tag}", best_epoch=model.best_epoch)
-            plot_parameters(model.history, fig_dir / f"parameters_{dataset}.png",
-                            title=f"Learned standard deviations over epochs, {dataset.upper()}{quick_tag}")
     seed = settings.figure_seed
-    ds1, ds2 = get_scenario("ds1"), get_scenario("ds2")
+    ds1 = get_scenario("ds1")
     ds1_trace = run_trace(constant["learned-ds1"], "learned DS1", ds1, seed)
-    title = f"EKF with the parameters learned from DS1, on DS1 (test split, seed {seed}){quick_tag}"
-    figs.save(figs.states_figure_titled(ds1_trace, title), fig_dir / "states_ds1.png")
-    title = (f"Angular-rate estimates with 2σ bands, DS1 parameters on DS1, first {settings.uncertainty_steps} "
-             f"samples{quick_tag}")
-    figs.save(figs.omega_uncertainty_figure(ds1_trace, steps=settings.uncertainty_steps, title=title),
-              fig_dir / "omega_uncertainty_ds1.png")
     uncertainty_steps = _uncertainty_steps(ds1_trace, settings.uncertainty_steps)
-    for scenario_name, label, stem, title in (
-        ("ds1-noise5x", "learned-ds1", "states_ds1_noise5x", "DS1 parameters on DS1 with five times the noise"),
-        ("ds1-gap100", "learned-ds1", "states_ds1_gap100", "DS1 parameters on DS1 with a measurement every 100 steps"),
-        ("ds2", "learned-ds2", "states_ds2", "DS2 parameters on DS2"),
-        ("ds2", "learned-ds1", "states_ds1_params_on_ds2", "DS1 parameters on DS2 (cross-data-set)"),
-        ("ds1", "learned-ds2", "states_ds2_params_on_ds1", "DS2 parameters on DS1 (cross-data-set)"),
-    ):
-        trace = run_trace(constant[label], LABELS[label], get_scenario(scenario_name), seed)
-        figs.save(figs.states_figure_titled(trace, f"EKF, {title} (test split, seed {seed}){quick_tag}"),
-                  fig_dir / f"{stem}.png")
+    if settings.figures:
+        _draw_figures(settings, trained, constant, ds1_trace, fig_dir, quick_tag)
     captions = {
         "training_loss_ds2": "Paper Fig. 3: training (blue) and validation (orange) RMSE per epoch, DS2.",
         "parameters_ds2": "Paper Fig. 4: the 20 learned standard deviations over the epochs, DS2.",

@@ -14,6 +14,9 @@ from fkn_bench.geometry import quaternion as quat
 ENV_ID = "AstrobeeTumble-v0"
 
 
+# exact comparisons of these bits: the vector and the single environments do the same element-wise
+# arithmetic on the same seeded draws, and their rewards share the batched/scalar cost that
+# tests/envs/test_rewards.py checks bit for bit
 def _bits(x) -> bytes:
     return np.ascontiguousarray(np.asarray(x, dtype=np.float64)).tobytes()
 

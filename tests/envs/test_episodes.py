@@ -22,6 +22,9 @@ BUSY = get_scenario(
 )
 
 
+# exact comparisons in this file: the same seeded generation (numpy Generator streams are the same
+# on any CPU) with element-wise arithmetic only; chunking, seeking, windows and seed order change
+# which rows and steps are computed together, not the operations on each
 def _equal(a: Episodes, b: Episodes) -> None:
     assert a.seeds == b.seeds and a.start == b.start and a.scenario == b.scenario
     np.testing.assert_array_equal(a.times, b.times)

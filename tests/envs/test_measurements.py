@@ -90,7 +90,7 @@ def test_noise_scale_scales_both_with_common_draws(clean) -> None:
     np.testing.assert_allclose(r5, 5.0 * r1, rtol=1e-9, atol=1e-13)
     np.testing.assert_allclose(e5, 5.0 * e1, rtol=1e-9, atol=1e-13)
     e0, r0 = _errors(_dense(noise_scale=0.0))
-    np.testing.assert_array_equal(r0, 0.0)
+    np.testing.assert_array_equal(r0, 0.0)  # exact: noise 0 * draw = 0 is added
     np.testing.assert_allclose(e0, 0.0, atol=1e-15)
 
 
@@ -124,7 +124,8 @@ def test_dropout_fraction_and_independence(clean) -> None:
     dropped = _dense(dropout=0.2)
     n = dropped.valid.size
     assert np.mean(dropped.valid) == pytest.approx(0.8, abs=4 * np.sqrt(0.16 / n))
-    # a surviving measurement has the value it would have had without dropout
+    # a surviving measurement has the value it would have had without dropout (exact: common random
+    # numbers, the same arithmetic; masks are booleans)
     np.testing.assert_array_equal(dropped.measurements[dropped.valid], clean.measurements[dropped.valid])
     np.testing.assert_array_equal(dropped.truth, clean.truth)
     # dropout applies on top of the schedule
@@ -166,6 +167,7 @@ def test_ds1_dropout_measurement_fraction() -> None:
 
 def test_sign_flips_change_only_the_sign(clean) -> None:
     flipped = _dense(sign_flip_probability=0.3)
+    # exact: common random numbers; the flips only negate quaternions
     np.testing.assert_array_equal(flipped.valid, clean.valid)
     np.testing.assert_array_equal(flipped.truth, clean.truth)
     np.testing.assert_array_equal(flipped.measurements[..., 4:], clean.measurements[..., 4:])
@@ -179,6 +181,7 @@ def test_sign_flips_change_only_the_sign(clean) -> None:
 def test_all_flipped() -> None:
     a = generate_episodes(get_scenario("ds1", n_steps=500), [0])
     b = generate_episodes(get_scenario("ds1", n_steps=500, sign_flip_probability=1.0), [0])
+    # exact: common random numbers, the flip is a negation
     np.testing.assert_array_equal(b.measurements[..., :4], -a.measurements[..., :4])
 
 
@@ -222,6 +225,7 @@ def test_ds1_flips_scenario() -> None:
 
 def test_streams() -> None:
     a = stream(3, "dropout", 0).random(5)
+    # exact: a seeded numpy Generator gives the same bits on any CPU
     np.testing.assert_array_equal(a, stream(3, "dropout", 0).random(5))
     assert not np.array_equal(a, stream(4, "dropout", 0).random(5))
     assert not np.array_equal(a, stream(3, "burst", 0).random(5))

@@ -87,7 +87,7 @@ def test_check_batch_inputs_refuses(measurements, mask, dt, message: str) -> Non
 def test_parse_observation_forms() -> None:
     pose = np.arange(7.0)
     got, time = parse_observation({"pose": pose, "valid": np.int64(1), "time": np.array(2.5)})
-    np.testing.assert_array_equal(got, pose)
+    np.testing.assert_array_equal(got, pose)  # exact: copied
     assert time == 2.5 and isinstance(time, float)
     assert parse_observation({"pose": pose, "valid": 0, "time": 1.0}) == (None, 1.0)  # invalid flag wins
     assert parse_observation({"pose": np.full(7, np.nan), "time": 3.0}) == (None, 3.0)
@@ -122,6 +122,7 @@ def test_estimate_is_immutable_and_converts_covariances() -> None:
         additive.time = 2.0  # type: ignore[misc]
     assert additive.covariance is additive.native_covariance
     np.testing.assert_allclose(additive.error_covariance, error, rtol=0, atol=1e-12)
+    # exact (this and the next): the property calls this very function on the same q and matrix
     np.testing.assert_allclose(additive.error_covariance, error_covariance_from_state(q, additive.native_covariance), rtol=0, atol=0)
     multiplicative = Estimate(time=1.0, mean=mean.copy(), native_covariance=error.copy(), initialised=True, updated=False)
     assert multiplicative.error_covariance is multiplicative.native_covariance

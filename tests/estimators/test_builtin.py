@@ -48,6 +48,8 @@ def test_oracle_ekf_uses_the_scenarios_true_noise() -> None:
     q_std, r_std = oracle_noise(scenario)
     config = estimator.to_config()
     assert config["variant"] == "ekf" and estimator.name == "oracle-ekf"
+    # exact: oracle_noise is the same computation twice; to_config's sqrt(diag(std**2)) gives std back
+    # bit for bit (sqrt(fl(x*x)) == |x| in binary64 with correctly rounded * and sqrt)
     np.testing.assert_array_equal(config["q_std"], q_std)
     np.testing.assert_array_equal(config["r_std"], r_std)
     assert "ds1-noise5x" in estimator.description

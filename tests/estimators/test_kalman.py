@@ -111,6 +111,7 @@ def test_estimate_values_and_conversions(hostile) -> None:
         assert batch.error_covariances.shape == (B, T, 12, 12)
         assert batch.innovations.shape == (B, T, 6) and batch.innovation_covariances.shape == (B, T, 6, 6)
         q = batch.means[..., :4]
+        # exact: estimate() converted with this very function on the same arrays (same computation twice)
         if name == "manual-ekf":
             np.testing.assert_allclose(batch.error_covariances, error_covariance_from_state(q, batch.covariances), rtol=0, atol=0)
         else:
@@ -262,6 +263,7 @@ def test_save_load_round_trip(variant: str, tmp_path: Path, hostile) -> None:
     assert isinstance(loaded, KalmanEstimator) and loaded.variant_name == variant
     assert loaded.to_config() == original.to_config()
     assert (loaded.name, loaded.description) == (f"tuned-{variant}", "tuned by hand")
+    # exact: the JSON round trip of the config is lossless (float repr), then the same computation twice
     np.testing.assert_array_equal(loaded.estimate(z[:, :80], mask[:, :80], DT).means, original.estimate(z[:, :80], mask[:, :80], DT).means)
     assert KalmanEstimator.load(path).to_config() == original.to_config()
     # a hand-edited file with a bad config is refused with the file's name
@@ -294,6 +296,8 @@ def test_full_covariance_configuration(tmp_path: Path, hostile) -> None:
     r_std = np.array([0.05] * 4 + [0.1] * 3)
     diagonal = KalmanEstimator(r_std=r_std)
     full = KalmanEstimator(r_cov=np.diag(r_std**2).tolist())
+    # exact: both build R = diag(r_std**2) bit for bit (x*x correctly rounded; symmetrising a diagonal
+    # matrix returns it), then run the same filter
     np.testing.assert_array_equal(full.estimate(z, mask, DT).means, diagonal.estimate(z, mask, DT).means)
     correlated = np.diag(r_std**2)
     correlated[4, 5] = correlated[5, 4] = 0.5 * 0.1 * 0.1

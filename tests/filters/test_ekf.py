@@ -1,5 +1,6 @@
 """The EKF: against the plain KF on a linear model, against filterpy's EKF on the paper's model,
-sign alignment, the Joseph form, and a long run on hostile data."""
+sign alignment and the Joseph form. (The long run on hostile data, 1e5 steps, is in
+tests/baselines/test_long_run.py, with the manual and the tuned parameters in one batch.)"""
 
 from __future__ import annotations
 
@@ -87,7 +88,9 @@ def test_predict_covariance_uses_the_autograd_jacobian() -> None:
     for b in range(2):
         F = torch.autograd.functional.jacobian(lambda s: variant.model.predict(s[None], DT)[0], state.mean[b])
         torch.testing.assert_close(predicted.covariance[b], F @ state.covariance[b] @ F.T + Q, rtol=0, atol=1e-12)
-        torch.testing.assert_close(predicted.mean[b], variant.model.predict(state.mean[b : b + 1], DT)[0], rtol=0, atol=0)
+        # not exact: a (2, 13) batch against a single row, whose products BLAS may run with other
+        # kernels (gemm/gemv, FMA or not): |mean| < 3.5, a few roundings of ulp(3.5) = 4.4e-16
+        torch.testing.assert_close(predicted.mean[b], variant.model.predict(state.mean[b : b + 1], DT)[0], rtol=0, atol=2e-15)
 
 
 # ---------------------------------------------------------------------------- filterpy
@@ -187,12 +190,16 @@ def test_measured_quaternion_sign_is_aligned_before_the_innovation() -> None:
     # common random numbers: the flipped data differ only in the signs
     signs = np.sign(np.sum(clean.measurements[..., :4] * flipped.measurements[..., :4], axis=-1))
     assert (signs[clean.valid] == -1).mean() > 0.3
+    # exact: the same seeded draws and arithmetic; the flips only negate (exact) the quaternions
     np.testing.assert_array_equal(np.abs(clean.measurements[clean.valid]), np.abs(flipped.measurements[clean.valid]))
     mask = torch.from_numpy(clean.valid)
     aligned = ExtendedKalmanFilter()
     noise = aligned.layout.default_noise()
     reference = aligned.run(noise, torch.from_numpy(clean.measurements), mask, dt=DT).means.numpy()
     estimates = aligned.run(noise, torch.from_numpy(flipped.measurements), mask, dt=DT).means.numpy()
+    # exact on any IEEE machine: the aligned measurements are identical, and where the state starts
+    # from a flipped measurement every quaternion-dependent intermediate is exactly negated
+    # (round-to-nearest is sign-symmetric)
     np.testing.assert_array_equal(estimates[..., 4:], reference[..., 4:])
     np.testing.assert_array_equal(np.abs(estimates[..., :4]), np.abs(reference[..., :4]))
     truth = clean.truth[..., :4]
@@ -222,6 +229,8 @@ def test_posterior_covariances_symmetric_psd_and_unit_quaternions() -> None:
     means = result.means.numpy()
     updated = result.updated.numpy()
     # posteriors are symmetrised exactly; predictions F P F' + Q are symmetric to rounding
+    # exact on any machine: 0.5 (P + P^T) holds the same sum of the same two numbers at [i, j] and
+    # [j, i] (IEEE addition is commutative)
     np.testing.assert_array_equal(P[updated], np.swapaxes(P[updated], -1, -2))
     np.testing.assert_allclose(P, np.swapaxes(P, -1, -2), rtol=0, atol=1e-15)
     np.testing.assert_allclose(np.linalg.norm(means[updated][:, :4], axis=-1), 1.0, rtol=0, atol=1e-14)
@@ -234,40 +243,3 @@ def test_posterior_covariances_symmetric_psd_and_unit_quaternions() -> None:
     np.testing.assert_allclose(np.einsum("bi,bij,bj->b", q, Pq[:, :4, :4], q), 0.0, atol=1e-18)
     error = error_covariance_from_state(means[updated][:, :4], Pq)
     assert np.linalg.eigvalsh(error).min() > 0
-
-
-@pytest.mark.slow
-def test_long_run_stays_finite_and_positive_definite() -> None:
-    """1e5 steps of ds1-flips-like data (sign flips at half the measurements, 1% gross
-    outliers, a measurement every 10 steps) through the batched EKF: no NaN, and the 12-dim error
-    covariance stays symmetric positive definite throughout."""
-    scenario = get_scenario("ds1-flips", n_steps=100_000)
-    episodes = generate_episodes(scenario, [7])
-    assert episodes.valid.sum() == 10_000
-    variant = ExtendedKalmanFilter()
-    with torch.no_grad():  # (no gradients needed: saves the autograd bookkeeping)
-        result = variant.run(
-            variant.layout.default_noise(),
-            torch.from_numpy(episodes.measurements),
-            torch.from_numpy(episodes.valid),
-            dt=scenario.dt,
-            store_innovations=False,
-        )
-    means, covariances = result.means[0].numpy(), result.covariances[0].numpy()
-    updated = result.updated[0].numpy()
-    assert updated.sum() > 9_900  # nearly every measurement went in (outliers included)
-    assert np.isfinite(means).all()
-    smallest = np.inf
-    for start in range(0, len(means), 10_000):  # in chunks: the checks' temporaries stay small
-        chunk = slice(start, start + 10_000)
-        P = covariances[chunk]
-        assert np.isfinite(P).all()
-        np.testing.assert_array_equal(P[updated[chunk]], np.swapaxes(P[updated[chunk]], -1, -2))
-        np.testing.assert_allclose(P, np.swapaxes(P, -1, -2), rtol=0, atol=1e-15)
-        error = error_covariance_from_state(means[chunk, :4], P)
-        np.testing.assert_allclose(error, np.swapaxes(error, -1, -2), rtol=0, atol=1e-15)
-        smallest = min(smallest, np.linalg.eigvalsh(error).min())
-    assert smallest > 0
-    # and the filter still tracks at the end (outliers did not derail it for good)
-    error = angle_between(means[-5000:, :4], episodes.truth[0, -5000:, :4])
-    assert np.sqrt(np.mean(error**2)) < 0.2

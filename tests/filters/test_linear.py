@@ -39,6 +39,7 @@ def test_missing_measurements_and_inputs_untouched() -> None:
     mask = np.array([False, True, False])
     copies = [a.copy() for a in (x0, P0, z)]
     means, covariances = linear_kalman_filter(A, H, Q, R, x0, P0, np.nan_to_num(z), mask)
+    # exact: no update at t = 0, the prior is copied (and symmetrising the symmetric P0 returns it)
     np.testing.assert_array_equal(means[0], x0)  # no update at t = 0: the prior
     np.testing.assert_array_equal(covariances[0], P0)
     x1 = A @ x0
@@ -48,4 +49,4 @@ def test_missing_measurements_and_inputs_untouched() -> None:
     np.testing.assert_allclose(means[2], A @ means[1])
     np.testing.assert_allclose(covariances[2], A @ covariances[1] @ A.T + Q)
     for original, now in zip(copies, (x0, P0, z)):
-        np.testing.assert_array_equal(original, now)
+        np.testing.assert_array_equal(original, now)  # exact: inputs untouched

@@ -51,6 +51,7 @@ def test_predict_matches_paper_equations() -> None:
     for b in range(5):
         np.testing.assert_allclose(moved[b], _paper_f(x[b].numpy(), 0.1), rtol=0, atol=1e-15)
     # w and v are constant; r moves with v
+    # exact: identity rows of A (products with 1 and 0, sums with 0)
     np.testing.assert_array_equal(moved[:, 7:13], x[:, 7:13].numpy())
 
 
@@ -101,6 +102,7 @@ def test_align_flips_only_opposing_quaternions() -> None:
     z = torch.cat((x[:, :4], x[:, 4:7] + 0.1), dim=1)
     z[::2, :4] *= -1
     aligned = model.align(z, x)
+    # exact: multiplying by +-1 (twice for the flipped rows) is exact
     torch.testing.assert_close(aligned[:, :4], x[:, :4], rtol=0, atol=0)
     torch.testing.assert_close(aligned[:, 4:], z[:, 4:], rtol=0, atol=0)
 
@@ -111,7 +113,7 @@ def test_normalize_returns_unit_quaternion_and_its_jacobian() -> None:
     unit, block, N = model.normalize(x)
     assert block == slice(0, 4)
     torch.testing.assert_close(unit[:, :4].norm(dim=1), torch.ones(4, dtype=torch.float64))
-    torch.testing.assert_close(unit[:, 4:], x[:, 4:], rtol=0, atol=0)
+    torch.testing.assert_close(unit[:, 4:], x[:, 4:], rtol=0, atol=0)  # exact: copied
     for b in range(4):
         auto = jacobian(lambda q: q / q.norm(), x[b, :4])
         torch.testing.assert_close(N[b], auto, rtol=0, atol=1e-14)

@@ -67,9 +67,10 @@ def test_predict_and_update_are_pure_and_match_the_model() -> None:
     x_post, P_post, nu, S = online_ekf.update(x_pred, P_pred, z, R)
     np.testing.assert_allclose(nu[:4], x[:4] - x_pred[:4], rtol=0, atol=1e-15)
     assert np.linalg.norm(x_post[:4]) == pytest.approx(1.0, abs=1e-15)
+    # exact: P_post is symmetrised, 0.5 (M + M^T), the same sum at [i, j] and [j, i]
     np.testing.assert_array_equal(P_post, P_post.T)
     for original, now in zip(originals, (x, P, Q, R)):
-        np.testing.assert_array_equal(original, now)  # inputs untouched
+        np.testing.assert_array_equal(original, now)  # inputs untouched (exact: no arithmetic on them)
     state, _, _ = ExtendedKalmanFilter().update(FilterState(torch.from_numpy(x_pred)[None], torch.from_numpy(P_pred)[None]), torch.from_numpy(z)[None], torch.from_numpy(R))
     np.testing.assert_allclose(x_post, state.mean[0].numpy(), rtol=0, atol=1e-13)
     P_torch = state.covariance[0].numpy()
@@ -98,7 +99,7 @@ def test_sanitize_measurement() -> None:
 
 def test_initial_state_and_template_cache() -> None:
     x = online_ekf.initial_state(np.arange(7.0))
-    np.testing.assert_array_equal(x, np.concatenate((np.arange(7.0), np.zeros(6))))
+    np.testing.assert_array_equal(x, np.concatenate((np.arange(7.0), np.zeros(6))))  # exact: copied
     P = np.eye(13)
     for k in range(40):  # irregular steps must not grow the cache without bound
         online_ekf.predict(x, P, P, 0.1 + k * 1e-3)

@@ -88,6 +88,8 @@ def test_cholesky_entries_give_spd_matrices(positivity: str) -> None:
     raw = torch.randn(5, parameters.size, generator=generator, dtype=torch.float64)
     noise = parameters.to_noise(raw)
     for matrix in (noise.process, noise.measurement):
+        # exact on any machine: the covariance is symmetrised by construction, 0.5 (M + M^T): M[i, j]
+        # and M[j, i] are then the same sum of the same two numbers (IEEE addition is commutative)
         torch.testing.assert_close(matrix, matrix.transpose(-1, -2), rtol=0, atol=0)
         assert (torch.linalg.eigvalsh(matrix) > 0).all()
         assert torch.linalg.cholesky_ex(matrix)[1].eq(0).all()

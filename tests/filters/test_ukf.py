@@ -116,5 +116,6 @@ def test_safe_cholesky_fallback_is_finite() -> None:
     P = torch.tensor([[[1.0, 1.0], [1.0, 1.0 - 1e-17]], [[2.0, 0.0], [0.0, 3.0]]], dtype=torch.float64)
     L = ukf_module._safe_cholesky(P)
     assert torch.isfinite(L).all()
-    torch.testing.assert_close(L[1], torch.linalg.cholesky(P[1]), rtol=0, atol=0)  # untouched row
+    # untouched row; exact: a diagonal matrix, L = diag(sqrt 2, sqrt 3) (correctly rounded sqrt)
+    torch.testing.assert_close(L[1], torch.linalg.cholesky(P[1]), rtol=0, atol=0)
     torch.testing.assert_close(L[0] @ L[0].T, P[0], rtol=0, atol=1e-6)

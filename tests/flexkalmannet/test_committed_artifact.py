@@ -1,10 +1,24 @@
 """The committed FlexKalmanNet parameters: they load, they are what their recorded training
 configuration produces, and they beat the manual tuning.
 
-Retraining uses the committed configuration and seed. On the machine and library versions that
-produced the artefact the result is identical; elsewhere floating-point differences in BLAS can
-move the optimisation slightly, hence the stated tolerances: 5% on each learned standard
-deviation and 2% on the test 13-state RMSE.
+The committed artefact records its run's per-epoch history (``training.history``: losses and the
+deployed standard deviations after every epoch). Retraining checks the first
+:data:`RETRAIN_EPOCHS` epochs of the committed configuration and seed against that history: the
+data, the network's initialisation, the filter, the objective and the optimiser all act from the
+first epoch on, so any change to them moves those epochs. (A full 100-epoch retraining, 140 s,
+is what ``fkn-bench train --estimator flexkalmannet --scenario ds1`` does; it reproduced the
+previous committed parameters to 9.4e-5 relative on another CPU vendor.)
+
+Tolerance: the network trains in float32, whose matrix products take different SIMD/BLAS paths
+on different CPUs (MKL picks other kernels on Intel than on AMD), so a retraining agrees with the
+committed history to rounding that Adam carries forward, not bit for bit. Measured over these three
+epochs on the AMD EPYC that trained the artefact: identical with torch and MKL forced to AVX2
+(``ATEN_CPU_CAPABILITY=avx2 MKL_ENABLE_INSTRUCTIONS=AVX2``), 1.4e-9 relative with SSE4.2 kernels;
+across vendors, the previous committed artefact (trained on an Intel Xeon) and its retraining here
+differed by 9.4e-5 after 100 epochs. :data:`HISTORY_RTOL` = 1e-5 leaves room for that drift over
+three epochs and is 1/30 of what the standard deviations move in them (the test checks that), so
+a change to the pipeline cannot hide under it. The test-split RMSE of the full run is checked
+against the leaderboard by the accuracy gate.
 """
 
 from __future__ import annotations
@@ -19,8 +33,8 @@ from fkn_bench.flexkalmannet import FlexKalmanNetConfig, FlexKalmanNetEstimator,
 from fkn_bench.scenarios import get_scenario
 from fkn_bench.training.artifacts import artifact_path, read_artifact
 
-SIGMA_TOLERANCE = 0.05
-TEST_RMSE_TOLERANCE = 0.02
+RETRAIN_EPOCHS = 3
+HISTORY_RTOL = 1e-5  # see the module docstring for its size
 
 
 @pytest.mark.parametrize("family", ["ds1", "ds2"])
@@ -35,16 +49,18 @@ def test_committed_artifacts_load_and_run_out_of_the_box(family: str) -> None:
     assert artifact["training"]["test_rmse"] < 0.9 * 0.0186  # below the manual EKF's ds1 test RMSE
 
 
-@pytest.mark.slow
-def test_retraining_with_the_committed_seed_reproduces_the_committed_ds1_parameters(tmp_path: Path) -> None:
+def test_retraining_with_the_committed_seed_reproduces_the_committed_ds1_history(tmp_path: Path) -> None:
     committed = read_artifact(artifact_path("flexkalmannet", "ds1"))
-    config = FlexKalmanNetConfig.from_dict(committed["training"]["config"])
+    history = committed["training"]["history"]
+    assert history["epoch"] == list(range(1, committed["training"]["epochs_run"] + 1))
+    config = FlexKalmanNetConfig.from_dict(committed["training"]["config"]).replace(epochs=RETRAIN_EPOCHS)
     scenario = get_scenario(committed["scenario"]["name"])
     assert scenario.config_hash() == committed["scenario"]["config_hash"], "the ds1 scenario changed since training"
     outcome = train_flexkalmannet(scenario, config, out=tmp_path, progress=False, plots=False)
-    retrained = read_artifact(outcome.artifact)
-    for entry in ("q_std", "r_std"):
-        np.testing.assert_allclose(
-            retrained["estimator_config"][entry], committed["estimator_config"][entry], rtol=SIGMA_TOLERANCE
-        )
-    assert outcome.test["test_rmse"] == pytest.approx(committed["training"]["test_rmse"], rel=TEST_RMSE_TOLERANCE)
+    retrained = read_artifact(outcome.artifact)["training"]["history"]
+    assert set(retrained) == set(history)
+    for column, values in retrained.items():
+        np.testing.assert_allclose(values, history[column][:RETRAIN_EPOCHS], rtol=HISTORY_RTOL, err_msg=column)
+    # each epoch moved the parameters by far more than the tolerance: the comparison can fail
+    first, last = (np.array([history[c][i] for c in history if c.startswith("sigma_")]) for i in (0, RETRAIN_EPOCHS - 1))
+    assert np.abs(last / first - 1).max() > 30 * HISTORY_RTOL

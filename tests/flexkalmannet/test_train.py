@@ -67,6 +67,7 @@ def test_deployed_estimator_runs_and_round_trips_through_save(trained, tmp_path:
 
     again = load_estimator(estimator.save(tmp_path / "fkn.json"))
     assert isinstance(again, FlexKalmanNetEstimator)
+    # exact: the saved parameters round-trip losslessly (JSON float repr); same computation twice
     np.testing.assert_array_equal(again.estimate(episodes.measurements, episodes.valid, SHORT.dt).means, result.means)
 
 

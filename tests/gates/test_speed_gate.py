@@ -1,6 +1,6 @@
 """The speed-ratio gate (:mod:`fkn_bench.gates.speed`), run by the default test command.
 
-For every check with a regression threshold: the real implementation passes three gate
+For every check with a regression threshold: the real implementation passes two gate
 evaluations in a row, and the same implementation made to do its work twice (injected here with
 :func:`~fkn_bench.gates.speed.doubled`) fails the gate. Nothing here compares a time with a stored
 time: each check is a ratio against a reference timed beside it in this process.
@@ -15,7 +15,10 @@ import pytest
 from fkn_bench.gates import speed
 from fkn_bench.runtime import torch_threads
 
-CONSECUTIVE_PASSES = 3
+CONSECUTIVE_PASSES = 2
+"""Evaluations in a row the real implementation must pass (each up to three attempts): two show
+that passing is not luck; a third added 30 s to the test command for no further information (the
+measured spreads are in :data:`fkn_bench.gates.speed.MEASURED`)."""
 
 
 def _checks() -> list[speed.RatioCheck]:
@@ -43,7 +46,7 @@ def _workloads(cache: dict[str, speed.Workloads], check: speed.RatioCheck) -> sp
 
 
 @pytest.mark.parametrize("check", _checks(), ids=lambda c: c.name)
-def test_real_implementation_passes_three_evaluations_in_a_row(check: speed.RatioCheck, workloads: dict) -> None:
+def test_real_implementation_passes_two_evaluations_in_a_row(check: speed.RatioCheck, workloads: dict) -> None:
     built = _workloads(workloads, check)
     outcomes = [speed.evaluate(check, workloads=built) for _ in range(CONSECUTIVE_PASSES)]
     print("\n" + speed.format_outcomes(outcomes))

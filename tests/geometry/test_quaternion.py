@@ -30,6 +30,9 @@ def _same_attitude(a: np.ndarray, b: np.ndarray, atol: float) -> None:
 # ---------------------------------------------------------------------------- product
 def test_multiply_known_values() -> None:
     i, j, k = np.eye(4)[1], np.eye(4)[2], np.eye(4)[3]
+    # exact in this file: multiply/conjugate/reorder/canonical use only + - * and copies (small
+    # integers and 0/1 are exact), the sign tests rely on sign-symmetric rounding, normalize([0, 3, 0,
+    # 4]) and slerp(t = 0) are correctly rounded (3/5, sin(0) = 0, cos(0) = 1), random_uniform is seeded
     np.testing.assert_array_equal(quat.multiply(i, j), k)
     np.testing.assert_array_equal(quat.multiply(j, k), i)
     np.testing.assert_array_equal(quat.multiply(k, i), j)

@@ -21,6 +21,8 @@ def local(grid):
 
 
 def _assert_identical(a, b) -> None:
+    # exact: the same cells computed in worker processes of this machine (same wheels, the filter's
+    # torch thread count fixed by runtime.torch_threads): the same computation, only elsewhere
     pd.testing.assert_frame_equal(deterministic_rows(a.rows), deterministic_rows(b.rows), check_exact=True)
     for estimator, scenario in a.pairs():
         for x, y in zip(a.pooled(estimator, scenario), b.pooled(estimator, scenario)):

@@ -28,6 +28,7 @@ def test_round_trip_is_exact(tmp_path: Path, short_ds1: SimulatedSource) -> None
     assert json_path == tmp_path / "cells" / "manual-ekf" / "ds1" / "seeds-3-4.json"
     back = store.read_cell(json_path)
     pd.testing.assert_frame_equal(back.rows, record.rows, check_exact=True)
+    # exact: a lossless write/read round trip of the cell (float64 values, integer counts)
     assert np.array_equal(back.nees.sum, record.nees.sum) and np.array_equal(back.nis.count, record.nis.count)
     assert back.key == record.key and back.status == "ok" and back.seeds == (3, 4)
     assert sorted(p.name for p in json_path.parent.iterdir()) == ["seeds-3-4.csv", "seeds-3-4.json", "seeds-3-4.npz"]

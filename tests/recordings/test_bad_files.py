@@ -100,6 +100,7 @@ def test_truncated_file(multi_chunk) -> None:
     assert any("stopped reading at record" in r for r in repairs)
     n = trajectory.n_steps
     assert 2 < n < episodes.n_steps
+    # exact here and below: MCAP stores float64 losslessly
     assert np.array_equal(trajectory.truth, episodes.truth[0, :n])  # what was read is intact
 
 

@@ -63,7 +63,7 @@ def test_cdr_bytes_identical_to_mcap_ros2(name: str) -> None:
                 got = decode_stamped(name, "cdr", theirs)
                 assert got[0] == stamp and got[1] == frame
                 assert got[2] == (child if "Odometry" in name else "")
-                assert np.array_equal(got[3], values[i])
+                assert np.array_equal(got[3], values[i])  # exact: float64 bytes round trip
 
 
 def _ros1_reference(seq: int, stamp: int, frame: str, child: str | None, values: list[float]) -> bytes:
@@ -86,7 +86,7 @@ def test_ros1_bytes_follow_the_wire_format(name: str) -> None:
         assert ours[i] == _ros1_reference(7 + i, stamp, "world", child, values[i].tolist())
         got = decode_stamped(name, "ros1", ours[i])
         assert got[0] == stamp and got[1] == "world" and got[2] == (child or "")
-        assert np.array_equal(got[3], values[i])
+        assert np.array_equal(got[3], values[i])  # exact: float64 bytes round trip
 
 
 def test_both_spellings_of_a_type_name_work() -> None:
@@ -134,7 +134,7 @@ def test_foxglove_json_round_trip_is_exact() -> None:
         assert document["frame_id"] == "world"
         assert document["timestamp"] == {"sec": stamp // 10**9, "nsec": stamp % 10**9}
         got_stamp, frame, got = decode_pose_in_frame(raw)
-        assert got_stamp == stamp and frame == "world" and np.array_equal(got, row)
+        assert got_stamp == stamp and frame == "world" and np.array_equal(got, row)  # exact: JSON float repr round trip
 
 
 def test_foxglove_json_non_finite_becomes_null_and_decodes_to_nan() -> None:

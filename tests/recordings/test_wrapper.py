@@ -36,6 +36,8 @@ def test_recorded_loop_replays_to_the_same_data(tmp_path) -> None:
     assert env.recorded_paths == [tmp_path / "ep5.mcap"]  # written at truncation
     path = env.recorded_paths[0]
     trajectory = read_recording(path, measurement_topic="/fkn_bench/measured_pose")
+    # exact in this test: MCAP stores float64 losslessly, measurements are re-synthesised from the
+    # read-back truth with the same seeded draws (same computation), the actions are written as given
     assert np.array_equal(trajectory.truth, np.array([i["truth"] for i in run["info"]]))
     episodes = trajectory.episodes()
     assert np.array_equal(episodes.measurements[0], np.array([o["pose"] for o in run["obs"]]), equal_nan=True)

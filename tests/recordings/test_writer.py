@@ -94,7 +94,7 @@ def test_round_trip_every_message_bit_exact(recorded) -> None:
         assert [m.twist.linear.x, m.twist.linear.y, m.twist.linear.z] == means[k, 10:13].tolist()
     for (_, _, _, m), k in zip(messages[TOPICS.estimated_pose_covariance], rows):
         assert _xyzw(m.pose.pose.orientation).tolist() == [*means[k, 1:4], means[k, 0]]
-        cov = np.array(m.pose.covariance).reshape(6, 6)
+        cov = np.array(m.pose.covariance).reshape(6, 6)  # exact below: float64 written and read back, reordered
         assert np.array_equal(cov[:3, :3], P[k, 3:6, 3:6])  # position block
         assert np.array_equal(cov[3:, 3:], P[k, 0:3, 0:3])  # attitude (rotation-vector) block
         assert np.array_equal(cov[:3, 3:], P[k, 3:6, 0:3])

@@ -16,6 +16,7 @@ def test_windows_are_consecutive_samples_of_the_train_split() -> None:
     data = TrainingData(SHORT, window=500, stride=250, train_measurement_every=1)
     full = generate_episodes(SHORT.replace(measurement_every=1), [SHORT.dataset_seed], split="train")
     assert data.n_windows == (3200 - 500) // 250 + 1
+    # exact: windows are copies of the same seeded generation
     assert torch.equal(data.train.truth[1], torch.as_tensor(full.truth[0, 250:750]))
     assert torch.equal(data.train.mask[3], torch.as_tensor(full.valid[0, 750:1250]))
     assert bool(data.train.mask.all())  # a measurement every step
@@ -34,7 +35,7 @@ def test_batches_cover_every_window_once_in_a_seeded_order() -> None:
     seen = [b.truth[:, 0, 4:7] for b in data.batches(4, torch.Generator().manual_seed(0))]
     again = [b.truth[:, 0, 4:7] for b in data.batches(4, torch.Generator().manual_seed(0))]
     assert sum(len(s) for s in seen) == data.n_windows
-    assert all(torch.equal(a, b) for a, b in zip(seen, again))
+    assert all(torch.equal(a, b) for a, b in zip(seen, again))  # exact: same seeded order, copies
 
 
 def test_bad_windows_are_refused() -> None:

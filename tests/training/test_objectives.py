@@ -16,6 +16,7 @@ def test_state_error_is_sign_safe() -> None:
     truth[..., 0] = 1.0
     estimate = truth.clone()
     estimate[..., :4] *= -1.0  # same attitude
+    # exact: after sign alignment the operands are equal, and x - x = 0
     assert torch.equal(aligned_state_error(estimate, truth), torch.zeros_like(truth))
 
 
