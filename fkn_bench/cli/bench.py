@@ -197,7 +197,7 @@ def _suite_directory(given: str | None) -> Path:
 def run_suite(args: argparse.Namespace) -> int:
     suite = _suite_directory(args.suite)
     output = Path(args.json).resolve()
-    command = [sys.executable, "-m", "pytest", str(suite), "--benchmark-only", f"--benchmark-json={output}",
+    command = [sys.executable, "-m", "pytest", str(suite), "-n", "0", "--benchmark-only", f"--benchmark-json={output}",
                "-q", "-p", "no:cacheprovider"]
     if args.keyword:
         command += ["-k", args.keyword]
