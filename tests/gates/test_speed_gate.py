@@ -15,6 +15,8 @@ import pytest
 from fkn_bench.gates import speed
 from fkn_bench.runtime import torch_threads
 
+pytestmark = pytest.mark.exclusive_cpu  # timed: the other xdist worker waits (tests/conftest.py)
+
 CONSECUTIVE_PASSES = 2
 """Evaluations in a row the real implementation must pass (each up to three attempts): two show
 that passing is not luck; a third added 30 s to the test command for no further information (the
