@@ -7,13 +7,12 @@ passed its threshold with the other worker running the suite). A test marked ``e
 therefore holds an exclusive lock for its whole run (setup, call, teardown) and every other test
 a shared one, fixtures of wider scope included (they are built inside the setup of the first test
 that needs them): while a timed test runs, the other worker waits between its tests, and the
-timing sees the machine the thresholds were calibrated on. Without xdist (``-n 0``) no lock is
-taken.
+timing sees the machine the thresholds were calibrated on. Without xdist (``-n 0``), or where
+``fcntl`` does not exist (Windows), no lock is taken.
 """
 
 from __future__ import annotations
 
-import fcntl
 import os
 import tempfile
 from collections.abc import Iterator
@@ -21,9 +20,14 @@ from pathlib import Path
 
 import pytest
 
+try:
+    import fcntl
+except ImportError:  # not a POSIX system: run without the lock
+    fcntl = None  # type: ignore[assignment]
+
 
 def _lock_path() -> Path | None:
-    if not os.environ.get("PYTEST_XDIST_WORKER"):
+    if fcntl is None or not os.environ.get("PYTEST_XDIST_WORKER"):
         return None
     # one fixed file: the workers of one run share it (so would two runs at once, which is right:
     # they share the cores too); flock locks end with their process, so a stale file is harmless

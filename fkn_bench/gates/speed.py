@@ -57,6 +57,7 @@ import copy
 import dataclasses
 import gc
 import importlib
+import statistics
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -147,8 +148,6 @@ class RatioMeasurement:
 
     @property
     def ratio(self) -> float:
-        import statistics
-
         return float(statistics.median(self.round_ratios))
 
     def to_dict(self) -> dict[str, Any]:
@@ -293,9 +292,8 @@ def average_filter_results(first: Any, second: Any) -> Any:
 def calibrate(check: RatioCheck, *, runs: int = 10, doubled_runs: int = 4) -> dict[str, float]:
     """Measure ``check`` ``runs`` times, and ``doubled_runs`` times with its hotspot doubled; returns
     a :data:`MEASURED` entry plus ``suggested_min_ratio`` (0.7 of the median, rounded to two
-    significant digits). Run it under the load the gate will see."""
-    import statistics
-
+    significant digits). Run it on the machine the gate runs on, as the gate sees it (the test
+    run gives timed tests the CPU to themselves)."""
     from fkn_bench.runtime import torch_threads
 
     with torch_threads():
