@@ -45,7 +45,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.cli import UsageError
     from fkn_bench.estimators import UnknownEstimatorError
-    from fkn_bench.harness.estimators import check_estimators, default_estimator, probe_estimator
+    from fkn_bench.harness.estimators import SelectionError, select_estimators
     from fkn_bench.harness.grid import safe_name
     from fkn_bench.harness.leaderboard import rank, scenario_order
     from fkn_bench.harness.plots import comparison_figure, errors_figure, save_figure, states_figure, uncertainty_figure
@@ -66,12 +66,9 @@ def run(args: argparse.Namespace) -> int:
     load_scenario_files(args)
     scenario = get_scenario(args.scenario)
     try:
-        estimator = check_estimators([args.estimator])[0] if args.estimator else default_estimator([scenario])
-    except UnknownEstimatorError as exc:
+        resolved = select_estimators([args.estimator] if args.estimator else None, [scenario]).resolved[0]
+    except (UnknownEstimatorError, SelectionError) as exc:
         raise UsageError(str(exc)) from None
-    availability = probe_estimator(estimator, scenario)
-    if not availability.available:
-        raise UsageError(f"estimator {estimator!r} is not available for scenario {scenario.name}: {availability.error}")
     results = None
     if args.results:
         try:
@@ -80,8 +77,8 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(str(exc)) from None
 
     out = Path(args.out)
-    run_trace = trace(estimator, SimulatedSource(scenario, args.split), args.seed)
-    stem = f"{safe_name(estimator)}-{safe_name(scenario.name)}-seed{args.seed}"
+    run_trace = trace(resolved, SimulatedSource(scenario, args.split), args.seed)
+    stem = f"{safe_name(resolved.name)}-{safe_name(scenario.name)}-seed{args.seed}"
     written = [
         save_figure(states_figure(run_trace, steps=args.steps), out / f"{stem}-states.png"),
         save_figure(uncertainty_figure(run_trace, steps=args.steps), out / f"{stem}-uncertainty.png"),

@@ -96,51 +96,23 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise UsageError("--rerun needs --out (without it nothing is reused)")
 
 
-def _estimators(args: argparse.Namespace, scenarios: list[Any]) -> tuple[list[str], dict[tuple[str, str], str]]:
-    """The estimators to run and their fingerprints per available (estimator, scenario) pair.
-    Named estimators that cannot be built are usage errors; ``--all`` skips the unavailable pairs
-    (e.g. a learned estimator without trained parameters for a scenario) with a note on stderr."""
+def _estimators(args: argparse.Namespace, scenarios: list[Any]) -> list[Any]:
+    """The resolved (estimator, scenario) pairs to run (:func:`fkn_bench.harness.select_estimators`:
+    its notes go to stderr, its refusals are usage errors)."""
     from fkn_bench.cli import UsageError
-    from fkn_bench.estimators import UnknownEstimatorError, estimator_names
-    from fkn_bench.harness.estimators import (
-        DEFAULT_ESTIMATOR_PREFERENCE,
-        check_estimators,
-        default_estimator,
-        probe_estimator,
-    )
+    from fkn_bench.estimators import UnknownEstimatorError
+    from fkn_bench.harness import SelectionError, select_estimators
 
-    try:
-        if args.estimator:
-            names = check_estimators(args.estimator)
-        else:
-            names = estimator_names() if args.all else [default_estimator(scenarios)]
-    except UnknownEstimatorError as exc:
-        raise UsageError(str(exc)) from None
-    if not args.estimator and not args.all and names[0] in DEFAULT_ESTIMATOR_PREFERENCE:
-        for better in DEFAULT_ESTIMATOR_PREFERENCE[: DEFAULT_ESTIMATOR_PREFERENCE.index(names[0])]:
-            if better in estimator_names():
-                probes = (probe_estimator(better, s) for s in scenarios)
-                reason = next((p.error for p in probes if not p.available), "unavailable")
-                print(f"fkn-bench run: {better} is not available ({reason}); running {names[0]}", file=sys.stderr)
-    fingerprints: dict[tuple[str, str], str] = {}
-    chosen = []
     options = parse_key_values(args.estimator_option, "--estimator-option")
     if options and not args.estimator:
         raise UsageError("--estimator-option needs --estimator NAME")
-    for name in names:
-        probes = [probe_estimator(name, scenario, options) for scenario in scenarios]
-        failed = [p for p in probes if not p.available]
-        if failed and (args.estimator or not args.all):
-            raise UsageError(f"estimator {name!r} is not available for scenario {failed[0].scenario}: {failed[0].error}")
-        for probe in failed:
-            print(f"fkn-bench run: skipping {name} on {probe.scenario} (not available: {probe.error})", file=sys.stderr)
-        if len(failed) == len(probes):
-            continue
-        chosen.append(name)
-        fingerprints.update({(name, p.scenario): p.fingerprint or "" for p in probes if p.available})
-    if not chosen:
-        raise UsageError("no available estimator to run")
-    return chosen, fingerprints
+    try:
+        selection = select_estimators(args.estimator, scenarios, every=args.all, options=options)
+    except (UnknownEstimatorError, SelectionError) as exc:
+        raise UsageError(str(exc)) from None
+    for note in selection.notes:
+        print(f"fkn-bench run: {note}", file=sys.stderr)
+    return selection.resolved
 
 
 def _scenarios(args: argparse.Namespace) -> list[Any]:
@@ -179,7 +151,7 @@ def _recording_source(args: argparse.Namespace) -> Any:
             raise UsageError(f"--dt must be a number of seconds or 'native' (got {args.dt!r})") from None
     source = RecordingSource(str(args.recording), tuple(sorted(options.items())))
     try:
-        print(source._trajectory().report.summary(), file=sys.stderr)
+        print(source.trajectory().report.summary(), file=sys.stderr)
     except (RecordingError, OSError) as exc:
         raise UsageError(str(exc)) from None
     return source
@@ -213,20 +185,12 @@ def run(args: argparse.Namespace) -> int:
     else:
         scenarios = _scenarios(args)
         sources = [SimulatedSource(scenario, args.split) for scenario in scenarios]
-    estimators, fingerprints = _estimators(args, scenarios)
-    settings = MetricSettings(cut=args.cut)
-    cells = [
-        cell
-        for cell in build_grid(
-            estimators, sources, range(args.seeds), settings=settings, fingerprints=fingerprints,
-            estimator_options=parse_key_values(args.estimator_option, "--estimator-option"),
-        )
-        if (cell.estimator, cell.scenario) in fingerprints  # available pairs only
-    ]
+    resolved = _estimators(args, scenarios)
+    cells = build_grid(resolved, sources, range(args.seeds), settings=MetricSettings(cut=args.cut))
     store = ResultStore(args.out) if args.out else None
     backend = make_backend(args.backend, workers=args.workers, scheduler=args.scheduler)
     outcome = run_grid(cells, store=store, backend=backend, progress=not args.no_progress, rerun=args.rerun)
-    order = [(e, s.label) for e in estimators for s in sources if (e, s.label) in fingerprints]
+    order = [(r.name, r.scenario) for r in resolved]
     summaries = summarize_results(outcome.results, order)
     if args.json:
         document = {

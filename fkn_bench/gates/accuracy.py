@@ -318,7 +318,7 @@ def run_accuracy_gate(
     """
     from fkn_bench.estimators import estimator_names
     from fkn_bench.harness import MetricSettings, ResultStore, SimulatedSource, run_grid
-    from fkn_bench.harness.estimators import probe_estimator
+    from fkn_bench.harness.estimators import resolve_estimator
     from fkn_bench.harness.grid import CellSpec
     from fkn_bench.scenarios import get_scenario, scenario_names
 
@@ -345,14 +345,14 @@ def run_accuracy_gate(
         scenario = get_scenario(scenario_name)
         for name in names:
             records = committed.cells(name, scenario_name)
-            probe = probe_estimator(name, scenario)
-            if not probe.available:
+            resolved = resolve_estimator(name, scenario)
+            if not resolved.available:
                 if records:
                     report.problems.append(PairProblem(
                         name, scenario_name, "stale",
-                        f"committed cells exist but the estimator no longer builds ({probe.error})"))
+                        f"committed cells exist but the estimator no longer builds ({resolved.error})"))
                 else:
-                    report.skipped.append((name, scenario_name, probe.error or "unavailable"))
+                    report.skipped.append((name, scenario_name, resolved.error or "unavailable"))
                 continue
             if not records:
                 report.problems.append(PairProblem(
@@ -363,11 +363,11 @@ def run_accuracy_gate(
             first = records[0]
             source = SimulatedSource(scenario, first.source.get("split", "test"))
             key = first.key
-            if key.get("estimator_fingerprint") != probe.fingerprint:
+            if key.get("estimator_fingerprint") != resolved.fingerprint:
                 report.problems.append(PairProblem(
                     name, scenario_name, "stale",
                     f"the estimator's configuration changed (fingerprint {key.get('estimator_fingerprint')} committed, "
-                    f"{probe.fingerprint} now): accept with `{ACCEPT_COMMAND}`"))
+                    f"{resolved.fingerprint} now): accept with `{ACCEPT_COMMAND}`"))
             if key.get("source") != source.key():
                 report.problems.append(PairProblem(
                     name, scenario_name, "stale",
@@ -375,14 +375,8 @@ def run_accuracy_gate(
                     f"`{ACCEPT_COMMAND}`"))
             gate_seeds = tuple(first.seeds[:seeds])
             wanted[(name, scenario_name)] = gate_seeds
-            cells.append(CellSpec(
-                estimator=name,
-                source=source,
-                seeds=gate_seeds,
-                settings=MetricSettings.from_dict(key["settings"]),
-                estimator_fingerprint=probe.fingerprint or "",
-                online_steps=1,  # the online timing is cost, not accuracy
-            ))
+            cells.append(CellSpec(resolved, source, gate_seeds, MetricSettings.from_dict(key["settings"]),
+                                  online_steps=1))  # the online timing is cost, not accuracy
             report.compared.append((name, scenario_name, gate_seeds))
 
     if cells:

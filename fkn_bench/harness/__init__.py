@@ -1,6 +1,8 @@
 """The benchmark harness: joins estimators, episodes and metrics into a grid of cells, runs it on
 a backend, stores the results, and summarises them.
 
+* :mod:`~fkn_bench.harness.estimators`: resolving estimators (each pair built once) and choosing
+  them (:func:`select_estimators`, the default estimator);
 * :mod:`~fkn_bench.harness.sources`: where episodes come from (:class:`SimulatedSource`,
   :class:`RecordingSource`);
 * :mod:`~fkn_bench.harness.grid`: cells (estimator x source x seed chunk);
@@ -16,11 +18,13 @@ a backend, stores the results, and summarises them.
 from fkn_bench.harness.backends import BACKENDS, DaskBackend, LocalBackend, make_backend
 from fkn_bench.harness.cell import CellResult, run_cell
 from fkn_bench.harness.estimators import (
-    Availability,
+    ResolvedEstimator,
+    Selection,
+    SelectionError,
     check_estimators,
-    default_estimator,
-    estimator_fingerprint,
-    probe_estimator,
+    resolve,
+    resolve_estimator,
+    select_estimators,
 )
 from fkn_bench.harness.grid import ONLINE_STEPS, SEED_CHUNK, CellSpec, build_grid, chunk_seeds
 from fkn_bench.harness.records import CellRecord, Results, record_of
@@ -33,7 +37,6 @@ from fkn_bench.harness.summary import PRIMARY_SCORE, summarize_pair, summarize_r
 from fkn_bench.metrics import MetricSettings
 
 __all__ = [
-    "Availability",
     "BACKENDS",
     "COLUMNS",
     "CellRecord",
@@ -46,23 +49,26 @@ __all__ = [
     "MetricSettings",
     "ONLINE_STEPS",
     "PRIMARY_SCORE",
+    "ResolvedEstimator",
     "ResultStore",
     "Results",
     "SEED_CHUNK",
     "RecordingSource",
+    "Selection",
+    "SelectionError",
     "SimulatedSource",
     "StoreError",
     "build_grid",
     "check_estimators",
     "chunk_seeds",
-    "default_estimator",
     "deterministic_rows",
-    "estimator_fingerprint",
     "make_backend",
-    "probe_estimator",
     "record_of",
+    "resolve",
+    "resolve_estimator",
     "run_cell",
     "run_grid",
+    "select_estimators",
     "summarize_pair",
     "summarize_results",
     "summary_text",

@@ -1,7 +1,8 @@
 """Running one grid cell: filter a seed chunk with one estimator, time it, score it.
 
-Steps (:func:`run_cell`): load the episodes of the chunk from the cell's source; build the
-estimator with ``make_estimator(name, scenario=...)``; call ``estimate()`` once on the whole batch
+Steps (:func:`run_cell`): load the episodes of the chunk from the cell's source; take a copy of
+the cell's estimator (built once, when the grid was resolved: every cell starts from the same
+pristine estimator, on every backend); call ``estimate()`` once on the whole batch
 (timed, with peak memory: the batched cost); time a short online run (``reset`` and ``step`` over
 the first ``online_steps`` steps of the chunk's first sequence: the online cost); score the batch
 with :func:`fkn_bench.metrics.score_run`. Everything runs under
@@ -14,6 +15,7 @@ and each of its seeds counts as diverged.
 
 from __future__ import annotations
 
+import copy
 import traceback
 from dataclasses import dataclass, field
 from typing import Any
@@ -21,7 +23,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from fkn_bench.estimators import Estimator, make_estimator
+from fkn_bench.estimators import Estimator
 from fkn_bench.harness.grid import CellSpec
 from fkn_bench.harness.profiling import measure
 from fkn_bench.harness.provenance import environment
@@ -94,7 +96,9 @@ def run_cell(spec: CellSpec) -> CellResult:
         episodes = spec.source.load(spec.seeds)
         dt = float(episodes.scenario.dt)
         try:
-            estimator = make_estimator(spec.estimator, scenario=spec.source.scenario, **dict(spec.estimator_options))
+            if spec.resolved.estimator is None:
+                raise RuntimeError(f"estimator {spec.estimator!r} is not available: {spec.resolved.error}")
+            estimator = copy.deepcopy(spec.resolved.estimator)
             measurements = np.array(episodes.measurements)  # private copies: estimators get writable input
             valid = np.array(episodes.valid)
             with measure() as batched:

@@ -1,66 +1,83 @@
-"""The harness's view of the estimator registry: which estimators are available, the default
-one, name checks and configuration fingerprints (for resuming grids).
+"""Resolving estimators: each (estimator, scenario) pair is built once, here, and everything the
+harness needs afterwards (availability, configuration fingerprint, the estimator the cells run)
+comes from that one build.
 
 An estimator is *available* for a scenario when its factory builds it (``make_estimator(name,
 scenario=...)`` returns without error). A registered estimator may be unavailable, e.g. a learned
-one whose trained parameters are not present; ``fkn-bench run`` then refuses it when named and
-skips it in ``--all`` grids, saying why, rather than scoring a filter that never ran.
+one whose trained parameters are not present; :func:`select_estimators` then refuses it when named
+and skips it in "every estimator" selections, saying why, rather than scoring a filter that never
+ran. The default choice (no names given) is also made here: :data:`DEFAULT_ESTIMATOR_PREFERENCE`.
 """
 
 from __future__ import annotations
 
-from typing import Any
-
 import hashlib
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
-from fkn_bench.estimators import UnknownEstimatorError, estimator_names, make_estimator
+from fkn_bench.estimators import Estimator, UnknownEstimatorError, estimator_names, make_estimator
 from fkn_bench.io import to_jsonable
 from fkn_bench.scenarios import Scenario
 
 __all__ = [
     "DEFAULT_ESTIMATOR_PREFERENCE",
-    "Availability",
-    "probe_estimator",
-    "default_estimator",
+    "ResolvedEstimator",
+    "Selection",
+    "SelectionError",
+    "resolve_estimator",
+    "resolve",
+    "select_estimators",
     "check_estimators",
-    "estimator_fingerprint",
 ]
 
 DEFAULT_ESTIMATOR_PREFERENCE: tuple[str, ...] = ("flexkalmannet", "manual-ekf")
-"""``fkn-bench run`` without ``--estimator`` runs the first of these that is available: the
-paper's learned filter when it is registered and its parameters exist, else its manual baseline."""
+"""Without estimator names, :func:`select_estimators` picks the first of these that is available:
+the paper's learned filter when it is registered and its parameters exist, else its manual baseline."""
 
 
-@dataclass(frozen=True)
-class Availability:
-    """Whether estimator ``name`` builds for ``scenario``: its configuration ``fingerprint`` (16 hex
-    digits of SHA-256 over ``to_config()``) or the ``error`` that its factory raised."""
+@dataclass(frozen=True, eq=False)
+class ResolvedEstimator:
+    """Estimator ``name`` built once for ``scenario`` (with factory ``options``).
+
+    Attributes:
+        name, scenario: the pair (registered name, scenario name).
+        estimator: the built estimator, or None when its factory raised (``error`` says why).
+        error: ``"Type: message"`` of the factory's exception, None when available.
+        fingerprint: 16 hex digits of SHA-256 over ``to_config()`` (floats rounded to
+            :data:`FINGERPRINT_DIGITS`), so that a retuned estimator is recomputed on resume; ""
+            when unknown (unavailable, or a configuration JSON cannot hold).
+        options: the factory options as sorted ``(name, value)`` pairs.
+    """
 
     name: str
     scenario: str
-    fingerprint: str | None
-    error: str | None
+    estimator: Estimator | None = field(default=None, repr=False)
+    error: str | None = None
+    fingerprint: str = ""
+    options: tuple[tuple[str, Any], ...] = ()
 
     @property
     def available(self) -> bool:
         return self.error is None
 
 
-def probe_estimator(name: str, scenario: Scenario, options: dict[str, Any] | None = None) -> Availability:
-    """Build ``name`` for ``scenario`` (with factory ``options``) and describe it (never raises
-    for factory errors)."""
-    try:
-        config = make_estimator(name, scenario=scenario, **(options or {})).to_config()
-    except Exception as exc:  # noqa: BLE001 - reported to the user as unavailability
-        return Availability(name, scenario.name, None, f"{type(exc).__name__}: {exc}")
-    try:
-        text = json.dumps(_rounded(to_jsonable(config)), sort_keys=True)
-    except (TypeError, ValueError):
-        return Availability(name, scenario.name, "", None)
-    return Availability(name, scenario.name, hashlib.sha256(text.encode()).hexdigest()[:16], None)
+class SelectionError(ValueError):
+    """A selection that cannot run (a named estimator unavailable, nothing available)."""
+
+
+@dataclass(frozen=True)
+class Selection:
+    """What :func:`select_estimators` chose: the available pairs in run order, and ``notes`` for
+    the user (a preferred default that is unavailable, pairs skipped)."""
+
+    resolved: list[ResolvedEstimator]
+    notes: list[str]
+
+    @property
+    def names(self) -> list[str]:
+        return list(dict.fromkeys(r.name for r in self.resolved))
 
 
 FINGERPRINT_DIGITS = 12
@@ -82,24 +99,21 @@ def _rounded(value: Any) -> Any:
     return value
 
 
-def estimator_fingerprint(name: str, scenario: Scenario) -> str:
-    """The configuration fingerprint of ``name`` for ``scenario`` ("" when it cannot be built)."""
-    return probe_estimator(name, scenario).fingerprint or ""
-
-
-def default_estimator(scenarios: Sequence[Scenario] = ()) -> str:
-    """The first name of :data:`DEFAULT_ESTIMATOR_PREFERENCE` that is registered and available for
-    every one of ``scenarios``; else the first registered preference; else the first registered."""
-    names = estimator_names()
-    preferred = [n for n in DEFAULT_ESTIMATOR_PREFERENCE if n in names]
-    for name in preferred:
-        if all(probe_estimator(name, s).available for s in scenarios):
-            return name
-    if preferred:
-        return preferred[-1]
-    if not names:
-        raise UnknownEstimatorError("no estimators are registered")
-    return names[0]
+def resolve_estimator(name: str, scenario: Scenario, options: dict[str, Any] | None = None) -> ResolvedEstimator:
+    """Build ``name`` for ``scenario`` (with factory ``options``) once and describe it (never
+    raises for factory errors: they make the result unavailable)."""
+    items = tuple(sorted((options or {}).items()))
+    try:
+        estimator = make_estimator(name, scenario=scenario, **(options or {}))
+        config = estimator.to_config()
+    except Exception as exc:  # noqa: BLE001 - reported to the user as unavailability
+        return ResolvedEstimator(name, scenario.name, error=f"{type(exc).__name__}: {exc}", options=items)
+    try:
+        text = json.dumps(_rounded(to_jsonable(config)), sort_keys=True)
+    except (TypeError, ValueError):
+        return ResolvedEstimator(name, scenario.name, estimator, options=items)
+    return ResolvedEstimator(name, scenario.name, estimator, fingerprint=hashlib.sha256(text.encode()).hexdigest()[:16],
+                             options=items)
 
 
 def check_estimators(names: Sequence[str]) -> list[str]:
@@ -113,3 +127,65 @@ def check_estimators(names: Sequence[str]) -> list[str]:
             f"valid estimators: {', '.join(valid)}"
         )
     return list(dict.fromkeys(names))
+
+
+def resolve(
+    names: Sequence[str] | None, scenarios: Sequence[Scenario], options: dict[str, Any] | None = None
+) -> list[ResolvedEstimator]:
+    """Every pair of ``names`` (None: every registered estimator) x ``scenarios``, each built once,
+    estimator-major; unknown names raise :class:`~fkn_bench.estimators.UnknownEstimatorError`."""
+    names = estimator_names() if names is None else check_estimators(names)
+    return [resolve_estimator(name, scenario, options) for name in names for scenario in scenarios]
+
+
+def _default(scenarios: Sequence[Scenario]) -> tuple[list[ResolvedEstimator], list[str]]:
+    """The first of :data:`DEFAULT_ESTIMATOR_PREFERENCE` that is registered and available on every
+    scenario (else the last registered preference, else the first registered estimator), with a
+    note for each preferred one passed over."""
+    registered = estimator_names()
+    preferred = [n for n in DEFAULT_ESTIMATOR_PREFERENCE if n in registered] or registered[:1]
+    if not preferred:
+        raise UnknownEstimatorError("no estimators are registered")
+    passed: list[tuple[str, str]] = []
+    for name in preferred:
+        pairs = resolve([name], scenarios)
+        if all(r.available for r in pairs) or name == preferred[-1]:
+            break
+        passed.append((name, next(r.error for r in pairs if not r.available) or "unavailable"))
+    return pairs, [f"{better} is not available ({reason}); running {name}" for better, reason in passed]
+
+
+def select_estimators(
+    names: Sequence[str] | None,
+    scenarios: Sequence[Scenario],
+    *,
+    every: bool = False,
+    options: dict[str, Any] | None = None,
+) -> Selection:
+    """The estimators to run on ``scenarios``, each pair resolved once.
+
+    * ``names`` given: those (unknown ones raise
+      :class:`~fkn_bench.estimators.UnknownEstimatorError`); a pair that is not available raises
+      :class:`SelectionError`.
+    * no names, ``every``: every registered estimator; unavailable pairs are skipped with a note,
+      estimators with no available pair dropped.
+    * no names: the default (:data:`DEFAULT_ESTIMATOR_PREFERENCE`), which must be available.
+    """
+    notes: list[str] = []
+    if names:
+        pairs = resolve(names, scenarios, options)
+    elif every:
+        pairs = resolve(None, scenarios, options)
+    else:
+        pairs, notes = _default(scenarios)
+    chosen = []
+    for pair in pairs:
+        if pair.available:
+            chosen.append(pair)
+        elif names or not every:
+            raise SelectionError(f"estimator {pair.name!r} is not available for scenario {pair.scenario}: {pair.error}")
+        else:
+            notes.append(f"skipping {pair.name} on {pair.scenario} (not available: {pair.error})")
+    if not chosen:
+        raise SelectionError("no available estimator to run")
+    return Selection(chosen, notes)

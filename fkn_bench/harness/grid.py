@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from fkn_bench.harness.estimators import ResolvedEstimator, resolve_estimator
 from fkn_bench.harness.sources import EpisodeSource
 from fkn_bench.metrics import MetricSettings
 
@@ -51,26 +52,27 @@ def safe_name(name: str) -> str:
 
 @dataclass(frozen=True)
 class CellSpec:
-    """One unit of work: filter ``seeds`` of ``source`` with ``estimator`` and score them.
+    """One unit of work: filter ``seeds`` of ``source`` with the ``resolved`` estimator and score them.
 
     Attributes:
-        estimator: registered estimator name.
+        resolved: the estimator, built once for the source's scenario
+            (:class:`~fkn_bench.harness.estimators.ResolvedEstimator`: name, configuration
+            fingerprint, factory options; an unavailable one makes the cell fail with its error).
         source: where the episodes come from (:class:`~fkn_bench.harness.sources.EpisodeSource`).
         seeds: the seed chunk.
         settings: metric settings.
-        estimator_fingerprint: short hash of the estimator's configuration (``to_config()``), so
-            that a retuned estimator is recomputed on resume ("" when unknown).
         online_steps: length of the timed online run.
-        estimator_options: keyword options for the estimator's factory, as sorted pairs.
     """
 
-    estimator: str
+    resolved: ResolvedEstimator
     source: EpisodeSource
     seeds: tuple[int, ...]
     settings: MetricSettings
-    estimator_fingerprint: str = ""
     online_steps: int = ONLINE_STEPS
-    estimator_options: tuple[tuple[str, Any], ...] = ()
+
+    @property
+    def estimator(self) -> str:
+        return self.resolved.name
 
     @property
     def scenario(self) -> str:
@@ -83,11 +85,12 @@ class CellSpec:
 
     def key(self) -> dict[str, Any]:
         """Everything that determines the cell's deterministic results (resume compares it)."""
+        options = self.resolved.options
         return {
             "format_version": CELL_FORMAT_VERSION,
             "estimator": self.estimator,
-            "estimator_fingerprint": self.estimator_fingerprint,
-            **({"estimator_options": [list(item) for item in self.estimator_options]} if self.estimator_options else {}),
+            "estimator_fingerprint": self.resolved.fingerprint,
+            **({"estimator_options": [list(item) for item in options]} if options else {}),
             "source": self.source.key(),
             "seeds": list(self.seeds),
             "settings": self.settings.to_dict(),
@@ -98,36 +101,22 @@ class CellSpec:
 
 
 def build_grid(
-    estimators: Sequence[str],
+    estimators: Sequence[ResolvedEstimator | str],
     sources: Sequence[EpisodeSource],
     seeds: Sequence[int],
     *,
     settings: MetricSettings | None = None,
-    fingerprints: dict[tuple[str, str], str] | None = None,
     chunk_size: int = SEED_CHUNK,
     online_steps: int = ONLINE_STEPS,
-    estimator_options: dict[str, Any] | None = None,
 ) -> list[CellSpec]:
     """All cells, ordered source, then seed chunk, then estimator (so that consecutive cells
-    share generated episodes). ``fingerprints`` maps ``(estimator, source label)`` to
-    :attr:`CellSpec.estimator_fingerprint`; ``estimator_options`` go to every estimator's
-    factory."""
-    options = tuple(sorted((estimator_options or {}).items()))
+    share generated episodes). ``estimators`` are resolved pairs (a source gets the pairs of its
+    scenario, :attr:`~EpisodeSource.label`) or names, resolved here once per source."""
     settings = settings or MetricSettings()
-    fingerprints = fingerprints or {}
     cells = []
     for source in sources:
+        pairs = [resolve_estimator(e, source.scenario) if isinstance(e, str) else e for e in estimators]
+        pairs = [p for p in pairs if p.scenario == source.label]
         for chunk in chunk_seeds(seeds, chunk_size):
-            for estimator in estimators:
-                cells.append(
-                    CellSpec(
-                        estimator=estimator,
-                        source=source,
-                        seeds=chunk,
-                        settings=settings,
-                        estimator_fingerprint=fingerprints.get((estimator, source.label), ""),
-                        online_steps=online_steps,
-                        estimator_options=options,
-                    )
-                )
+            cells.extend(CellSpec(p, source, chunk, settings, online_steps) for p in pairs)
     return cells

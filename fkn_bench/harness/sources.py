@@ -109,16 +109,18 @@ class RecordingSource:
     path: str
     options: tuple[tuple[str, Any], ...] = ()
 
-    def _trajectory(self) -> Any:
+    def trajectory(self) -> Any:
+        """The recording as read (:class:`~fkn_bench.recordings.RecordedTrajectory`: scenario,
+        report, episodes per seed), cached per process."""
         return _read_recording(self.path, self.options)
 
     @property
     def label(self) -> str:
-        return str(self._trajectory().scenario.name)
+        return str(self.trajectory().scenario.name)
 
     @property
     def scenario(self) -> Scenario:
-        return self._trajectory().scenario
+        return self.trajectory().scenario
 
     def key(self) -> str:
         import hashlib
@@ -130,7 +132,7 @@ class RecordingSource:
         return f"recording:{digest.hexdigest()[:16]}:{self.options!r}"
 
     def describe(self) -> dict[str, Any]:
-        report = self._trajectory().report
+        report = self.trajectory().report
         return {
             "kind": "recording",
             "path": self.path,
@@ -145,7 +147,7 @@ class RecordingSource:
     def load(self, seeds: Sequence[int]) -> Episodes:
         import numpy as np
 
-        parts = [self._trajectory().episodes(int(seed)) for seed in seeds]
+        parts = [self.trajectory().episodes(int(seed)) for seed in seeds]
         first = parts[0]
         episodes = Episodes(
             scenario=first.scenario,

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from fkn_bench.estimators import Estimates, make_estimator
+from fkn_bench.estimators import Estimates
+from fkn_bench.harness.estimators import ResolvedEstimator, resolve_estimator
 from fkn_bench.harness.sources import EpisodeSource
 from fkn_bench.runtime import torch_threads
 from fkn_bench.types import ArrayB, ArrayF
@@ -35,16 +36,20 @@ class Trace:
     estimates: Estimates
 
 
-def trace(estimator: str, source: EpisodeSource, seed: int) -> Trace:
-    """Run ``estimator`` on ``seed`` of ``source`` (one torch thread) and keep every series."""
+def trace(estimator: ResolvedEstimator | str, source: EpisodeSource, seed: int) -> Trace:
+    """Run ``estimator`` (resolved for ``source``'s scenario, or a name resolved here) on ``seed`` of
+    ``source`` (one torch thread) and keep every series."""
+    resolved = resolve_estimator(estimator, source.scenario) if isinstance(estimator, str) else estimator
+    if resolved.estimator is None:
+        raise ValueError(f"estimator {resolved.name!r} is not available: {resolved.error}")
     episodes = source.load([seed])
     dt = float(episodes.scenario.dt)
     with torch_threads():
-        estimates = make_estimator(estimator, scenario=source.scenario).estimate(
+        estimates = resolved.estimator.estimate(
             episodes.measurements.copy(), episodes.valid.copy(), dt
         )
     return Trace(
-        estimator=estimator,
+        estimator=resolved.name,
         scenario=source.label,
         seed=int(seed),
         dt=dt,

@@ -124,10 +124,10 @@ def test_all_runs_every_available_estimator(capsys: pytest.CaptureFixture, tiny:
     )
     document = _run_json(capsys, "--all", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "1",
                          "--no-progress")
-    from fkn_bench.harness import probe_estimator
+    from fkn_bench.harness import resolve
     from fkn_bench.scenarios import get_scenario
 
-    available = [n for n in estimator_names() if probe_estimator(n, get_scenario("tiny")).available]
+    available = [r.name for r in resolve(None, [get_scenario("tiny")]) if r.available]
     assert [e["estimator"] for e in document["results"]] == available
     assert "late-arrival" in available and {"manual-ekf", "oracle-ekf"} <= set(available)
 

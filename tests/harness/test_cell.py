@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fkn_bench.harness import CellSpec, run_cell
+from fkn_bench.harness import CellSpec, resolve_estimator, run_cell
 from fkn_bench.harness.rows import COLUMNS, COST_METRICS, GROUP_ORDER
 from fkn_bench.harness.sources import SimulatedSource
 from fkn_bench.metrics import MetricSettings
 
 
 def _spec(source: SimulatedSource, estimator: str, seeds: tuple[int, ...] = (0, 1, 2)) -> CellSpec:
-    return CellSpec(estimator=estimator, source=source, seeds=seeds, settings=MetricSettings(), online_steps=50)
+    return CellSpec(resolve_estimator(estimator, source.scenario), source, seeds, MetricSettings(), online_steps=50)
 
 
 def _value(rows, seed: int, group: str, metric: str) -> float:

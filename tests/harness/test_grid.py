@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from fkn_bench.harness import SEED_CHUNK, SimulatedSource, build_grid, chunk_seeds
+from fkn_bench.harness import SEED_CHUNK, ResolvedEstimator, SimulatedSource, build_grid, chunk_seeds
 from fkn_bench.harness.grid import safe_name
 from fkn_bench.metrics import MetricSettings
 from fkn_bench.scenarios import get_scenario
@@ -25,13 +25,16 @@ def test_bad_seed_lists(seeds: list[int]) -> None:
 
 def test_grid_order_and_keys() -> None:
     sources = [SimulatedSource(get_scenario("ds1")), SimulatedSource(get_scenario("ds2"))]
-    cells = build_grid(["a", "b"], sources, range(15), fingerprints={("a", "ds1"): "f1"})
+    pairs = [ResolvedEstimator(name, source.label, fingerprint="f1" if (name, source.label) == ("a", "ds1") else "")
+             for name in "ab" for source in sources]
+    cells = build_grid(pairs, sources, range(15))
     assert [c.name for c in cells[:4]] == ["a/ds1/seeds-0-9", "b/ds1/seeds-0-9", "a/ds1/seeds-10-14", "b/ds1/seeds-10-14"]
     assert len(cells) == 8
-    assert cells[0].estimator_fingerprint == "f1" and cells[1].estimator_fingerprint == ""
+    assert cells[0].resolved.fingerprint == "f1" and cells[1].resolved.fingerprint == ""
+    assert cells[0].resolved is cells[2].resolved  # one resolution per pair, shared by its seed chunks
     key = cells[0].key()
     assert key["source"].startswith("simulated:ds1:") and key["seeds"] == list(range(10))
-    other = build_grid(["a"], sources[:1], range(15), settings=MetricSettings(cut=50))[0]
+    other = build_grid(pairs[:1], sources[:1], range(15), settings=MetricSettings(cut=50))[0]
     assert other.key() != cells[0].key() and other.key_hash() != cells[0].key_hash()
 
 

@@ -8,15 +8,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from fkn_bench.harness import CellSpec, ResultStore, StoreError, record_of, run_cell
+from dataclasses import replace
+
+from fkn_bench.harness import CellSpec, ResultStore, StoreError, record_of, resolve_estimator, run_cell
 from fkn_bench.harness.sources import SimulatedSource
 from fkn_bench.harness.store import read_rows_csv, rows_to_csv
 from fkn_bench.metrics import MetricSettings
 
 
-def _spec(source: SimulatedSource, **changes) -> CellSpec:
-    fields = {"estimator": "manual-ekf", "source": source, "seeds": (3, 4), "settings": MetricSettings(),
-              "estimator_fingerprint": "abc", "online_steps": 20}
+def _spec(source: SimulatedSource, fingerprint: str = "abc", **changes) -> CellSpec:
+    resolved = replace(resolve_estimator("manual-ekf", source.scenario), fingerprint=fingerprint)
+    fields = {"resolved": resolved, "source": source, "seeds": (3, 4), "settings": MetricSettings(), "online_steps": 20}
     fields.update(changes)
     return CellSpec(**fields)
 
@@ -40,7 +42,7 @@ def test_finished_matches_the_key(tmp_path: Path, short_ds1: SimulatedSource) ->
     assert store.finished(spec) is None
     store.write_cell(record_of(run_cell(spec)))
     assert store.finished(spec) is not None
-    assert store.finished(_spec(short_ds1, estimator_fingerprint="retuned")) is None
+    assert store.finished(_spec(short_ds1, fingerprint="retuned")) is None
     assert store.finished(_spec(short_ds1, settings=MetricSettings(cut=50))) is None
     other_config = SimulatedSource(short_ds1.scenario.replace(noise_scale=2.0))
     assert store.finished(_spec(other_config)) is None
