@@ -4,21 +4,18 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-from fkn_bench.envs.astrobee_tumble import _check_weights, episode_seed_for_reset
-from fkn_bench.envs.rewards import estimate_cost_scalar
-from fkn_bench.envs.spaces import MeasuredPose, action_space, action_values, observation_space
+from fkn_bench.envs.astrobee_tumble import AstrobeeTumbleEnv
+from fkn_bench.envs.episodes import Episodes
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
 
 __all__ = ["AstrobeeReplayEnv"]
 
 
-class AstrobeeReplayEnv(gym.Env[dict[str, Any], ArrayF]):
+class AstrobeeReplayEnv(AstrobeeTumbleEnv):
     """Estimate the pose and twist of a recorded trajectory from (recorded or synthesised) poses.
 
     ## Description
@@ -79,8 +76,6 @@ class AstrobeeReplayEnv(gym.Env[dict[str, Any], ArrayF]):
     seed from ``self.np_random``. Recorded measurements are the same for every seed.
     """
 
-    metadata = {"render_modes": ["ansi"], "render_fps": 10}
-
     def __init__(
         self,
         path: str | Path,
@@ -103,71 +98,30 @@ class AstrobeeReplayEnv(gym.Env[dict[str, Any], ArrayF]):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']} (got {render_mode!r})")
         self.trajectory = read_recording(
-            path,
-            truth_topic=truth_topic,
-            measurement_topic=measurement_topic,
-            twist_topic=twist_topic,
-            scenario=scenario,
-            dt=dt,
-            repair=repair,
-            time_source=time_source,
-            twist_frame=twist_frame,
+            path, truth_topic=truth_topic, measurement_topic=measurement_topic, twist_topic=twist_topic,
+            scenario=scenario, dt=dt, repair=repair, time_source=time_source, twist_frame=twist_frame,
             quaternion_tolerance=quaternion_tolerance,
         )
-        self.scenario: Scenario = self.trajectory.scenario
         self.report = self.trajectory.report
-        self.render_mode = render_mode
-        self.expose_truth = bool(expose_truth)
-        self.reward_weights = _check_weights(reward_weights)
-        self.observation_space = observation_space(self.scenario.n_steps, self.scenario.dt)
-        self.action_space = action_space()
-        self._truth = self.trajectory.truth
-        self._truth_rows = self._truth.tolist()
-        self._times = self.trajectory.times
-        self._meas: ArrayF | None = None
-        self._valid: np.ndarray | None = None
-        self._index = 0
-        self.episode_seed: int | None = None
+        super().__init__(self.trajectory.scenario, expose_truth=expose_truth, reward_weights=reward_weights,
+                         render_mode=render_mode, chunk_size=self.trajectory.scenario.n_steps)
 
-    def _observation(self) -> dict[str, Any]:
-        assert self._meas is not None and self._valid is not None
-        i = self._index
-        return {
-            "pose": self._meas[i].copy().view(MeasuredPose),
-            "valid": np.int64(self._valid[i]),
-            "time": np.array(self._times[i]),
-        }
+    def _new_stream(self, seed: int) -> _WholeEpisode:
+        return _WholeEpisode(self.trajectory.episodes(seed))
 
-    def _info(self) -> dict[str, Any]:
-        info: dict[str, Any] = {"step": self._index, "episode_seed": self.episode_seed}
-        if self.expose_truth:
-            info["truth"] = self._truth[self._index].copy()
-        return info
+    def _render_name(self) -> tuple[str, int]:
+        return f"replay {self.report.path.name}", 2
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[dict[str, Any], dict[str, Any]]:
-        super().reset(seed=seed)
-        self.episode_seed = episode_seed_for_reset(seed, self.np_random)
-        episodes = self.trajectory.episodes(self.episode_seed)
-        self._meas, self._valid = episodes.measurements[0], episodes.valid[0]
-        self._index = 0
-        return self._observation(), self._info()
 
-    def step(self, action: ArrayF) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
-        if self._meas is None:
-            raise gym.error.ResetNeeded("call reset() before step()")
-        if self._index >= self.scenario.n_steps - 1:
-            raise gym.error.ResetNeeded("the episode was truncated; call reset() before step()")
-        values = action_values(action)
-        reward = -estimate_cost_scalar(self._truth_rows[self._index], values, self.reward_weights)
-        self._index += 1
-        truncated = self._index == self.scenario.n_steps - 1
-        return self._observation(), reward, False, truncated, self._info()
+class _WholeEpisode:
+    """A replayed episode as a stream of one chunk (the interface of
+    :class:`~fkn_bench.envs.episodes.EpisodeStream` that the environment uses)."""
 
-    def render(self) -> str | None:
-        if self.render_mode != "ansi" or self._meas is None or self._valid is None:
-            return None
-        i = self._index
-        shown = "missing" if not self._valid[i] else np.array2string(self._meas[i], precision=3)
-        return f"replay {self.report.path.name} seed={self.episode_seed} step={i} t={self._times[i]:.2f}s pose={shown}"
+    def __init__(self, episodes: Episodes) -> None:
+        self.index = 0
+        self._episodes = episodes
+
+    def advance(self, n: int) -> tuple[ArrayF, ArrayF, ArrayF, np.ndarray]:
+        e = self._episodes
+        self.index = len(e.times)
+        return e.times, e.truth, e.measurements, e.valid

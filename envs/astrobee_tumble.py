@@ -123,9 +123,14 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
         self.observation_space = observation_space(self.scenario.n_steps, self.scenario.dt)
         self.action_space = action_space()
         self._chunk_size = int(chunk_size)
-        self._stream: EpisodeStream | None = None
+        self._stream: Any = None
         self._index = 0
         self.episode_seed: int | None = None
+
+    def _new_stream(self, seed: int) -> Any:
+        """The data of episode ``seed``: an object with ``index`` and ``advance(n) -> (times,
+        truth, measurements, valid)`` (:class:`~fkn_bench.envs.episodes.EpisodeStream`)."""
+        return EpisodeStream(self.scenario, [seed])
 
     # ------------------------------------------------------------------ episode data
     def _load_chunk(self) -> None:
@@ -155,7 +160,7 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
     ) -> tuple[dict[str, Any], dict[str, Any]]:
         super().reset(seed=seed)
         self.episode_seed = episode_seed_for_reset(seed, self.np_random)
-        self._stream = EpisodeStream(self.scenario, [self.episode_seed])
+        self._stream = self._new_stream(self.episode_seed)
         self._index = 0
         self._load_chunk()
         return self._observation(), self._info()
@@ -174,13 +179,17 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
         truncated = self._index == self.scenario.n_steps - 1
         return self._observation(), reward, False, truncated, self._info()
 
+    def _render_name(self) -> tuple[str, int]:
+        """What ``render`` calls the episode, and the decimals of its time."""
+        return self.scenario.name, 1
+
     def render(self) -> str | None:
         if self.render_mode != "ansi" or self._stream is None:
             return None
         i = self._index - self._chunk_start
-        pose = self._meas[i]
-        shown = "missing" if not self._valid[i] else np.array2string(pose, precision=3)
-        return f"{self.scenario.name} seed={self.episode_seed} step={self._index} t={self._times[i]:.1f}s pose={shown}"
+        shown = "missing" if not self._valid[i] else np.array2string(self._meas[i], precision=3)
+        name, digits = self._render_name()
+        return f"{name} seed={self.episode_seed} step={self._index} t={self._times[i]:.{digits}f}s pose={shown}"
 
 
 def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:
