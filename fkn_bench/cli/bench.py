@@ -145,6 +145,8 @@ def _machine(document: dict[str, Any]) -> str:
 
 def format_summary(document: dict[str, Any], *, source: str = "") -> str:
     """The summary table of :func:`summarize_benchmarks` as text, with the machine."""
+    from fkn_bench.harness.report import text_table
+
     rows = summarize_benchmarks(document)
     header = ("benchmark", "rounds", "median", "mean", "stddev", "steps", "steps/s", "what")
     body = []
@@ -152,15 +154,9 @@ def format_summary(document: dict[str, Any], *, source: str = "") -> str:
         spread = f"{100 * row['stddev_s'] / row['mean_s']:.0f}%" if row["mean_s"] and math.isfinite(row["stddev_s"]) else "-"
         body.append((row["name"], str(row["rounds"]), _seconds(row["median_s"]), _seconds(row["mean_s"]), spread,
                      "-" if row["steps"] is None else str(row["steps"]), _rate(row["steps_per_s"]), row["what"]))
-    widths = [max(len(r[i]) for r in [header, *body]) for i in range(len(header))]
-    right = set(range(1, 7))
-
-    def line(cells: tuple[str, ...]) -> str:
-        return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
-
     title = f"fkn-bench speed suite{': ' + source if source else ''} (pytest-benchmark {document.get('version', '?')}"
     title += f", {document.get('datetime', '?')})"
-    lines = [title, _machine(document), "", line(header), line(tuple("-" * w for w in widths)), *(line(r) for r in body)]
+    lines = [title, _machine(document), "", text_table(header, body, right=range(1, 7))]
     lines.append("")
     lines.append("Times are wall-clock per call; steps/s = steps per call / median. Absolute times vary by tens of "
                  "percent between runs on shared machines: compare ratios within one run (fkn-bench bench gate).")

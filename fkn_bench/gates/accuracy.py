@@ -45,6 +45,8 @@ from typing import Any
 
 import pandas as pd
 
+from fkn_bench.harness.leaderboard import REGENERATE_COMMAND, RESULTS_DIR
+
 __all__ = [
     "ACCEPT_COMMAND",
     "ADD_COMMAND",
@@ -58,17 +60,14 @@ __all__ = [
     "tolerance_for",
 ]
 
-RESULTS_DIR = "leaderboards/results"
-"""The committed per-cell results (``fkn-bench run --out``), relative to the repository root."""
-
 GATE_SEEDS = 2
 """Seeds recomputed per (estimator, scenario) pair: the first ones of its first committed cell."""
 
-ADD_COMMAND = f"fkn-bench run --all --seeds 20 --out {RESULTS_DIR} --no-progress && fkn-bench leaderboard"
+ADD_COMMAND = REGENERATE_COMMAND
 """Computes the cells that are missing or whose configuration changed (finished cells are reused)
 and rebuilds the leaderboards: the repository's regeneration command."""
 
-ACCEPT_COMMAND = f"fkn-bench run --all --seeds 20 --rerun --out {RESULTS_DIR} --no-progress && fkn-bench leaderboard"
+ACCEPT_COMMAND = REGENERATE_COMMAND.replace(" --out ", " --rerun --out ")
 """Accepts intentional changes: recomputes every cell (``--rerun``: a code change that keeps an
 estimator's configuration does not change its cells' keys, so resuming would keep the old numbers)
 and rebuilds the leaderboards. Run from the repository root, then commit ``leaderboards/``."""
@@ -205,6 +204,8 @@ class AccuracyReport:
     def table(self, estimator: str | None = None, *, limit: int = 60) -> str:
         """The differences as an aligned text table (at most ``limit`` rows, worst first within
         each pair)."""
+        from fkn_bench.harness.report import text_table
+
         rows = self.differences_of(estimator)
         if not rows:
             return "(no differences)"
@@ -214,13 +215,7 @@ class AccuracyReport:
              str(d.tolerance))
             for d in rows[:limit]
         ]
-        widths = [max(len(r[i]) for r in [header, *body]) for i in range(len(header))]
-        right = {2, 4, 5, 6}
-
-        def line(cells: Sequence[str]) -> str:
-            return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
-
-        lines = [line(header), line(["-" * w for w in widths]), *(line(r) for r in body)]
+        lines = [text_table(header, body, right={2, 4, 5, 6})]
         if len(rows) > limit:
             lines.append(f"... and {len(rows) - limit} more differences")
         return "\n".join(lines)

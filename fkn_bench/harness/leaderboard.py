@@ -30,7 +30,7 @@ import pandas as pd
 
 from fkn_bench.harness.records import Results
 from fkn_bench.harness.reference import QuotedRow, quoted_rows
-from fkn_bench.harness.report import format_number
+from fkn_bench.harness.report import format_number, format_percent
 from fkn_bench.harness.rows import deterministic_rows
 from fkn_bench.harness.store import rows_to_csv
 from fkn_bench.harness.summary import summarize_pair
@@ -51,6 +51,7 @@ __all__ = [
 ]
 
 RESULTS_DIR = "leaderboards/results"
+"""The committed per-cell results (``fkn-bench run --out``), relative to the repository root."""
 LEADERBOARD_COMMAND = "fkn-bench leaderboard"
 REGENERATE_COMMAND = f"fkn-bench run --all --seeds 20 --out {RESULTS_DIR} --no-progress && {LEADERBOARD_COMMAND}"
 """Rebuilds the committed leaderboards: runs every available estimator on every named scenario
@@ -69,9 +70,7 @@ def _fmt(value: Any, digits: int = 3) -> str:
 
 
 def _pct(value: Any) -> str:
-    if value is None or not math.isfinite(float(value)):
-        return _DASH
-    return f"{100 * float(value):.0f}%"
+    return format_percent(value, _DASH)
 
 
 def _score(summary: dict[str, Any]) -> float:

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
-__all__ = ["format_number", "text_table", "summary_text"]
+__all__ = ["format_number", "format_percent", "text_table", "summary_text"]
 
 
 def format_number(value: Any, digits: int = 4) -> str:
@@ -24,20 +24,22 @@ def format_number(value: Any, digits: int = 4) -> str:
     return f"{value:.{digits - 1}e}"
 
 
-def text_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """A fixed-width table: first column left-aligned, the others right-aligned."""
+def text_table(header: Sequence[str], rows: Sequence[Sequence[str]], *, right: Collection[int] | None = None) -> str:
+    """A fixed-width table: the columns ``right`` (default: all but the first) right-aligned, the
+    others left-aligned."""
     widths = [max(len(str(cell)) for cell in column) for column in zip(header, *rows)]
+    right = set(range(1, len(widths)) if right is None else right)
 
     def line(cells: Sequence[str]) -> str:
-        parts = [str(c).ljust(w) if i == 0 else str(c).rjust(w) for i, (c, w) in enumerate(zip(cells, widths))]
-        return "  ".join(parts).rstrip()
+        return "  ".join(str(c).rjust(w) if i in right else str(c).ljust(w)
+                         for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
 
-    rule = "  ".join("-" * w for w in widths)
-    return "\n".join([line(header), rule, *(line(r) for r in rows)])
+    return "\n".join([line(header), line(["-" * w for w in widths]), *(line(r) for r in rows)])
 
 
-def _percent(value: Any) -> str:
-    return "-" if value is None or not math.isfinite(float(value)) else f"{100 * float(value):.0f}%"
+def format_percent(value: Any, missing: str = "-") -> str:
+    """A fraction as a whole percentage; ``missing`` for missing values."""
+    return missing if value is None or not math.isfinite(float(value)) else f"{100 * float(value):.0f}%"
 
 
 def summary_text(summaries: Sequence[dict[str, Any]]) -> str:
@@ -60,10 +62,10 @@ def summary_text(summaries: Sequence[dict[str, Any]]) -> str:
             format_number(s["omega_rmse_rad_s"], 3),
             format_number(s["velocity_rmse_m_s"], 3),
             format_number(s["settling_time_s"], 3),
-            _percent(s["diverged_fraction"]),
+            format_percent(s["diverged_fraction"]),
             format_number(s["anees"], 3),
             f"[{format_number(lo, 3)}, {format_number(hi, 3)}]",
-            _percent(s["nees_in_bounds_fraction"]),
+            format_percent(s["nees_in_bounds_fraction"]),
             format_number(s["us_per_step"], 3),
         ])
     legend = (

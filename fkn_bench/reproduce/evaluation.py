@@ -13,14 +13,15 @@ convention.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
 
-from fkn_bench.estimators import Estimates, Estimator
+from fkn_bench.estimators import Estimator
+from fkn_bench.harness.estimators import ResolvedEstimator
 from fkn_bench.harness.sources import SimulatedSource
-from fkn_bench.harness.trace import Trace
+from fkn_bench.harness.trace import Trace, trace
 from fkn_bench.metrics import GROUPS, MetricSettings, score_run
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
@@ -69,20 +70,7 @@ class Evaluation:
     per_seed_state_rmse: tuple[float, ...] = field(default_factory=tuple)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "estimator": self.estimator,
-            "scenario": self.scenario,
-            "seeds": list(self.seeds),
-            "state_rmse": self.state_rmse,
-            "component_rmse": dict(self.component_rmse),
-            "group_rmse": dict(self.group_rmse),
-            "settling_time_s": self.settling_time_s,
-            "settled_fraction": self.settled_fraction,
-            "diverged_fraction": self.diverged_fraction,
-            "divergence_reasons": dict(self.divergence_reasons),
-            "unstable_fraction": self.unstable_fraction,
-            "per_seed_state_rmse": list(self.per_seed_state_rmse),
-        }
+        return {**asdict(self), "seeds": list(self.seeds), "per_seed_state_rmse": list(self.per_seed_state_rmse)}
 
 
 def _finite_mean(values: np.ndarray) -> float:
@@ -130,19 +118,5 @@ def evaluate(
 
 
 def run_trace(estimator: Estimator, label: str, scenario: Scenario, seed: int) -> Trace:
-    """One run kept whole for the figures (the harness's :class:`~fkn_bench.harness.trace.Trace`)."""
-    episodes = SimulatedSource(scenario, "test").load([int(seed)])
-    dt = float(scenario.dt)
-    with torch_threads():
-        estimates: Estimates = estimator.estimate(np.array(episodes.measurements), np.array(episodes.valid), dt)
-    return Trace(
-        estimator=label,
-        scenario=scenario.name,
-        seed=int(seed),
-        dt=dt,
-        times=episodes.times - episodes.times[0],
-        truth=episodes.truth[0],
-        measurements=episodes.measurements[0],
-        valid=episodes.valid[0],
-        estimates=estimates,
-    )
+    """One run kept whole for the figures (:func:`fkn_bench.harness.trace.trace`, filed under ``label``)."""
+    return trace(ResolvedEstimator(label, scenario.name, estimator), SimulatedSource(scenario, "test"), seed)
