@@ -16,7 +16,7 @@ a backend, stores the results, and summarises them.
 """
 
 from fkn_bench.harness.backends import BACKENDS, DaskBackend, LocalBackend, make_backend
-from fkn_bench.harness.cell import CellResult, run_cell
+from fkn_bench.harness.cell import run_cell
 from fkn_bench.harness.estimators import (
     ResolvedEstimator,
     Selection,
@@ -27,7 +27,7 @@ from fkn_bench.harness.estimators import (
     select_estimators,
 )
 from fkn_bench.harness.grid import ONLINE_STEPS, SEED_CHUNK, CellSpec, build_grid, chunk_seeds
-from fkn_bench.harness.records import CellRecord, Results, record_of
+from fkn_bench.harness.records import CellRecord, Results
 from fkn_bench.harness.report import summary_text
 from fkn_bench.harness.rows import COLUMNS, deterministic_rows
 from fkn_bench.harness.runner import GridRun, run_grid
@@ -40,7 +40,6 @@ __all__ = [
     "BACKENDS",
     "COLUMNS",
     "CellRecord",
-    "CellResult",
     "CellSpec",
     "DaskBackend",
     "EpisodeSource",
@@ -63,7 +62,6 @@ __all__ = [
     "chunk_seeds",
     "deterministic_rows",
     "make_backend",
-    "record_of",
     "resolve",
     "resolve_estimator",
     "run_cell",

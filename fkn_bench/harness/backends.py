@@ -20,8 +20,9 @@ import multiprocessing
 from collections.abc import Iterator, Sequence
 from typing import Protocol
 
-from fkn_bench.harness.cell import CellResult, run_cell
+from fkn_bench.harness.cell import run_cell
 from fkn_bench.harness.grid import CellSpec
+from fkn_bench.harness.records import CellRecord
 
 __all__ = ["Backend", "LocalBackend", "DaskBackend", "make_backend", "BACKENDS"]
 
@@ -33,7 +34,7 @@ class Backend(Protocol):
 
     name: str
 
-    def run(self, cells: Sequence[CellSpec]) -> Iterator[CellResult]: ...
+    def run(self, cells: Sequence[CellSpec]) -> Iterator[CellRecord]: ...
 
 
 class LocalBackend:
@@ -46,7 +47,7 @@ class LocalBackend:
             raise ValueError(f"workers must be >= 1 (got {workers})")
         self.workers = int(workers)
 
-    def run(self, cells: Sequence[CellSpec]) -> Iterator[CellResult]:
+    def run(self, cells: Sequence[CellSpec]) -> Iterator[CellRecord]:
         if self.workers == 1 or len(cells) <= 1:
             for cell in cells:
                 yield run_cell(cell)
@@ -73,7 +74,7 @@ class DaskBackend:
         self.scheduler = scheduler
         self.workers = int(workers)
 
-    def run(self, cells: Sequence[CellSpec]) -> Iterator[CellResult]:
+    def run(self, cells: Sequence[CellSpec]) -> Iterator[CellRecord]:
         import logging
 
         from distributed import Client, LocalCluster, as_completed

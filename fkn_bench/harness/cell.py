@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import copy
 import traceback
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -27,37 +26,13 @@ from fkn_bench.estimators import Estimator
 from fkn_bench.harness.grid import CellSpec
 from fkn_bench.harness.profiling import measure
 from fkn_bench.harness.provenance import environment
+from fkn_bench.harness.records import CellRecord
 from fkn_bench.harness.rows import cost_rows, failure_rows, score_rows
-from fkn_bench.metrics import StatisticSums, score_run
+from fkn_bench.metrics import score_run
 from fkn_bench.runtime import torch_threads
 from fkn_bench.types import ArrayF
 
-__all__ = ["CellResult", "run_cell", "time_online"]
-
-
-@dataclass(frozen=True, eq=False)
-class CellResult:
-    """The outcome of one cell.
-
-    Attributes:
-        spec: the cell.
-        rows: tidy rows (:mod:`fkn_bench.harness.rows`), cost rows included.
-        nees, nis: per-step sums over the cell's runs for the Monte Carlo averages (None when
-            the estimator reports no covariances / innovations, or failed).
-        status: ``"ok"`` or ``"failed"``.
-        error: the exception (type, message and traceback) of a failed cell.
-        notes: extra facts (e.g. an online run that failed while the batch succeeded).
-        provenance: :func:`fkn_bench.harness.provenance.environment` of the process that ran it.
-    """
-
-    spec: CellSpec
-    rows: pd.DataFrame
-    nees: StatisticSums | None
-    nis: StatisticSums | None
-    status: str
-    error: str | None = None
-    notes: dict[str, Any] = field(default_factory=dict)
-    provenance: dict[str, Any] = field(default_factory=dict)
+__all__ = ["run_cell", "time_online"]
 
 
 def time_online(estimator: Estimator, measurements: ArrayF, dt: float, *, passes: int = 2) -> float:
@@ -76,21 +51,20 @@ def time_online(estimator: Estimator, measurements: ArrayF, dt: float, *, passes
     return 1e6 * best / max(len(observations), 1)
 
 
-def _failure(spec: CellSpec, exc: BaseException) -> CellResult:
+def _record(spec: CellSpec, status: str, rows: list[pd.DataFrame], **fields: Any) -> CellRecord:
+    return CellRecord(estimator=spec.estimator, scenario=spec.scenario, seeds=tuple(spec.seeds), key=spec.key(),
+                      source=spec.source.describe(), status=status, rows=pd.concat(rows, ignore_index=True),
+                      provenance=environment(), **fields)
+
+
+def _failure(spec: CellSpec, exc: BaseException) -> CellRecord:
     message = "".join(traceback.format_exception_only(type(exc), exc)).strip()
     detail = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
-    rows = pd.concat(
-        [
-            failure_rows(spec.estimator, spec.scenario, spec.seeds),
-            cost_rows(spec.estimator, spec.scenario, spec.seeds, {}),
-        ],
-        ignore_index=True,
-    )
-    return CellResult(spec, rows, None, None, "failed", error=message, notes={"traceback": detail},
-                      provenance=environment())
+    rows = [failure_rows(spec.estimator, spec.scenario, spec.seeds), cost_rows(spec.estimator, spec.scenario, spec.seeds, {})]
+    return _record(spec, "failed", rows, error=message, notes={"traceback": detail})
 
 
-def run_cell(spec: CellSpec) -> CellResult:
+def run_cell(spec: CellSpec) -> CellRecord:
     """Run ``spec`` (module docstring); never raises for estimator errors."""
     with torch_threads():
         episodes = spec.source.load(spec.seeds)
@@ -127,11 +101,6 @@ def run_cell(spec: CellSpec) -> CellResult:
         "us_per_step_online": us_online,
         "peak_memory_mib": batched.peak_memory_mib,
     }
-    rows = pd.concat(
-        [
-            score_rows(spec.estimator, spec.scenario, spec.seeds, scores),
-            cost_rows(spec.estimator, spec.scenario, spec.seeds, cost),
-        ],
-        ignore_index=True,
-    )
-    return CellResult(spec, rows, scores.nees_sums, scores.nis_sums, "ok", notes=notes, provenance=environment())
+    rows = [score_rows(spec.estimator, spec.scenario, spec.seeds, scores),
+            cost_rows(spec.estimator, spec.scenario, spec.seeds, cost)]
+    return _record(spec, "ok", rows, nees=scores.nees_sums, nis=scores.nis_sums, notes=notes)

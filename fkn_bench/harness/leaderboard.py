@@ -352,9 +352,7 @@ def _provenance(results: Results, scenarios: Sequence[str]) -> str:
             for e in results.estimators()
         },
         "cells": len(results),
-        "failed_cells": sorted(
-            f"{r.estimator}/{r.scenario}/seeds-{r.seeds[0]}-{r.seeds[-1]}" for r in results.records if r.status != "ok"
-        ),
+        "failed_cells": sorted(r.name for r in results.records if r.status != "ok"),
         "environments": _environments(results),
     }
     return json.dumps(to_jsonable(document), indent=2, sort_keys=True) + "\n"

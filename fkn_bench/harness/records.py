@@ -2,7 +2,8 @@
 summaries, leaderboards and plots consume.
 
 A :class:`CellRecord` is a cell's outcome in plain data (no estimator, no source object): the
-identity of the cell, its status, its tidy rows and the per-step NEES/NIS sums of its runs.
+identity of the cell, its status, its tidy rows and the per-step NEES/NIS sums of its runs; the
+cell computes it, the store writes and reads it.
 :class:`Results` collects records and pools the sums of the cells of one estimator and scenario
 in seed order (a fixed order, so pooled values are identical whatever order cells finished in).
 """
@@ -15,17 +16,30 @@ from typing import Any
 
 import pandas as pd
 
-from fkn_bench.harness.cell import CellResult
 from fkn_bench.harness.rows import COLUMNS, sort_rows
 from fkn_bench.metrics import MetricSettings, StatisticSums
 
-__all__ = ["CellRecord", "Results", "record_of"]
+__all__ = ["CellRecord", "Results"]
 
 
 @dataclass(frozen=True, eq=False)
 class CellRecord:
-    """A cell's outcome as data (see module docstring); ``key`` is
-    :meth:`fkn_bench.harness.grid.CellSpec.key` and ``source`` the source's ``describe()``."""
+    """A cell's outcome as data (see module docstring): what :func:`fkn_bench.harness.cell.run_cell`
+    returns and the store writes and reads.
+
+    Attributes:
+        estimator, scenario, seeds: the cell.
+        key: :meth:`fkn_bench.harness.grid.CellSpec.key` (resume compares it).
+        source: the source's ``describe()``.
+        status: ``"ok"`` or ``"failed"``.
+        rows: tidy rows (:mod:`fkn_bench.harness.rows`), cost rows included.
+        nees, nis: per-step sums over the cell's runs for the Monte Carlo averages (None when
+            the estimator reports no covariances / innovations, or failed).
+        error: the exception (type and message) of a failed cell.
+        notes: extra facts (the traceback of a failure, an online run that failed while the batch
+            succeeded).
+        provenance: :func:`fkn_bench.harness.provenance.environment` of the process that ran it.
+    """
 
     estimator: str
     scenario: str
@@ -41,27 +55,13 @@ class CellRecord:
     provenance: dict[str, Any] = field(default_factory=dict)
 
     @property
+    def name(self) -> str:
+        """Human-readable cell name, e.g. ``manual-ekf/ds1/seeds-0-9``."""
+        return f"{self.estimator}/{self.scenario}/seeds-{self.seeds[0]}-{self.seeds[-1]}"
+
+    @property
     def settings(self) -> MetricSettings:
         return MetricSettings.from_dict(self.key["settings"])
-
-
-def record_of(result: CellResult) -> CellRecord:
-    """The record of a freshly computed cell."""
-    spec = result.spec
-    return CellRecord(
-        estimator=spec.estimator,
-        scenario=spec.scenario,
-        seeds=tuple(spec.seeds),
-        key=spec.key(),
-        source=spec.source.describe(),
-        status=result.status,
-        rows=result.rows,
-        nees=result.nees,
-        nis=result.nis,
-        error=result.error,
-        notes=dict(result.notes),
-        provenance=dict(result.provenance),
-    )
 
 
 def _pool(parts: Sequence[StatisticSums | None]) -> StatisticSums | None:

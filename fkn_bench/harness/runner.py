@@ -17,7 +17,7 @@ from tqdm import tqdm
 from fkn_bench.harness.backends import Backend, LocalBackend
 from fkn_bench.harness.grid import CellSpec
 from fkn_bench.harness.provenance import environment
-from fkn_bench.harness.records import CellRecord, Results, record_of
+from fkn_bench.harness.records import CellRecord, Results
 from fkn_bench.harness.store import ResultStore
 
 __all__ = ["GridRun", "run_grid", "grid_provenance"]
@@ -76,12 +76,11 @@ def run_grid(
                disable=not progress, dynamic_ncols=True)
     try:
         if todo:
-            for result in backend.run(todo):
-                record = record_of(result)
+            for record in backend.run(todo):
                 if store is not None:
                     store.write_cell(record)
                 records.append(record)
-                bar.set_postfix_str(result.spec.name, refresh=False)
+                bar.set_postfix_str(record.name, refresh=False)
                 bar.update(1)
     finally:
         bar.close()

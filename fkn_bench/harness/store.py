@@ -97,7 +97,7 @@ class ResultStore:
             np.savez_compressed(fh, **arrays)
         document = {
             "format": CELL_FORMAT,
-            "cell": f"{record.estimator}/{record.scenario}/seeds-{record.seeds[0]}-{record.seeds[-1]}",
+            "cell": record.name,
             "estimator": record.estimator,
             "scenario": record.scenario,
             "seeds": list(record.seeds),

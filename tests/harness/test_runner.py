@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from fkn_bench.harness import (
-    CellResult,
+    CellRecord,
     CellSpec,
     LocalBackend,
     ResultStore,
@@ -28,11 +28,11 @@ class CountingBackend(LocalBackend):
         self.ran: list[str] = []
         self.stop_after = stop_after
 
-    def run(self, cells: Sequence[CellSpec]) -> Iterator[CellResult]:
+    def run(self, cells: Sequence[CellSpec]) -> Iterator[CellRecord]:
         for result in super().run(cells):
             if self.stop_after is not None and len(self.ran) >= self.stop_after:
                 raise KeyboardInterrupt
-            self.ran.append(result.spec.name)
+            self.ran.append(result.name)
             yield result
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from dataclasses import replace
 
-from fkn_bench.harness import CellSpec, ResultStore, StoreError, record_of, resolve_estimator, run_cell
+from fkn_bench.harness import CellSpec, ResultStore, StoreError, resolve_estimator, run_cell
 from fkn_bench.harness.sources import SimulatedSource
 from fkn_bench.harness.store import read_rows_csv, rows_to_csv
 from fkn_bench.metrics import MetricSettings
@@ -24,7 +24,7 @@ def _spec(source: SimulatedSource, fingerprint: str = "abc", **changes) -> CellS
 
 
 def test_round_trip_is_exact(tmp_path: Path, short_ds1: SimulatedSource) -> None:
-    record = record_of(run_cell(_spec(short_ds1)))
+    record = run_cell(_spec(short_ds1))
     store = ResultStore(tmp_path)
     json_path = store.write_cell(record)
     assert json_path == tmp_path / "cells" / "manual-ekf" / "ds1" / "seeds-3-4.json"
@@ -40,7 +40,7 @@ def test_finished_matches_the_key(tmp_path: Path, short_ds1: SimulatedSource) ->
     store = ResultStore(tmp_path)
     spec = _spec(short_ds1)
     assert store.finished(spec) is None
-    store.write_cell(record_of(run_cell(spec)))
+    store.write_cell(run_cell(spec))
     assert store.finished(spec) is not None
     assert store.finished(_spec(short_ds1, fingerprint="retuned")) is None
     assert store.finished(_spec(short_ds1, settings=MetricSettings(cut=50))) is None
@@ -51,7 +51,7 @@ def test_finished_matches_the_key(tmp_path: Path, short_ds1: SimulatedSource) ->
 def test_torn_cell_is_not_finished(tmp_path: Path, short_ds1: SimulatedSource) -> None:
     store = ResultStore(tmp_path)
     spec = _spec(short_ds1)
-    json_path = store.write_cell(record_of(run_cell(spec)))
+    json_path = store.write_cell(run_cell(spec))
     json_path.with_suffix(".csv").unlink()
     assert store.finished(spec) is None
     with pytest.raises(StoreError, match="incomplete"):
