@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from fkn_bench.envs.astrobee_tumble import AstrobeeTumbleEnv
 from fkn_bench.envs.episodes import Episodes
-from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
 
 __all__ = ["AstrobeeReplayEnv"]
@@ -65,7 +65,8 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
       Astrobee's ``<robot>/loc/truth/pose``.
     * ``measurement_topic``: pose topic used as measurements; None synthesises them.
     * ``twist_topic``, ``scenario``, ``dt``, ``repair``, ``time_source``, ``twist_frame``,
-      ``quaternion_tolerance``: as :func:`fkn_bench.recordings.read_recording`.
+      ``quaternion_tolerance``: as :func:`fkn_bench.recordings.read_recording` (every keyword
+      that it takes; its defaults).
     * ``expose_truth``: put the true 13-dim state in ``info["truth"]``.
     * ``reward_weights``, ``render_mode`` (``None`` or ``"ansi"``): as ``AstrobeeTumble-v0``.
 
@@ -80,28 +81,16 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
         self,
         path: str | Path,
         *,
-        truth_topic: str | None = None,
-        measurement_topic: str | None = None,
-        twist_topic: str | None = "auto",
-        scenario: str | Scenario | None = None,
-        dt: float | str | None = None,
-        repair: bool = False,
-        time_source: str = "auto",
-        twist_frame: str = "auto",
-        quaternion_tolerance: float = 1e-6,
         expose_truth: bool = False,
         reward_weights: Mapping[str, float] | None = None,
         render_mode: str | None = None,
+        **recording_options: Any,
     ) -> None:
         from fkn_bench.recordings.replay import read_recording
 
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']} (got {render_mode!r})")
-        self.trajectory = read_recording(
-            path, truth_topic=truth_topic, measurement_topic=measurement_topic, twist_topic=twist_topic,
-            scenario=scenario, dt=dt, repair=repair, time_source=time_source, twist_frame=twist_frame,
-            quaternion_tolerance=quaternion_tolerance,
-        )
+        self.trajectory = read_recording(path, **recording_options)
         self.report = self.trajectory.report
         super().__init__(self.trajectory.scenario, expose_truth=expose_truth, reward_weights=reward_weights,
                          render_mode=render_mode, chunk_size=self.trajectory.scenario.n_steps)

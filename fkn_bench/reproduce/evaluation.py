@@ -22,7 +22,7 @@ from fkn_bench.estimators import Estimator
 from fkn_bench.harness.estimators import ResolvedEstimator
 from fkn_bench.harness.sources import SimulatedSource
 from fkn_bench.harness.trace import Trace, trace
-from fkn_bench.metrics import GROUPS, MetricSettings, score_run
+from fkn_bench.metrics import GROUPS, MetricSettings, score_run, summarize
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import STATE_NAMES
@@ -74,9 +74,7 @@ class Evaluation:
 
 
 def _finite_mean(values: np.ndarray) -> float:
-    values = np.asarray(values, dtype=np.float64)
-    finite = values[np.isfinite(values)]
-    return float(finite.mean()) if finite.size else float("nan")
+    return summarize(values).mean
 
 
 def evaluate(

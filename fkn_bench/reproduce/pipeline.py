@@ -30,7 +30,7 @@ import math
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -154,19 +154,9 @@ class TrainedModel:
     learned_std: dict[str, float]
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "dataset": self.dataset,
-            "out": str(self.out),
-            "artifact": str(self.artifact),
-            "best_epoch": self.best_epoch,
-            "best_val_rmse": self.best_val_rmse,
-            "test_rmse": self.test_rmse,
-            "seconds_per_epoch": self.seconds_per_epoch,
-            "epochs_run": self.epochs_run,
-            "output_size": self.output_size,
-            "windows": self.windows,
-            "learned_std": self.learned_std,
-        }
+        """JSON-compatible facts (paths as text; the estimator and the history left out)."""
+        return {f.name: str(v) if isinstance(v := getattr(self, f.name), Path) else v
+                for f in fields(self) if f.name not in ("estimator", "history")}
 
 
 @dataclass
@@ -314,12 +304,12 @@ def run_reproduction(
         "ds1-noise5x": ("learned-ds1", "manual", "oracle"),
         "ds1-gap100": ("learned-ds1", "manual", "oracle"),
     }
+    oracles = {name: make_estimator("oracle-ekf", scenario=get_scenario(name)) for name in plan}  # true noise
     evaluations: dict[tuple[str, str], Evaluation] = {}
     for scenario_name, labels in plan.items():
-        scenario = get_scenario(scenario_name)
         for label in labels:
-            estimator = make_estimator("oracle-ekf", scenario=scenario) if label == "oracle" else constant[label]
-            evaluations[(label, scenario_name)] = evaluate(estimator, label, scenario, seeds)
+            estimator = oracles[scenario_name] if label == "oracle" else constant[label]
+            evaluations[(label, scenario_name)] = evaluate(estimator, label, get_scenario(scenario_name), seeds)
     seconds["evaluate"] = time.perf_counter() - t0
 
     # 3. figures (the DS1 trace also feeds the differences section, so it is computed either way)
@@ -356,7 +346,7 @@ def run_reproduction(
 
     # 4. tables and differences
     manual_std = named_std(constant["manual"], config.variant)
-    oracle_std = named_std(make_estimator("oracle-ekf", scenario=ds1), "ekf")
+    oracle_std = named_std(oracles["ds1"], "ekf")
     tables = {
         "hyperparameters": hyperparameter_table(config, trained["ds1"].output_size, quick=settings.quick),
         "training_results": training_table(trained),

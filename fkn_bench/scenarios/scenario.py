@@ -17,7 +17,7 @@ import dataclasses
 import hashlib
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -183,12 +183,7 @@ class Scenario:
     # ------------------------------------------------------------------ conversions
     def replace(self, **changes: Any) -> Scenario:
         """A copy with ``changes`` applied (validated); unknown field names raise ConfigError."""
-        known = {f.name for f in dataclasses.fields(self)}
-        unknown = sorted(set(changes) - known)
-        if unknown:
-            raise ConfigError(
-                f"unknown scenario field(s) {', '.join(unknown)}; valid fields: {', '.join(sorted(known))}"
-            )
+        _check_fields(changes)
         return dataclasses.replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
@@ -202,12 +197,7 @@ class Scenario:
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Scenario:
         """Build from a dict such as :meth:`to_dict` output or a TOML table."""
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(data) - known)
-        if unknown:
-            raise ConfigError(
-                f"unknown scenario field(s) {', '.join(unknown)}; valid fields: {', '.join(sorted(known))}"
-            )
+        _check_fields(data)
         if "name" not in data:
             raise ConfigError("scenario field 'name' is required")
         return cls(**dict(data))
@@ -216,3 +206,11 @@ class Scenario:
         """Short SHA-256 of the generating configuration (name, description and tags excluded)."""
         payload = {k: v for k, v in self.to_dict().items() if k not in ("name", "description", "tags")}
         return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def _check_fields(names: Iterable[str]) -> None:
+    """Raise :class:`ConfigError` naming the valid fields when ``names`` holds unknown ones."""
+    known = {f.name for f in dataclasses.fields(Scenario)}
+    unknown = sorted(set(names) - known)
+    if unknown:
+        raise ConfigError(f"unknown scenario field(s) {', '.join(unknown)}; valid fields: {', '.join(sorted(known))}")
