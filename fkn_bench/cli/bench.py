@@ -32,12 +32,13 @@ from typing import Any
 
 from fkn_bench.cli import UsageError
 
+from fkn_bench.cli.options import add_command
+
 __all__ = ["add_parser", "summarize_benchmarks", "format_summary"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser("bench", help="speed benchmarks, their summary and the CI speed gate",
-                                   description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = add_command(subparsers, "bench", "speed benchmarks, their summary and the CI speed gate", __doc__)
     kinds = parser.add_subparsers(dest="bench", metavar="WHAT", required=True)
 
     run = kinds.add_parser("run", help="run the pytest-benchmark speed suite and print its summary")

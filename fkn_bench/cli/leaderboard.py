@@ -16,16 +16,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+from fkn_bench.cli.options import add_command
+
 __all__ = ["add_parser", "run"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "leaderboard",
-        help="build leaderboards (Markdown, HTML, CSV) from stored results",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    parser = add_command(subparsers, "leaderboard", "build leaderboards (Markdown, HTML, CSV) from stored results", __doc__)
     parser.add_argument("--results", default="leaderboards/results", metavar="DIR",
                         help="results directory written by fkn-bench run --out (default: leaderboards/results)")
     parser.add_argument("--out", default="leaderboards", metavar="DIR",

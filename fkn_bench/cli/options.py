@@ -6,7 +6,13 @@ import argparse
 
 from typing import Any
 
-__all__ = ["add_scenario_file_option", "load_scenario_files", "parse_value", "parse_key_values"]
+__all__ = ["add_command", "add_scenario_file_option", "load_scenario_files", "parse_value", "parse_key_values"]
+
+
+def add_command(subparsers: argparse._SubParsersAction, name: str, help: str, doc: str | None) -> argparse.ArgumentParser:
+    """Register subcommand ``name`` with its module docstring ``doc`` as the description (kept as
+    written: examples and lists stay readable in ``--help``)."""
+    return subparsers.add_parser(name, help=help, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
 def add_scenario_file_option(parser: argparse.ArgumentParser) -> None:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files
 
 __all__ = ["add_parser", "run"]
 
@@ -24,12 +24,8 @@ __all__ = ["add_parser", "run"]
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     from fkn_bench.scenarios import SPLITS
 
-    parser = subparsers.add_parser(
-        "plot",
-        help="draw PNG figures of an estimator's run (and bar charts from stored results)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    parser = add_command(subparsers, "plot",
+                         "draw PNG figures of an estimator's run (and bar charts from stored results)", __doc__)
     parser.add_argument("--estimator", metavar="NAME", help="estimator (default: the best built-in, as fkn-bench run)")
     parser.add_argument("--scenario", default="ds1", metavar="NAME", help="scenario (default: ds1)")
     parser.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")

@@ -20,16 +20,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from fkn_bench.cli.options import add_command
+
 __all__ = ["add_parser", "run"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "reproduce",
-        help="regenerate the paper's tables and figures and write a report",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    parser = add_command(subparsers, "reproduce", "regenerate the paper's tables and figures and write a report", __doc__)
     parser.add_argument("--out", type=Path, metavar="DIR",
                         help="report directory (default: runs/reproduce, with --quick runs/reproduce-quick)")
     parser.add_argument("--quick", action="store_true", help="small network, few epochs, 5 seeds: a pipeline check")

@@ -27,7 +27,7 @@ import json
 import sys
 from typing import Any
 
-from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files, parse_key_values
+from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files, parse_key_values
 
 __all__ = ["add_parser", "run", "DEFAULT_SCENARIO", "DEFAULT_SEEDS"]
 
@@ -42,12 +42,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     from fkn_bench.harness.backends import BACKENDS
     from fkn_bench.scenarios import SPLITS
 
-    parser = subparsers.add_parser(
-        "run",
-        help="run estimators on scenarios and score them",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    parser = add_command(subparsers, "run", "run estimators on scenarios and score them", __doc__)
     parser.add_argument("--estimator", action="append", metavar="NAME",
                         help="estimator to run (repeatable; default: flexkalmannet when available, else manual-ekf)")
     parser.add_argument("--scenario", action="append", metavar="NAME",
