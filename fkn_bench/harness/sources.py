@@ -47,7 +47,10 @@ class EpisodeSource(Protocol):
 
 @lru_cache(maxsize=2)
 def _generate(scenario: Scenario, seeds: tuple[int, ...], split: str) -> Episodes:
-    episodes = generate_episodes(scenario, list(seeds), split=split)
+    return _frozen(generate_episodes(scenario, list(seeds), split=split))
+
+
+def _frozen(episodes: Episodes) -> Episodes:
     for array in (episodes.truth, episodes.measurements, episodes.valid, episodes.times):
         array.flags.writeable = False  # shared between the cells of one process: never mutate
     return episodes
@@ -149,7 +152,7 @@ class RecordingSource:
 
         parts = [self.trajectory().episodes(int(seed)) for seed in seeds]
         first = parts[0]
-        episodes = Episodes(
+        return _frozen(Episodes(
             scenario=first.scenario,
             seeds=tuple(int(s) for s in seeds),
             start=0,
@@ -157,7 +160,4 @@ class RecordingSource:
             truth=np.concatenate([p.truth for p in parts]),
             measurements=np.concatenate([p.measurements for p in parts]),
             valid=np.concatenate([p.valid for p in parts]),
-        )
-        for array in (episodes.truth, episodes.measurements, episodes.valid, episodes.times):
-            array.flags.writeable = False
-        return episodes
+        ))
