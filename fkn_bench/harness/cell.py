@@ -24,7 +24,7 @@ import pandas as pd
 from fkn_bench.estimators import Estimator, make_estimator
 from fkn_bench.harness.grid import CellSpec
 from fkn_bench.harness.profiling import measure
-from fkn_bench.harness.provenance import environment
+from fkn_bench.provenance import environment
 from fkn_bench.harness.rows import cost_rows, failure_rows, score_rows
 from fkn_bench.metrics import StatisticSums, score_run
 from fkn_bench.runtime import torch_threads
@@ -45,7 +45,7 @@ class CellResult:
         status: ``"ok"`` or ``"failed"``.
         error: the exception (type, message and traceback) of a failed cell.
         notes: extra facts (e.g. an online run that failed while the batch succeeded).
-        provenance: :func:`fkn_bench.harness.provenance.environment` of the process that ran it.
+        provenance: :func:`fkn_bench.provenance.environment` of the process that ran it.
     """
 
     spec: CellSpec
