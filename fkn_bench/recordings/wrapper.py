@@ -33,7 +33,6 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fkn_bench.estimators.base import parse_observation
 from fkn_bench.recordings.writer import (
     DEFAULT_START_EPOCH_NS,
     _estimator_metadata,
@@ -97,7 +96,8 @@ class RecordMcap(gym.Wrapper):
     def _observe(self, obs: Any, info: Mapping[str, Any]) -> None:
         buffer = self._buffer
         assert buffer is not None
-        pose, time = parse_observation(obs)
+        pose, valid, time = (obs["pose"], obs.get("valid", True), obs.get("time")) if isinstance(obs, Mapping) else (obs, True, None)
+        pose = np.asarray(pose, dtype=float).reshape(7)
         if time is None:
             if self._dt is None:
                 raise ValueError(
@@ -105,7 +105,7 @@ class RecordMcap(gym.Wrapper):
                 )
             time = len(buffer["times"]) * self._dt
         buffer["times"].append(float(time))
-        buffer["measurements"].append(np.full(7, np.nan) if pose is None else np.array(pose, dtype=float))
+        buffer["measurements"].append(pose if valid else np.full(7, np.nan))
         truth = info.get("truth")
         buffer["truth"].append(None if truth is None else np.array(truth, dtype=float).reshape(13))
 
