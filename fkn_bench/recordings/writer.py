@@ -187,11 +187,8 @@ def stamps_from_times(times: ArrayF, start_epoch_ns: int = DEFAULT_START_EPOCH_N
 
 def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
     """The ``fkn_bench.provenance`` metadata (MCAP metadata values are strings): the versions,
-    machine and git commit of :func:`fkn_bench.provenance.environment`, the mcap
-    packages' versions, the command line and the time."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    from fkn_bench.provenance import environment
+    machine and git commit of :func:`fkn_bench.provenance.environment`, the mcap packages'
+    versions, the command line and the time."""
 
     def package_version(name: str) -> str:
         try:

@@ -16,7 +16,7 @@ from fkn_bench.envs import Episodes, generate_episodes
 from fkn_bench.estimators import Estimates, make_estimator
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.recordings.codecs import encode_pose_in_frame, encode_ros2
-from fkn_bench.recordings.schemas import FOXGLOVE_SCHEMAS, ros1_schema_text, ros2_schema_text
+from fkn_bench.recordings.schemas import FOXGLOVE_SCHEMAS, SEPARATOR, ros2_schema_text
 from fkn_bench.scenarios import get_scenario
 
 SHORT_STEPS = 300
@@ -141,6 +141,14 @@ def twist_channel(
     return _ros_channel(topic, "geometry_msgs/TwistStamped", encoding, stamps_ns, log_ns, values, frame_id, "")
 
 
+def ros1_schema_text(name: str) -> str:
+    """The ``ros1msg`` definition of ``name`` (fkn-bench writes only ROS 2): the ROS 2 one with
+    ROS 1's ``std_msgs/Header`` (``uint32 seq``, builtin ``time``) and no ``builtin_interfaces``."""
+    sections = ros2_schema_text(name).split(SEPARATOR + "\n")
+    text = (SEPARATOR + "\n").join(s for s in sections if not s.startswith("MSG: builtin_interfaces/Time"))
+    return text.replace("builtin_interfaces/Time stamp\n", "uint32 seq\ntime stamp\n")
+
+
 def ros1_message(seq: int, stamp: int, frame: str, child: str | None, values: Sequence[float]) -> bytes:
     """ROS 1 wire format written field by field (fkn-bench reads ROS 1 but writes only ROS 2):
     uint32 seq, time (uint32 secs, nsecs), string (uint32 length + bytes), then float64 fields,
@@ -211,6 +219,7 @@ def tools() -> Any:
         pose_channel=pose_channel,
         twist_channel=twist_channel,
         ros1_message=ros1_message,
+        ros1_schema_text=ros1_schema_text,
         pose_values=pose_values,
         forced_rotation=forced_rotation,
         EPOCH_NS=EPOCH_NS,
