@@ -33,13 +33,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fkn_bench.recordings.writer import (
-    DEFAULT_START_EPOCH_NS,
-    _estimator_metadata,
-    _scenario_metadata,
-    provenance,
-    write_recording,
-)
+from fkn_bench.recordings.writer import DEFAULT_START_EPOCH_NS, episode_metadata, write_recording
 
 __all__ = ["RecordMcap"]
 
@@ -131,22 +125,18 @@ class RecordMcap(gym.Wrapper):
         estimates[: len(buffer["estimates"])] = np.array(buffer["estimates"])
         mask = np.zeros(n, dtype=bool)
         mask[: len(buffer["estimates"])] = True
-        metadata: dict[str, Mapping[str, str]] = {}
         scenario = getattr(self.env.unwrapped, "scenario", None)
-        if scenario is not None and hasattr(scenario, "to_dict") and hasattr(scenario, "config_hash"):
-            metadata["fkn_bench.scenario"] = _scenario_metadata(scenario)
+        if not (hasattr(scenario, "to_dict") and hasattr(scenario, "config_hash")):
+            scenario = None
         spec = getattr(self.env, "spec", None)
-        metadata["fkn_bench.episode"] = {
+        episode = {
             "seed": "" if buffer["seed"] is None else str(buffer["seed"]),
             "episode": str(self._episode),
             "n_steps": str(n),
             "environment": spec.id if spec is not None else type(self.env.unwrapped).__name__,
             "source": "fkn_bench.recordings.RecordMcap",
         }
-        if self.estimator is not None:
-            metadata["fkn_bench.estimator"] = _estimator_metadata(self.estimator)
-        metadata["fkn_bench.provenance"] = provenance()
-        metadata.update(self._metadata)
+        metadata = episode_metadata(episode, scenario=scenario, estimator=self.estimator, extra=self._metadata)
         write_recording(
             path,
             times=np.array(buffer["times"]),

@@ -88,6 +88,7 @@ __all__ = [
     "write_recording",
     "record_episode",
     "provenance",
+    "episode_metadata",
 ]
 
 DEFAULT_START_EPOCH_NS = 1_735_689_600 * 1_000_000_000
@@ -389,21 +390,34 @@ def write_recording(
     )
 
 
-def _scenario_metadata(scenario: Any) -> dict[str, str]:
-    data = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
-    data["config_hash"] = scenario.config_hash()
-    return data
-
-
-def _estimator_metadata(estimator: Any) -> dict[str, str]:
+def episode_metadata(
+    episode: Mapping[str, str],
+    *,
+    scenario: Any = None,
+    estimator: Any = None,
+    extra: Mapping[str, Mapping[str, str]] | None = None,
+    provenance_extra: Mapping[str, Any] | None = None,
+) -> dict[str, Mapping[str, str]]:
+    """The metadata records of a recorded episode: ``fkn_bench.scenario`` (each field of a
+    :class:`~fkn_bench.scenarios.Scenario` JSON-encoded, plus ``config_hash``), ``fkn_bench.episode``,
+    ``fkn_bench.estimator`` (name, class, JSON config of an estimator; a mapping is taken as it
+    is), ``fkn_bench.provenance`` (:func:`provenance`), then ``extra``."""
+    metadata: dict[str, Mapping[str, str]] = {}
+    if scenario is not None:
+        metadata["fkn_bench.scenario"] = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
+        metadata["fkn_bench.scenario"]["config_hash"] = scenario.config_hash()
+    metadata["fkn_bench.episode"] = dict(episode)
     if isinstance(estimator, Mapping):
-        return {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in estimator.items()}
-    cls = type(estimator)
-    record = {"name": str(getattr(estimator, "name", cls.__name__)), "class": f"{cls.__module__}:{cls.__qualname__}"}
-    to_config = getattr(estimator, "to_config", None)
-    if callable(to_config):
-        record["config"] = json.dumps(to_jsonable(to_config()))
-    return record
+        metadata["fkn_bench.estimator"] = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in estimator.items()}
+    elif estimator is not None:
+        cls = type(estimator)
+        record = {"name": str(getattr(estimator, "name", cls.__name__)), "class": f"{cls.__module__}:{cls.__qualname__}"}
+        if callable(getattr(estimator, "to_config", None)):
+            record["config"] = json.dumps(to_jsonable(estimator.to_config()))
+        metadata["fkn_bench.estimator"] = record
+    metadata["fkn_bench.provenance"] = provenance(provenance_extra)
+    metadata.update(extra or {})
+    return metadata
 
 
 def record_episode(
@@ -439,20 +453,16 @@ def record_episode(
             covariances = estimates.error_covariances[index]
         if estimates.initialised is not None:
             mask = estimates.initialised[index]
-    metadata: dict[str, Mapping[str, str]] = {
-        "fkn_bench.scenario": _scenario_metadata(episodes.scenario),
-        "fkn_bench.episode": {
-            "seed": str(episodes.seeds[index]),
-            "split": split or ("full" if episodes.start == 0 and episodes.n_steps == episodes.scenario.n_steps else "window"),
-            "start_step": str(episodes.start),
-            "n_steps": str(episodes.n_steps),
-            "dt": repr(episodes.scenario.dt),
-        },
+    episode = {
+        "seed": str(episodes.seeds[index]),
+        "split": split or ("full" if episodes.start == 0 and episodes.n_steps == episodes.scenario.n_steps else "window"),
+        "start_step": str(episodes.start),
+        "n_steps": str(episodes.n_steps),
+        "dt": repr(episodes.scenario.dt),
     }
-    if estimator is not None:
-        metadata["fkn_bench.estimator"] = _estimator_metadata(estimator)
-    metadata["fkn_bench.provenance"] = provenance(provenance_extra)
-    metadata.update(extra_metadata or {})
+    metadata = episode_metadata(
+        episode, scenario=episodes.scenario, estimator=estimator, extra=extra_metadata, provenance_extra=provenance_extra
+    )
     return write_recording(
         path,
         times=episodes.times,
