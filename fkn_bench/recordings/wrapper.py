@@ -90,7 +90,10 @@ class RecordMcap(gym.Wrapper):
     def _observe(self, obs: Any, info: Mapping[str, Any]) -> None:
         buffer = self._buffer
         assert buffer is not None
-        pose, valid, time = (obs["pose"], obs.get("valid", True), obs.get("time")) if isinstance(obs, Mapping) else (obs, True, None)
+        if isinstance(obs, Mapping):  # a Gymnasium observation dict, or a bare (7,) pose (NaN when missing)
+            pose, valid, time = obs["pose"], obs.get("valid", True), obs.get("time")
+        else:
+            pose, valid, time = obs, True, None
         pose = np.asarray(pose, dtype=float).reshape(7)
         if time is None:
             if self._dt is None:
