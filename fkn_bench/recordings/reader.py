@@ -296,9 +296,9 @@ class McapRecording:
                 f"{problem}; read the file front to back up to the damage",
             )
             self._summary = None
-            self._scan_linear(tolerant=True)
+            self._scan_linear()
         elif self._summary is None or not self._summary.chunk_indexes:
-            self._scan_linear(tolerant=False)  # valid file without an index
+            self._scan_linear()  # valid file without an index
 
     # ------------------------------------------------------------------ chunk and linear reading
     def _chunk_records(self, chunk: Chunk, where: str) -> list[Any] | None:
@@ -317,7 +317,7 @@ class McapRecording:
             )
             return None
 
-    def _scan_linear(self, *, tolerant: bool) -> None:
+    def _scan_linear(self) -> None:
         """Read every record front to back (files without an index, or damaged ones)."""
         schemas: dict[int, Schema] = {}
         raw: dict[int, _Raw] = {}
@@ -355,14 +355,11 @@ class McapRecording:
                     break
                 except Exception as exc:
                     problem = f"record {count} (near byte {fh.tell()}), which cannot be read ({_describe(exc)})"
-                    if tolerant:
-                        self.repairs.append(f"stopped reading at {problem}")
-                    else:
-                        self._repair(
-                            f"{problem}; the file is truncated or corrupt. Pass repair=True to use the messages "
-                            "before the damage",
-                            f"stopped reading at {problem}",
-                        )
+                    self._repair(
+                        f"{problem}; the file is truncated or corrupt. Pass repair=True to use the messages before "
+                        "the damage",
+                        f"stopped reading at {problem}",
+                    )
                     break
                 count += 1
                 if isinstance(record, Chunk):
