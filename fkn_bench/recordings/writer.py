@@ -214,22 +214,14 @@ def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
     return record
 
 
-def _check_rows(name: str, array: Any, n: int, width: tuple[int, ...]) -> ArrayF | None:
+def _checked(name: str, array: Any, shape: tuple[int, ...], dtype: type = np.float64) -> Any:
+    """``array`` as ``dtype``, checked to have ``shape``; None stays None."""
     if array is None:
         return None
-    out = np.asarray(array, dtype=np.float64)
-    if out.shape != (n, *width):
-        raise ValueError(f"{name} must have shape {(n, *width)} (got {out.shape})")
-    return out
-
-
-def _check_mask(name: str, mask: Any, n: int) -> ArrayB | None:
-    if mask is None:
-        return None
-    out = np.asarray(mask)
-    if out.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},) (got {out.shape})")
-    return out.astype(bool)
+    out = np.asarray(array)
+    if out.shape != shape:
+        raise ValueError(f"{name} must have shape {shape} (got {out.shape})")
+    return out.astype(dtype, copy=False)
 
 
 def _pose_values(states: ArrayF) -> ArrayF:
@@ -291,12 +283,12 @@ def write_recording(
     if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
         raise ValueError("times must be finite and strictly increasing")
     n = len(times)
-    truth = _check_rows("truth", truth, n, (13,))
-    measurements = _check_rows("measurements", measurements, n, (7,))
-    valid = _check_mask("valid", valid, n)
-    estimates = _check_rows("estimates", estimates, n, (13,))
-    covariances = _check_rows("estimate_error_covariances", estimate_error_covariances, n, (12, 12))
-    estimate_mask = _check_mask("estimate_mask", estimate_mask, n)
+    truth = _checked("truth", truth, (n, 13))
+    measurements = _checked("measurements", measurements, (n, 7))
+    valid = _checked("valid", valid, (n,), bool)
+    estimates = _checked("estimates", estimates, (n, 13))
+    covariances = _checked("estimate_error_covariances", estimate_error_covariances, (n, 12, 12))
+    estimate_mask = _checked("estimate_mask", estimate_mask, (n,), bool)
     if compression not in COMPRESSIONS:
         raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)} (got {compression!r})")
     topics = topics if topics is not None else RecordingTopics.with_namespace(namespace)
