@@ -5,8 +5,7 @@ Every module of ``fkn_bench`` is parsed (``ast``, nothing is imported), the mapp
 included (``fkn_bench.envs`` = ``envs/``, ``fkn_bench.baselines`` = ``baselines/``). Layers, bottom
 to top (:data:`LAYERS`; a package may import its own layer and the layers below)::
 
-    ground floor   geometry, io, linalg, types, runtime, provenance (fkn_bench.provenance, and
-                   fkn_bench.harness.provenance until it has moved), the package root
+    ground floor   geometry, io, linalg, types, runtime, provenance, the package root
                    (``__version__``)
     data           envs, scenarios, recordings (file format)
     metrics        metrics
@@ -46,7 +45,7 @@ REPO = Path(__file__).resolve().parents[1]
 PACKAGE_DIRS = {"fkn_bench": REPO / "fkn_bench", "fkn_bench.envs": REPO / "envs", "fkn_bench.baselines": REPO / "baselines"}
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("", "geometry", "io", "linalg", "types", "runtime", "provenance", "harness.provenance"),
+    ("", "geometry", "io", "linalg", "types", "runtime", "provenance"),
     ("envs", "scenarios", "recordings"),
     ("metrics",),
     ("models",),
@@ -67,13 +66,7 @@ ALLOWED: dict[tuple[str, str], str] = {
 }
 """Upward imports that are the design, ``{(module, imported module): why}``."""
 
-KNOWN_VIOLATIONS: set[tuple[str, str]] = {
-    # recordings mixes the file format with orchestration (issue 14, item 4: being moved out of
-    # recordings/ in the recordings work package): the Gym wrapper and record_episodes run
-    # estimators.
-    ("fkn_bench.recordings.wrapper", "fkn_bench.estimators.base"),
-    ("fkn_bench.recordings.writer", "fkn_bench.estimators"),
-}
+KNOWN_VIOLATIONS: set[tuple[str, str]] = set()
 """``(module, imported module)`` pairs that break the layer rule today and are being fixed in
 other work packages of issue 14; remove each entry when its fix is merged (the test fails on an
 entry that no longer occurs, so the list cannot go stale)."""
@@ -239,7 +232,7 @@ def test_import_resolution(source: str, expected: list[str], monkeypatch: pytest
 
 
 def test_the_checks_catch_what_they_should(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
-    assert layer_of("fkn_bench.harness.provenance") == 0 < layer_of("fkn_bench.envs.dynamics")
+    assert layer_of("fkn_bench.provenance") == 0 < layer_of("fkn_bench.envs.dynamics")
     assert layer_of("fkn_bench.metrics.scoring") < layer_of("fkn_bench.harness") < layer_of("fkn_bench.cli.run")
     upward = tmp_path / "upward.py"
     upward.write_text("def f():\n    from fkn_bench.harness import run_grid\n")

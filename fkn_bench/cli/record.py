@@ -48,7 +48,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.cli import UsageError
     from fkn_bench.estimators import EstimatorFileError, UnknownEstimatorError
-    from fkn_bench.recordings import record
+    from fkn_bench.harness.recording import record
     from fkn_bench.scenarios import get_scenario
 
     if args.seed < 0:

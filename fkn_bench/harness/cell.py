@@ -25,7 +25,7 @@ import pandas as pd
 from fkn_bench.estimators import Estimator
 from fkn_bench.harness.grid import CellSpec
 from fkn_bench.harness.profiling import measure
-from fkn_bench.harness.provenance import environment
+from fkn_bench.provenance import environment
 from fkn_bench.harness.records import CellRecord
 from fkn_bench.harness.rows import cost_rows, failure_rows, score_rows
 from fkn_bench.metrics import score_run

@@ -38,7 +38,7 @@ class CellRecord:
         error: the exception (type and message) of a failed cell.
         notes: extra facts (the traceback of a failure, an online run that failed while the batch
             succeeded).
-        provenance: :func:`fkn_bench.harness.provenance.environment` of the process that ran it.
+        provenance: :func:`fkn_bench.provenance.environment` of the process that ran it.
     """
 
     estimator: str

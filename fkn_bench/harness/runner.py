@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from fkn_bench.harness.backends import Backend, LocalBackend
 from fkn_bench.harness.grid import CellSpec
-from fkn_bench.harness.provenance import environment
+from fkn_bench.provenance import environment
 from fkn_bench.harness.records import CellRecord, Results
 from fkn_bench.harness.store import ResultStore
 

@@ -1,9 +1,10 @@
 """MCAP recordings: write episodes that ROS 2 tools and Foxglove open, and replay recordings.
 
-* :func:`record` / :func:`record_episode` / :func:`write_recording` write one episode (truth,
-  measurements, estimates) as ROS 2 CDR ``PoseStamped`` / ``TwistStamped`` /
+* :func:`record_episode` / :func:`write_recording` write one episode (truth, measurements,
+  estimates) as ROS 2 CDR ``PoseStamped`` / ``TwistStamped`` /
   ``PoseWithCovarianceStamped`` messages plus ``foxglove.PoseInFrame`` channels and metadata
-  (:mod:`fkn_bench.recordings.writer` documents topics, frames and conventions).
+  (:mod:`fkn_bench.recordings.writer` documents topics, frames and conventions);
+  :func:`fkn_bench.harness.recording.record` generates an episode and runs an estimator to record.
 * :class:`RecordMcap` records any Gymnasium loop of the Astrobee environments.
 * :func:`load_episodes` / :func:`read_recording` turn a recording (fkn-bench, Astrobee simulation,
   any ROS 1 / ROS 2 / Foxglove JSON pose topic) into :class:`~fkn_bench.envs.Episodes`
@@ -36,7 +37,6 @@ from fkn_bench.recordings.writer import (
     DEFAULT_START_EPOCH_NS,
     RecordingSummary,
     RecordingTopics,
-    record,
     record_episode,
     ros_pose_covariance,
     write_recording,
@@ -61,7 +61,6 @@ __all__ = [
     "load_episodes",
     "read_metadata",
     "read_recording",
-    "record",
     "record_episode",
     "ros_pose_covariance",
     "write_recording",

@@ -1,48 +1,51 @@
-"""Serialisation of the few message types fkn-bench writes and reads, vectorised over messages.
+"""Serialisation of the few message types fkn-bench writes and reads.
 
 Three wire formats:
 
-* ROS 2 CDR (MCAP message encoding ``cdr``): a 4-byte encapsulation header (``00 01 00 00``,
+* ROS 2 CDR (MCAP message encoding ``cdr``), written by ``mcap-ros2-support``
+  (:func:`encode_ros2`) and read here: a 4-byte encapsulation header (``00 01 00 00``,
   little-endian plain CDR; ``00 00`` big-endian is also read), then the fields, each aligned to
   its own size counted from the end of the encapsulation header; ``builtin_interfaces/Time`` is
   ``int32 sec, uint32 nanosec``; a string is a ``uint32`` length that counts a terminating NUL,
-  the bytes and the NUL. The encoder's bytes are tested to be identical to those of
-  ``mcap-ros2-support``'s encoder.
-* ROS 1 (message encoding ``ros1``): little-endian, no alignment, ``std_msgs/Header`` is
-  ``uint32 seq, time stamp (uint32 secs, uint32 nsecs), string frame_id``; a string is a
+  the bytes and the NUL.
+* ROS 1 (message encoding ``ros1``, read only): little-endian, no alignment, ``std_msgs/Header``
+  is ``uint32 seq, time stamp (uint32 secs, uint32 nsecs), string frame_id``; a string is a
   ``uint32`` length and the bytes, without NUL.
 * JSON ``foxglove.PoseInFrame`` (message encoding ``json``).
 
 Every supported ROS type is a header, optionally a second string (``nav_msgs/Odometry``'s
 ``child_frame_id``) and a run of ``float64`` fields; :data:`LAYOUTS` lists them in ROS order
-(positions ``x y z``, quaternions ``x y z w``, twists ``linear`` then ``angular``).
+(positions ``x y z``, quaternions ``x y z w``, twists ``linear`` then ``angular``). The decoders
+are written here (rather than taken from the libraries) so that a bad message is reported by the
+field that cannot be read.
 """
 
 from __future__ import annotations
 
 import json
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
 
 import numpy as np
+from mcap_ros2._dynamic import serialize_dynamic
 
-from fkn_bench.recordings.schemas import canonical_type_name
+from fkn_bench.recordings.schemas import canonical_type_name, ros2_schema_text
 from fkn_bench.types import ArrayF
 
 __all__ = [
     "LAYOUTS",
     "Layout",
     "DecodeError",
-    "CDR_LE_HEADER",
     "split_stamp",
-    "encode_stamped",
+    "encode_ros2",
     "decode_stamped",
     "encode_pose_in_frame",
     "decode_pose_in_frame",
 ]
 
-CDR_LE_HEADER = b"\x00\x01\x00\x00"
 _NS = 1_000_000_000
 
 
@@ -72,14 +75,13 @@ LAYOUTS: dict[str, Layout] = {
 """Canonical ROS type name (``package/Type``) -> :class:`Layout`."""
 
 
-def split_stamp(stamps_ns: ArrayF, encoding: str) -> tuple[np.ndarray, np.ndarray]:
-    """Seconds and nanoseconds of integer nanosecond stamps; raises ``ValueError`` out of range
-    (ROS 2 ``int32`` seconds, ROS 1 ``uint32``)."""
+def split_stamp(stamps_ns: ArrayF) -> tuple[np.ndarray, np.ndarray]:
+    """Seconds and nanoseconds of integer nanosecond stamps; raises ``ValueError`` outside the
+    ROS 2 ``builtin_interfaces/Time`` range (``int32`` seconds, not negative)."""
     ns = np.asarray(stamps_ns, dtype=np.int64)
     sec, nsec = np.divmod(ns, _NS)
-    high = 2**31 - 1 if encoding == "cdr" else 2**32 - 1
-    if ns.size and (sec.min() < 0 or sec.max() > high):
-        raise ValueError(f"time stamps must lie in [0, {high}] s for {encoding} messages")
+    if ns.size and (sec.min() < 0 or sec.max() > 2**31 - 1):
+        raise ValueError(f"time stamps must lie in [0, {2**31 - 1}] s")
     return sec, nsec
 
 
@@ -89,103 +91,55 @@ def _align(offset: int, size: int) -> int:
     return 4 + (body + size - 1) // size * size
 
 
-def _string_bytes(text: str, encoding: str) -> bytes:
-    raw = text.encode("utf-8")
-    return raw + b"\x00" if encoding == "cdr" else raw
+def _pose(v: list[float]) -> dict:
+    return {"position": dict(zip("xyz", v[0:3])), "orientation": dict(zip("xyzw", v[3:7]))}
 
 
-def encode_stamped(
-    type_name: str,
-    encoding: str,
-    stamps_ns: np.ndarray,
-    values: ArrayF,
-    frame_id: str,
-    *,
-    child_frame_id: str = "",
-    seq: np.ndarray | None = None,
+def _twist(v: list[float]) -> dict:
+    return {"linear": dict(zip("xyz", v[0:3])), "angular": dict(zip("xyz", v[3:6]))}
+
+
+# the message below the header, from the float64 fields in ROS order (see LAYOUTS) and the child frame
+_BODIES: dict[str, Callable[[list[float], str], dict]] = {
+    "geometry_msgs/PoseStamped": lambda v, child: {"pose": _pose(v)},
+    "geometry_msgs/TwistStamped": lambda v, child: {"twist": _twist(v)},
+    "geometry_msgs/PoseWithCovarianceStamped": lambda v, child: {"pose": {"pose": _pose(v), "covariance": v[7:43]}},
+    "nav_msgs/Odometry": lambda v, child: {
+        "child_frame_id": child,
+        "pose": {"pose": _pose(v), "covariance": v[7:43]},
+        "twist": {"twist": _twist(v[43:49]), "covariance": v[49:85]},
+    },
+}
+
+
+@lru_cache(maxsize=None)
+def _ros2_encoder(type_name: str) -> Callable[[Any], bytes]:
+    name = "/msg/".join(type_name.split("/"))
+    return serialize_dynamic(name, ros2_schema_text(type_name))[name]
+
+
+def encode_ros2(
+    type_name: str, stamps_ns: np.ndarray, values: ArrayF, frame_id: str, *, child_frame_id: str = ""
 ) -> list[bytes]:
-    """Serialise ``N`` messages of a type in :data:`LAYOUTS` at once.
+    """ROS 2 CDR bytes of ``N`` messages of a type in :data:`LAYOUTS`, serialised by
+    ``mcap-ros2-support`` from the schema text of :func:`~fkn_bench.recordings.schemas.ros2_schema_text`.
 
     Args:
         type_name: ROS type (``geometry_msgs/msg/PoseStamped`` or ``geometry_msgs/PoseStamped``).
-        encoding: ``"cdr"`` (ROS 2) or ``"ros1"``.
         stamps_ns: ``(N,)`` integer header stamps, ns.
         values: ``(N, n_doubles)`` float64 fields in ROS order.
         frame_id, child_frame_id: header frame (and Odometry's child frame) of every message.
-        seq: ROS 1 header sequence numbers (default ``0 .. N-1``).
-
-    Returns:
-        One ``bytes`` per message.
     """
-    layout = LAYOUTS[canonical_type_name(type_name)]
+    name = canonical_type_name(type_name)
     values = np.asarray(values, dtype=np.float64)
-    n = len(stamps_ns)
-    if values.shape != (n, layout.n_doubles):
-        raise ValueError(f"{layout.name} needs values of shape ({n}, {layout.n_doubles}) (got {values.shape})")
-    sec, nsec = split_stamp(stamps_ns, encoding)
-    frame = _string_bytes(frame_id, encoding)
-    child = _string_bytes(child_frame_id, encoding)
-    names: list[str] = []
-    formats: list[object] = []
-    offsets: list[int] = []
-
-    def field(name: str, fmt: object, offset: int) -> None:
-        names.append(name)
-        formats.append(fmt)
-        offsets.append(offset)
-
-    if encoding == "cdr":
-        field("encapsulation", "V4", 0)
-        field("sec", "<i4", 4)
-        field("nsec", "<u4", 8)
-        field("frame_len", "<u4", 12)
-        pos = 16
-        if frame:
-            field("frame", f"V{len(frame)}", pos)
-        pos += len(frame)
-        if layout.child_frame:
-            pos = _align(pos, 4)
-            field("child_len", "<u4", pos)
-            if child:
-                field("child", f"V{len(child)}", pos + 4)
-            pos += 4 + len(child)
-        pos = _align(pos, 8)
-    elif encoding == "ros1":
-        field("seq", "<u4", 0)
-        field("sec", "<u4", 4)
-        field("nsec", "<u4", 8)
-        field("frame_len", "<u4", 12)
-        pos = 16
-        if frame:
-            field("frame", f"V{len(frame)}", pos)
-        pos += len(frame)
-        if layout.child_frame:
-            field("child_len", "<u4", pos)
-            if child:
-                field("child", f"V{len(child)}", pos + 4)
-            pos += 4 + len(child)
-    else:
-        raise ValueError(f"unknown message encoding {encoding!r} (expected 'cdr' or 'ros1')")
-    field("values", ("<f8", (layout.n_doubles,)), pos)
-    size = pos + 8 * layout.n_doubles
-    dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": size})
-    records = np.zeros(n, dtype=dtype)
-    if encoding == "cdr":
-        records["encapsulation"] = np.void(CDR_LE_HEADER)
-    else:
-        records["seq"] = np.arange(n) if seq is None else np.asarray(seq)
-    records["sec"] = sec
-    records["nsec"] = nsec
-    records["frame_len"] = len(frame)
-    if frame:
-        records["frame"] = np.void(frame)
-    if layout.child_frame:
-        records["child_len"] = len(child)
-        if child:
-            records["child"] = np.void(child)
-    records["values"] = values
-    blob = records.tobytes()
-    return [blob[i : i + size] for i in range(0, n * size, size)]
+    if values.shape != (len(stamps_ns), LAYOUTS[name].n_doubles):
+        raise ValueError(f"values must have shape ({len(stamps_ns)}, {LAYOUTS[name].n_doubles}) (got {values.shape})")
+    sec, nsec = split_stamp(stamps_ns)
+    encode, body = _ros2_encoder(name), _BODIES[name]
+    return [
+        encode({"header": {"stamp": {"sec": s, "nanosec": ns}, "frame_id": frame_id}, **body(v, child_frame_id)})
+        for s, ns, v in zip(sec.tolist(), nsec.tolist(), values.tolist())
+    ]
 
 
 def decode_stamped(type_name: str, encoding: str, data: bytes) -> tuple[int, str, str, tuple[float, ...]]:
@@ -252,32 +206,19 @@ def decode_stamped(type_name: str, encoding: str, data: bytes) -> tuple[int, str
 def encode_pose_in_frame(stamps_ns: np.ndarray, frame_id: str, values: ArrayF) -> list[bytes]:
     """JSON ``foxglove.PoseInFrame`` messages; ``values (N, 7)`` = position xyz, orientation xyzw.
 
-    Floats are written with Python's shortest round-trip representation (``repr``), so a JSON
-    reader gets the same float64 back; non-finite values become ``null``.
+    Floats are written with Python's shortest round-trip representation, so a JSON reader gets the
+    same float64 back; non-finite values become ``null``.
     """
+    sec, nsec = split_stamp(stamps_ns)
     values = np.asarray(values, dtype=np.float64)
-    sec, nsec = split_stamp(stamps_ns, "json")
-    frame = json.dumps(frame_id)
-    template = (
-        '{"timestamp":{"sec":%d,"nsec":%d},"frame_id":' + frame.replace("%", "%%") + ',"pose":{"position":'
-        '{"x":%r,"y":%r,"z":%r},"orientation":{"x":%r,"y":%r,"z":%r,"w":%r}}}'
-    )
-    finite = np.isfinite(values).all(axis=1)
-    out: list[bytes] = []
-    for s, ns, row, ok in zip(sec.tolist(), nsec.tolist(), values.tolist(), finite.tolist()):
-        if ok:
-            out.append((template % (s, ns, *row)).encode())
-        else:
-            document = {
-                "timestamp": {"sec": s, "nsec": ns},
-                "frame_id": frame_id,
-                "pose": {
-                    "position": dict(zip("xyz", (v if np.isfinite(v) else None for v in row[:3]))),
-                    "orientation": dict(zip("xyzw", (v if np.isfinite(v) else None for v in row[3:]))),
-                },
-            }
-            out.append(json.dumps(document, separators=(",", ":")).encode())
-    return out
+    rows = np.where(np.isfinite(values), values, np.nan).tolist()
+    return [
+        json.dumps(
+            {"timestamp": {"sec": s, "nsec": ns}, "frame_id": frame_id, "pose": _pose([None if v != v else v for v in row])},
+            separators=(",", ":"),
+        ).encode()
+        for s, ns, row in zip(sec.tolist(), nsec.tolist(), rows)
+    ]
 
 
 def _number(value: object, where: str) -> float:

@@ -238,6 +238,13 @@ class McapRecording:
     def _error(self, message: str, **where: Any) -> RecordingError:
         return RecordingError(f"{self.path}: {message}", path=self.path, **where)
 
+    def _repair(self, error: str, note: str, repairs: list[str] | None = None, **where: Any) -> None:
+        """Raise ``error`` (which says how to repair) unless repairing; else record ``note`` in
+        ``repairs`` (default: the file's)."""
+        if not self.repair:
+            raise self._error(error, **where)
+        (self.repairs if repairs is None else repairs).append(note)
+
     def _check_file(self) -> None:
         path = self.path
         if not path.exists():
@@ -283,16 +290,15 @@ class McapRecording:
                     f"bytes ({self.size} bytes)"
                 )
         if problem is not None:
-            if not self.repair:
-                raise self._error(
-                    f"{problem}. Pass repair=True to read the messages stored before "
-                    "the damage, or recover the file with `mcap recover`"
-                )
-            self.repairs.append(f"{problem}; read the file front to back up to the damage")
+            self._repair(
+                f"{problem}. Pass repair=True to read the messages stored before the damage, or recover the "
+                "file with `mcap recover`",
+                f"{problem}; read the file front to back up to the damage",
+            )
             self._summary = None
-            self._scan_linear(tolerant=True)
+            self._scan_linear()
         elif self._summary is None or not self._summary.chunk_indexes:
-            self._scan_linear(tolerant=False)  # valid file without an index
+            self._scan_linear()  # valid file without an index
 
     # ------------------------------------------------------------------ chunk and linear reading
     def _chunk_records(self, chunk: Chunk, where: str) -> list[Any] | None:
@@ -305,15 +311,13 @@ class McapRecording:
                                        message_end_time=chunk.message_end_time, uncompressed_crc=0,
                                        uncompressed_size=len(data)))
         except Exception as exc:
-            problem = f"{where} is corrupt ({_describe(exc)})"
-            if not self.repair:
-                raise self._error(
-                    f"{problem}. Pass repair=True to skip damaged chunks (their messages are lost)"
-                ) from exc
-            self.repairs.append(f"skipped {where}, which is corrupt ({_describe(exc)})")
+            self._repair(
+                f"{where} is corrupt ({_describe(exc)}). Pass repair=True to skip damaged chunks (their messages are lost)",
+                f"skipped {where}, which is corrupt ({_describe(exc)})",
+            )
             return None
 
-    def _scan_linear(self, *, tolerant: bool) -> None:
+    def _scan_linear(self) -> None:
         """Read every record front to back (files without an index, or damaged ones)."""
         schemas: dict[int, Schema] = {}
         raw: dict[int, _Raw] = {}
@@ -351,13 +355,11 @@ class McapRecording:
                     break
                 except Exception as exc:
                     problem = f"record {count} (near byte {fh.tell()}), which cannot be read ({_describe(exc)})"
-                    if not tolerant:
-                        if not self.repair:
-                            raise self._error(
-                                f"{problem}; the file is truncated or corrupt. Pass repair=True "
-                                "to use the messages before the damage"
-                            ) from exc
-                    self.repairs.append(f"stopped reading at {problem}")
+                    self._repair(
+                        f"{problem}; the file is truncated or corrupt. Pass repair=True to use the messages before "
+                        "the damage",
+                        f"stopped reading at {problem}",
+                    )
                     break
                 count += 1
                 if isinstance(record, Chunk):
@@ -424,7 +426,7 @@ class McapRecording:
             )
         info = topics[topic]
         if info.message_count == 0:
-            raise RecordingError(f"{self.path}: {role} topic {topic!r} has no messages", path=self.path, topic=topic)
+            raise self._error(f"{role} topic {topic!r} has no messages", topic=topic)
         return info
 
     def prefetch(self, topics: Iterable[str]) -> None:
@@ -443,12 +445,10 @@ class McapRecording:
         self.prefetch([topic])
         parts = self._cache[topic]
         if not parts:
-            raise RecordingError(f"{self.path}: topic {topic!r} has no readable messages", path=self.path, topic=topic)
+            raise self._error(f"topic {topic!r} has no readable messages", topic=topic)
         schemas = {(p.schema.name if p.schema else "", p.channel.message_encoding) for p in parts}
         if len(schemas) > 1:
-            raise RecordingError(
-                f"{self.path}: topic {topic!r} mixes several types/encodings {sorted(schemas)}", path=self.path, topic=topic
-            )
+            raise self._error(f"topic {topic!r} mixes several types/encodings {sorted(schemas)}", topic=topic)
         merged = _Raw(parts[0].channel, parts[0].schema, [m for p in parts for m in p.messages])
         merged.messages.sort(key=lambda m: (m[0], m[1]))
         return merged
@@ -475,12 +475,10 @@ class McapRecording:
                 problem = "its CRC does not match its data"
         if problem is None:
             return data
-        if not self.repair:
-            raise self._error(
-                f"{where} is corrupt: {problem}. Pass repair=True to skip damaged chunks "
-                "(their messages are lost)"
-            )
-        self.repairs.append(f"skipped {where}, which is corrupt: {problem}")
+        self._repair(
+            f"{where} is corrupt: {problem}. Pass repair=True to skip damaged chunks (their messages are lost)",
+            f"skipped {where}, which is corrupt: {problem}",
+        )
         return None
 
     def _read_indexed(self, topics: set[str]) -> dict[str, list[_Raw]]:
@@ -501,12 +499,11 @@ class McapRecording:
                     fh.seek(index.chunk_start_offset + 1 + 8)
                     chunk = Chunk.read(ReadDataStream(fh))
                 except Exception as exc:
-                    problem = f"{where} cannot be read ({_describe(exc)})"
-                    if not self.repair:
-                        raise self._error(
-                            f"{problem}; the file is corrupt. Pass repair=True to skip damaged chunks"
-                        ) from exc
-                    self.repairs.append(f"skipped {where}, which cannot be read ({_describe(exc)})")
+                    self._repair(
+                        f"{where} cannot be read ({_describe(exc)}); the file is corrupt. Pass repair=True to skip "
+                        "damaged chunks",
+                        f"skipped {where}, which cannot be read ({_describe(exc)})",
+                    )
                     continue
                 data = self._chunk_data(chunk, where)
                 if data is None:
@@ -528,12 +525,10 @@ class McapRecording:
                                 entry.messages.append((log_time, serial, data[body + 22 : pos]))
                         serial += 1
                 except (struct.error, ValueError) as exc:
-                    if not self.repair:
-                        raise self._error(
-                            f"{where} is corrupt: its records cannot be parsed ({exc}). Pass repair=True "
-                            "to skip damaged chunks"
-                        ) from None
-                    self.repairs.append(f"{where}: stopped at a damaged record ({exc})")
+                    self._repair(
+                        f"{where} is corrupt: its records cannot be parsed ({exc}). Pass repair=True to skip damaged chunks",
+                        f"{where}: stopped at a damaged record ({exc})",
+                    )
         out: dict[str, list[_Raw]] = {topic: [] for topic in topics}
         for entry in raw.values():
             if entry.messages:
@@ -543,27 +538,23 @@ class McapRecording:
     # ------------------------------------------------------------------ decoding
     def _decode(self, topic: str, role: str, allowed: tuple[str, ...]) -> _Decoded:
         info = self.require_topic(topic, role)
-        type_name = info.type_name
-        encoding = info.message_encoding
+        type_name, encoding = info.type_name, info.message_encoding
         if encoding not in _ENCODINGS:
-            raise RecordingError(
-                f"{self.path}: {role} topic {topic!r} uses message encoding {encoding!r} (schema {info.schema_name!r}, "
-                f"schema encoding {info.schema_encoding!r}); fkn-bench reads 'cdr' (ROS 2), 'ros1' (ROS 1) and "
-                "'json' (foxglove.PoseInFrame)",
-                path=self.path,
+            raise self._error(
+                f"{role} topic {topic!r} uses message encoding {encoding!r} (schema {info.schema_name!r}, schema "
+                f"encoding {info.schema_encoding!r}); fkn-bench reads 'cdr' (ROS 2), 'ros1' (ROS 1) and 'json' "
+                "(foxglove.PoseInFrame)",
                 topic=topic,
             )
         if type_name not in allowed or (encoding == "json") != (type_name == "foxglove.PoseInFrame"):
-            raise RecordingError(
-                f"{self.path}: {role} topic {topic!r} has type {info.schema_name or '(no schema)'!r} ({encoding}); a "
-                f"{role} topic must be one of {', '.join(allowed)} (JSON only for foxglove.PoseInFrame)",
-                path=self.path,
+            raise self._error(
+                f"{role} topic {topic!r} has type {info.schema_name or '(no schema)'!r} ({encoding}); a {role} topic "
+                f"must be one of {', '.join(allowed)} (JSON only for foxglove.PoseInFrame)",
                 topic=topic,
             )
-        raw = self._raw(topic)
         rows: list[tuple[int, int, int, str, str, tuple[float, ...]]] = []
         dropped: list[int] = []
-        for i, (log_time, _, data) in enumerate(raw.messages):
+        for i, (log_time, _, data) in enumerate(self._raw(topic).messages):
             try:
                 if encoding == "json":
                     stamp, frame, values = decode_pose_in_frame(data)
@@ -572,32 +563,29 @@ class McapRecording:
                     stamp, frame, child, values = decode_stamped(type_name, encoding, data)
             except (DecodeError, struct.error) as exc:
                 if not self.repair:
-                    raise RecordingError(
-                        f"{self.path}: {role} topic {topic!r}: message #{i} (log time {_seconds(log_time)}) cannot be "
-                        f"decoded as {info.schema_name} ({_ENCODINGS[encoding]}): {exc}. Pass repair=True to drop "
-                        "undecodable messages",
-                        path=self.path,
+                    raise self._error(
+                        f"{role} topic {topic!r}: message #{i} (log time {_seconds(log_time)}) cannot be decoded as "
+                        f"{info.schema_name} ({_ENCODINGS[encoding]}): {exc}. Pass repair=True to drop undecodable "
+                        "messages",
                         topic=topic,
                         index=i,
                     ) from None
                 dropped.append(i)
                 continue
             rows.append((i, log_time, stamp, frame, child, values))
-        repairs = []
-        if dropped:
-            repairs.append(f"{topic}: dropped {len(dropped)} undecodable message(s) (first: #{dropped[0]})")
         if not rows:
-            raise RecordingError(f"{self.path}: {role} topic {topic!r} has no decodable messages", path=self.path, topic=topic)
+            raise self._error(f"{role} topic {topic!r} has no decodable messages", topic=topic)
+        indices, log, header, frames, children, values = zip(*rows)
         return _Decoded(
             type_name=type_name,
             encoding=encoding,
-            indices=np.array([r[0] for r in rows], dtype=np.int64),
-            log=np.array([r[1] for r in rows], dtype=np.int64),
-            header=np.array([r[2] for r in rows], dtype=np.int64),
-            frame_id=rows[0][3],
-            child_frame_id=rows[0][4],
-            values=np.array([r[5] for r in rows], dtype=np.float64),
-            repairs=repairs,
+            indices=np.array(indices, dtype=np.int64),
+            log=np.array(log, dtype=np.int64),
+            header=np.array(header, dtype=np.int64),
+            frame_id=frames[0],
+            child_frame_id=children[0],
+            values=np.array(values, dtype=np.float64),
+            repairs=[f"{topic}: dropped {len(dropped)} undecodable message(s) (first: #{dropped[0]})"] if dropped else [],
         )
 
     def _stamps(self, topic: str, role: str, d: _Decoded, time_source: str, notes: list[str]) -> tuple[np.ndarray, np.ndarray, str]:
@@ -612,19 +600,18 @@ class McapRecording:
             if time_source == "auto":
                 notes.append(f"{topic}: every header stamp is zero; used the MCAP log times instead")
                 return d.log.copy(), keep, "log"
-            raise RecordingError(
-                f"{self.path}: {role} topic {topic!r}: every header stamp is zero; use time_source='log' (or 'auto')",
-                path=self.path, topic=topic, index=int(d.indices[0]),
+            raise self._error(
+                f"{role} topic {topic!r}: every header stamp is zero; use time_source='log' (or 'auto')",
+                topic=topic, index=int(d.indices[0]),
             )
         if zero.any():
             first = int(d.indices[np.argmax(zero)])
-            if not self.repair:
-                raise RecordingError(
-                    f"{self.path}: {role} topic {topic!r}: message #{first} has a zero header stamp while others do not. "
-                    "Pass repair=True to drop such messages, or time_source='log'",
-                    path=self.path, topic=topic, index=first,
-                )
-            d.repairs.append(f"{topic}: dropped {int(zero.sum())} message(s) with a zero header stamp (first: #{first})")
+            self._repair(
+                f"{role} topic {topic!r}: message #{first} has a zero header stamp while others do not. "
+                "Pass repair=True to drop such messages, or time_source='log'",
+                f"{topic}: dropped {int(zero.sum())} message(s) with a zero header stamp (first: #{first})",
+                d.repairs, topic=topic, index=first,
+            )
             keep &= ~zero
         return d.header.copy(), keep, "header"
 
@@ -634,35 +621,34 @@ class McapRecording:
         back = np.flatnonzero(np.diff(stamps) < 0) + 1
         if len(back):
             i = int(back[0])
-            if not self.repair:
-                raise RecordingError(
-                    f"{self.path}: {role} topic {topic!r}: message #{int(indices[i])} has stamp {_seconds(int(stamps[i]))}, "
-                    f"earlier than message #{int(indices[i - 1])} ({_seconds(int(stamps[i - 1]))}): the time stamps are not "
-                    "monotonic. Pass repair=True to sort the messages by stamp",
-                    path=self.path, topic=topic, index=int(indices[i]),
-                )
+            self._repair(
+                f"{role} topic {topic!r}: message #{int(indices[i])} has stamp {_seconds(int(stamps[i]))}, earlier than "
+                f"message #{int(indices[i - 1])} ({_seconds(int(stamps[i - 1]))}): the time stamps are not monotonic. "
+                "Pass repair=True to sort the messages by stamp",
+                f"{topic}: sorted the messages by stamp ({len(back)} went backwards; first: #{int(indices[i])})",
+                repairs, topic=topic, index=int(indices[i]),
+            )
             order = np.argsort(stamps, kind="stable")
-            repairs.append(f"{topic}: sorted the messages by stamp ({len(back)} went backwards; first: #{int(indices[i])})")
         same = np.flatnonzero(np.diff(stamps[order]) == 0) + 1
         if len(same):
             i = int(same[0])
             this, before = int(indices[order[i]]), int(indices[order[i - 1]])
-            if not self.repair:
-                raise RecordingError(
-                    f"{self.path}: {role} topic {topic!r}: message #{this} has the same stamp "
-                    f"{_seconds(int(stamps[order[i]]))} as message #{before} (duplicate time stamps). "
-                    "Pass repair=True to keep only the first message of each stamp",
-                    path=self.path, topic=topic, index=this,
-                )
-            order = np.delete(order, same)
-            repairs.append(
-                f"{topic}: dropped {len(same)} message(s) with a duplicate stamp, keeping the first of each (first dropped: #{this})"
+            self._repair(
+                f"{role} topic {topic!r}: message #{this} has the same stamp {_seconds(int(stamps[order[i]]))} as "
+                f"message #{before} (duplicate time stamps). Pass repair=True to keep only the first message of each stamp",
+                f"{topic}: dropped {len(same)} message(s) with a duplicate stamp, keeping the first of each "
+                f"(first dropped: #{this})",
+                repairs, topic=topic, index=this,
             )
+            order = np.delete(order, same)
         return order
 
-    def _check_values(self, topic: str, role: str, d: _Decoded, poses: np.ndarray | None, twists: np.ndarray | None,
-                      keep: np.ndarray) -> np.ndarray:
-        """Rows with finite values and non-zero quaternions (others dropped under repair)."""
+    def _rows(self, topic: str, role: str, d: _Decoded, time_source: str, poses: np.ndarray | None,
+              twists: np.ndarray | None, quaternion_tolerance: float = 1e-6) -> tuple[np.ndarray, np.ndarray, str, list[str]]:
+        """The usable rows of ``d`` in stamp order, its stamps, the time source and notes: drops (or
+        refuses) non-finite values and zero quaternions, renormalises ``poses`` in place."""
+        notes: list[str] = []
+        stamps, keep, source = self._stamps(topic, role, d, time_source, notes)
         ok = np.ones(len(d.indices), dtype=bool)
         for array in (poses, twists):
             if array is not None:
@@ -675,17 +661,32 @@ class McapRecording:
         if bad.any():
             i = int(np.argmax(bad))
             what = "a zero quaternion" if zero_q[i] else "a non-finite value (NaN or infinity)"
-            if not self.repair:
-                raise RecordingError(
-                    f"{self.path}: {role} topic {topic!r}: message #{int(d.indices[i])} has {what}; pass repair=True to "
-                    "drop such messages",
-                    path=self.path, topic=topic, index=int(d.indices[i]),
-                )
-            d.repairs.append(
+            self._repair(
+                f"{role} topic {topic!r}: message #{int(d.indices[i])} has {what}; pass repair=True to drop such messages",
                 f"{topic}: dropped {int(bad.sum())} message(s) with non-finite values or zero quaternions "
-                f"(first: #{int(d.indices[i])})"
+                f"(first: #{int(d.indices[i])})",
+                d.repairs, topic=topic, index=int(d.indices[i]),
             )
-        return keep & ok
+        keep &= ok
+        if poses is not None:
+            norms = np.linalg.norm(poses[:, :4], axis=1)
+            bad_norm = keep & (np.abs(norms - 1.0) > quaternion_tolerance)
+            if bad_norm.any():
+                i = int(np.argmax(bad_norm))
+                self._repair(
+                    f"{role} topic {topic!r}: message #{int(d.indices[i])} has a quaternion of norm {norms[i]:.9g}, not 1 "
+                    f"(tolerance {quaternion_tolerance:g}); pass repair=True to renormalise such quaternions, or a "
+                    "larger quaternion_tolerance",
+                    f"{topic}: renormalised {int(bad_norm.sum())} quaternion(s) with a norm off 1 by more than "
+                    f"{quaternion_tolerance:g} (first: #{int(d.indices[i])}, norm {norms[i]:.9g})",
+                    d.repairs, topic=topic, index=int(d.indices[i]),
+                )
+                poses[bad_norm, :4] /= norms[bad_norm, None]
+        rows = np.flatnonzero(keep)
+        order = rows[self._order(topic, role, stamps[rows], d.indices[rows], d.repairs)]
+        if len(order) == 0:
+            raise self._error(f"{role} topic {topic!r} has no usable messages", topic=topic)
+        return order, stamps[order], source, notes
 
     def read_poses(
         self,
@@ -697,40 +698,18 @@ class McapRecording:
     ) -> PoseSeries:
         """Validated poses of ``topic`` (see module docstring for the checks and repairs)."""
         d = self._decode(topic, role, POSE_TYPES)
-        notes: list[str] = []
         values = d.values
         # ROS order: position(3), orientation xyzw(4) [, pose cov(36), twist linear(3), angular(3), ...]
         poses = np.concatenate([xyzw_to_wxyz(values[:, 3:7]), values[:, 0:3]], axis=1)
         twists = None
         if d.type_name == "nav_msgs/Odometry":
             twists = np.concatenate([values[:, 46:49], values[:, 43:46]], axis=1)
-        stamps, keep, source = self._stamps(topic, role, d, time_source, notes)
-        keep = self._check_values(topic, role, d, poses, twists, keep)
-        norms = np.linalg.norm(poses[:, :4], axis=1)
-        bad_norm = keep & (np.abs(norms - 1.0) > quaternion_tolerance)
-        if bad_norm.any():
-            i = int(np.argmax(bad_norm))
-            if not self.repair:
-                raise RecordingError(
-                    f"{self.path}: {role} topic {topic!r}: message #{int(d.indices[i])} has a quaternion of norm "
-                    f"{norms[i]:.9g}, not 1 (tolerance {quaternion_tolerance:g}); pass repair=True to renormalise such "
-                    "quaternions, or a larger quaternion_tolerance",
-                    path=self.path, topic=topic, index=int(d.indices[i]),
-                )
-            poses[bad_norm, :4] /= norms[bad_norm, None]
-            d.repairs.append(
-                f"{topic}: renormalised {int(bad_norm.sum())} quaternion(s) with a norm off 1 by more than "
-                f"{quaternion_tolerance:g} (first: #{int(d.indices[i])}, norm {norms[i]:.9g})"
-            )
-        rows = np.flatnonzero(keep)
-        order = rows[self._order(topic, role, stamps[rows], d.indices[rows], d.repairs)]
-        if len(order) == 0:
-            raise RecordingError(f"{self.path}: {role} topic {topic!r} has no usable messages", path=self.path, topic=topic)
+        order, stamps, source, notes = self._rows(topic, role, d, time_source, poses, twists, quaternion_tolerance)
         return PoseSeries(
             topic=topic,
             type_name=d.type_name,
             encoding=d.encoding,
-            stamps_ns=stamps[order],
+            stamps_ns=stamps,
             poses=poses[order],
             frame_id=d.frame_id,
             child_frame_id=d.child_frame_id,
@@ -744,20 +723,14 @@ class McapRecording:
     def read_twists(self, topic: str, *, role: str = "twist", time_source: str = "auto") -> TwistSeries:
         """Validated twists of ``topic`` (``TwistStamped``, or the twist part of ``Odometry``)."""
         d = self._decode(topic, role, TWIST_TYPES)
-        notes: list[str] = []
         values = d.values[:, 43:49] if d.type_name == "nav_msgs/Odometry" else d.values
         twists = np.concatenate([values[:, 3:6], values[:, 0:3]], axis=1)  # angular, linear
-        stamps, keep, source = self._stamps(topic, role, d, time_source, notes)
-        keep = self._check_values(topic, role, d, None, twists, keep)
-        rows = np.flatnonzero(keep)
-        order = rows[self._order(topic, role, stamps[rows], d.indices[rows], d.repairs)]
-        if len(order) == 0:
-            raise RecordingError(f"{self.path}: {role} topic {topic!r} has no usable messages", path=self.path, topic=topic)
+        order, stamps, source, notes = self._rows(topic, role, d, time_source, None, twists)
         return TwistSeries(
             topic=topic,
             type_name=d.type_name,
             encoding=d.encoding,
-            stamps_ns=stamps[order],
+            stamps_ns=stamps,
             twists=twists[order],
             frame_id=d.child_frame_id if d.type_name == "nav_msgs/Odometry" else d.frame_id,
             indices=d.indices[order],

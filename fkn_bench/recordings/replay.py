@@ -209,19 +209,11 @@ def resample_truth(stamps_ns: np.ndarray, poses: ArrayF, twists: ArrayF | None, 
     exact, lo, hi, frac = _locate(stamps_ns, grid_ns)
     interp = exact < 0
     out = np.empty((len(grid_ns), 7))
-    out[~interp] = poses[exact[~interp]]
+    out[:, :4] = poses[exact, :4]  # rows to interpolate are overwritten below
     if interp.any():
-        f = frac[interp]
-        out[interp, :4] = quat.slerp(poses[lo[interp], :4], poses[hi[interp], :4], f)
-        p0, p1 = poses[lo[interp], 4:], poses[hi[interp], 4:]
-        out[interp, 4:] = p0 + f[:, None] * (p1 - p0)
-    tw = None
-    if twists is not None:
-        tw = np.empty((len(grid_ns), 6))
-        tw[~interp] = twists[exact[~interp]]
-        if interp.any():
-            f = frac[interp][:, None]
-            tw[interp] = twists[lo[interp]] + f * (twists[hi[interp]] - twists[lo[interp]])
+        out[interp, :4] = quat.slerp(poses[lo[interp], :4], poses[hi[interp], :4], frac[interp])
+    out[:, 4:] = _resample_linear(stamps_ns, poses[:, 4:], grid_ns)
+    tw = None if twists is None else _resample_linear(stamps_ns, twists, grid_ns)
     return out, tw, int(interp.sum())
 
 

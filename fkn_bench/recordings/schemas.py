@@ -1,12 +1,11 @@
-"""Message schemas fkn-bench writes and reads: ROS 2 and ROS 1 message definitions and
-Foxglove JSON schemas.
+"""Message schemas fkn-bench writes: ROS 2 message definitions and Foxglove JSON schemas.
 
 ROS message definitions are stored in MCAP ``Schema`` records the way ``rosbag2`` and
-``mcap-ros2-support`` do (schema encoding ``ros2msg``; ``ros1msg`` for ROS 1): the definition of
-the top-level type, followed by the definition of every type it depends on, each after a line of
-80 ``=`` and a ``MSG: package/Type`` line. The field lists below are those of the standard ROS 2
-``geometry_msgs``, ``std_msgs``, ``builtin_interfaces`` and ``nav_msgs`` packages (and of their
-ROS 1 counterparts, where ``Header`` starts with ``uint32 seq`` and ``time`` is a builtin).
+``mcap-ros2-support`` do (schema encoding ``ros2msg``): the definition of the top-level type,
+followed by the definition of every type it depends on, each after a line of 80 ``=`` and a
+``MSG: package/Type`` line. The field lists below are those of the standard ROS 2
+``geometry_msgs``, ``std_msgs``, ``builtin_interfaces`` and ``nav_msgs`` packages. (The reader
+needs no schema text: it knows the wire layout of each type it reads, ROS 1 ones included.)
 
 Foxglove schemas (``foxglove.PoseInFrame``) are JSON Schema documents (schema encoding
 ``jsonschema``, message encoding ``json``); Foxglove recognises them by name and draws the poses
@@ -20,11 +19,9 @@ import json
 __all__ = [
     "SEPARATOR",
     "ROS2_DEFINITIONS",
-    "ROS1_DEFINITIONS",
     "FOXGLOVE_POSE_IN_FRAME",
     "FOXGLOVE_SCHEMAS",
     "ros2_schema_text",
-    "ros1_schema_text",
     "canonical_type_name",
 ]
 
@@ -65,35 +62,18 @@ _ROS2_BASE: dict[str, tuple[str, tuple[str, ...]]] = {
     ),
 }
 
-_ROS1_BASE: dict[str, tuple[str, tuple[str, ...]]] = {
-    "std_msgs/Header": ("uint32 seq\ntime stamp\nstring frame_id\n", ()),
-    **{
-        name: (text, tuple(d for d in deps if d != "builtin_interfaces/Time"))
-        for name, (text, deps) in _ROS2_BASE.items()
-        if name not in ("builtin_interfaces/Time", "std_msgs/Header")
-    },
-}
-
-
-def _closure(base: dict[str, tuple[str, tuple[str, ...]]], name: str) -> list[str]:
-    """Dependencies of ``name`` in first-use (depth-first) order, without ``name`` itself."""
+def _concatenate(name: str) -> str:
+    """The definition of ``name`` and, in first-use (depth-first) order, of its dependencies."""
     order: list[str] = []
 
     def visit(n: str) -> None:
-        for dep in base[n][1]:
+        for dep in _ROS2_BASE[n][1]:
             if dep not in order:
                 order.append(dep)
                 visit(dep)
 
     visit(name)
-    return order
-
-
-def _concatenate(base: dict[str, tuple[str, tuple[str, ...]]], name: str) -> str:
-    parts = [base[name][0]]
-    for dep in _closure(base, name):
-        parts.append(f"{SEPARATOR}\nMSG: {dep}\n{base[dep][0]}")
-    return "".join(parts)
+    return "".join([_ROS2_BASE[name][0], *(f"{SEPARATOR}\nMSG: {dep}\n{_ROS2_BASE[dep][0]}" for dep in order)])
 
 
 def canonical_type_name(name: str) -> str:
@@ -102,7 +82,7 @@ def canonical_type_name(name: str) -> str:
 
 
 ROS2_DEFINITIONS: dict[str, str] = {
-    f"{n.split('/')[0]}/msg/{n.split('/')[1]}": _concatenate(_ROS2_BASE, n)
+    n.replace("/", "/msg/"): _concatenate(n)
     for n in (
         "geometry_msgs/PoseStamped",
         "geometry_msgs/TwistStamped",
@@ -112,27 +92,9 @@ ROS2_DEFINITIONS: dict[str, str] = {
 }
 """ROS 2 schema name (``geometry_msgs/msg/PoseStamped``) -> concatenated ``ros2msg`` definition."""
 
-ROS1_DEFINITIONS: dict[str, str] = {
-    n: _concatenate(_ROS1_BASE, n)
-    for n in (
-        "geometry_msgs/PoseStamped",
-        "geometry_msgs/TwistStamped",
-        "geometry_msgs/PoseWithCovarianceStamped",
-        "nav_msgs/Odometry",
-    )
-}
-"""ROS 1 schema name (``geometry_msgs/PoseStamped``) -> concatenated ``ros1msg`` definition."""
-
-
 def ros2_schema_text(name: str) -> str:
     """The ``ros2msg`` schema text of ``name`` (either spelling, see :func:`canonical_type_name`)."""
-    package, _, type_name = canonical_type_name(name).partition("/")
-    return ROS2_DEFINITIONS[f"{package}/msg/{type_name}"]
-
-
-def ros1_schema_text(name: str) -> str:
-    """The ``ros1msg`` schema text of ``name``."""
-    return ROS1_DEFINITIONS[canonical_type_name(name)]
+    return ROS2_DEFINITIONS[canonical_type_name(name).replace("/", "/msg/")]
 
 
 def _number(description: str) -> dict:

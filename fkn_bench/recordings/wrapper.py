@@ -33,14 +33,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fkn_bench.estimators.base import parse_observation
-from fkn_bench.recordings.writer import (
-    DEFAULT_START_EPOCH_NS,
-    _estimator_metadata,
-    _scenario_metadata,
-    provenance,
-    write_recording,
-)
+from fkn_bench.recordings.writer import DEFAULT_START_EPOCH_NS, episode_metadata, write_recording
 
 __all__ = ["RecordMcap"]
 
@@ -97,7 +90,11 @@ class RecordMcap(gym.Wrapper):
     def _observe(self, obs: Any, info: Mapping[str, Any]) -> None:
         buffer = self._buffer
         assert buffer is not None
-        pose, time = parse_observation(obs)
+        if isinstance(obs, Mapping):  # a Gymnasium observation dict, or a bare (7,) pose (NaN when missing)
+            pose, valid, time = obs["pose"], obs.get("valid", True), obs.get("time")
+        else:
+            pose, valid, time = obs, True, None
+        pose = np.asarray(pose, dtype=float).reshape(7)
         if time is None:
             if self._dt is None:
                 raise ValueError(
@@ -105,7 +102,7 @@ class RecordMcap(gym.Wrapper):
                 )
             time = len(buffer["times"]) * self._dt
         buffer["times"].append(float(time))
-        buffer["measurements"].append(np.full(7, np.nan) if pose is None else np.array(pose, dtype=float))
+        buffer["measurements"].append(pose if valid else np.full(7, np.nan))
         truth = info.get("truth")
         buffer["truth"].append(None if truth is None else np.array(truth, dtype=float).reshape(13))
 
@@ -131,22 +128,18 @@ class RecordMcap(gym.Wrapper):
         estimates[: len(buffer["estimates"])] = np.array(buffer["estimates"])
         mask = np.zeros(n, dtype=bool)
         mask[: len(buffer["estimates"])] = True
-        metadata: dict[str, Mapping[str, str]] = {}
         scenario = getattr(self.env.unwrapped, "scenario", None)
-        if scenario is not None and hasattr(scenario, "to_dict") and hasattr(scenario, "config_hash"):
-            metadata["fkn_bench.scenario"] = _scenario_metadata(scenario)
+        if not (hasattr(scenario, "to_dict") and hasattr(scenario, "config_hash")):
+            scenario = None
         spec = getattr(self.env, "spec", None)
-        metadata["fkn_bench.episode"] = {
+        episode = {
             "seed": "" if buffer["seed"] is None else str(buffer["seed"]),
             "episode": str(self._episode),
             "n_steps": str(n),
             "environment": spec.id if spec is not None else type(self.env.unwrapped).__name__,
             "source": "fkn_bench.recordings.RecordMcap",
         }
-        if self.estimator is not None:
-            metadata["fkn_bench.estimator"] = _estimator_metadata(self.estimator)
-        metadata["fkn_bench.provenance"] = provenance()
-        metadata.update(self._metadata)
+        metadata = episode_metadata(episode, scenario=scenario, estimator=self.estimator, extra=self._metadata)
         write_recording(
             path,
             times=np.array(buffer["times"]),

@@ -1,8 +1,8 @@
 """Write episodes as MCAP recordings that ROS 2 tools and Foxglove open.
 
 One file holds one episode (:func:`write_recording` for arrays, :func:`record_episode` for an
-:class:`~fkn_bench.envs.Episodes` row and its :class:`~fkn_bench.estimators.Estimates`,
-:func:`record` to generate, estimate and write in one call).
+:class:`~fkn_bench.envs.Episodes` row and its :class:`~fkn_bench.estimators.Estimates`;
+:func:`fkn_bench.harness.recording.record` generates an episode, runs an estimator and records both).
 
 Topics (:class:`RecordingTopics`; a ``namespace`` such as ``/honey`` is prepended to each), all
 with ``header.frame_id = "world"``:
@@ -48,10 +48,8 @@ JSON), ``fkn_bench.scenario`` (each scenario field JSON-encoded, plus ``config_h
 ``fkn_bench.episode`` (seed, split, first step, steps), ``fkn_bench.estimator`` (name, class,
 JSON config) and ``fkn_bench.provenance`` (versions, platform, command line, git commit, time).
 
-Chunks are zstd-compressed by default (``compression``). The CDR bytes come from the vectorised
-encoder of :mod:`fkn_bench.recordings.codecs`, tested to be identical to ``mcap-ros2-support``'s,
-and the file from :class:`~fkn_bench.recordings.bulk.BulkWriter`, tested to write the same bytes
-as ``mcap``'s ``Writer`` (``engine="mcap"`` uses that one).
+Chunks are zstd-compressed by default (``compression``). The CDR bytes are serialised by
+``mcap-ros2-support`` and the file written by ``mcap``'s ``Writer``.
 """
 
 from __future__ import annotations
@@ -62,6 +60,7 @@ import sys
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
@@ -69,10 +68,11 @@ import numpy as np
 from mcap.writer import LIBRARY_IDENTIFIER as MCAP_LIBRARY
 from mcap.writer import CompressionType, Writer
 
+from fkn_bench import __version__
 from fkn_bench.geometry.quaternion import wxyz_to_xyzw
-from fkn_bench.io import atomic_path
-from fkn_bench.recordings.bulk import BulkWriter
-from fkn_bench.recordings.codecs import encode_pose_in_frame, encode_stamped
+from fkn_bench.io import atomic_path, to_jsonable
+from fkn_bench.provenance import environment
+from fkn_bench.recordings.codecs import encode_pose_in_frame, encode_ros2
 from fkn_bench.recordings.schemas import FOXGLOVE_SCHEMAS, ros2_schema_text
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -87,8 +87,8 @@ __all__ = [
     "stamps_from_times",
     "write_recording",
     "record_episode",
-    "record",
     "provenance",
+    "episode_metadata",
 ]
 
 DEFAULT_START_EPOCH_NS = 1_735_689_600 * 1_000_000_000
@@ -102,8 +102,6 @@ COMPRESSIONS: dict[str, CompressionType] = {
     "lz4": CompressionType.LZ4,
     "none": CompressionType.NONE,
 }
-
-_COMPRESSION_NAMES = {"zstd": "zstd", "lz4": "lz4", "none": ""}
 
 _POSE = "geometry_msgs/msg/PoseStamped"
 _TWIST = "geometry_msgs/msg/TwistStamped"
@@ -155,7 +153,8 @@ class RecordingSummary:
         size_bytes: file size.
         write_seconds: wall time of encoding and writing.
         topics: the topic names used.
-        timings: extra wall times (``record`` adds ``generate_seconds``, ``estimate_seconds``).
+        timings: extra wall times (:func:`fkn_bench.harness.recording.record` adds
+            ``generate_seconds``, ``estimate_seconds``).
     """
 
     path: Path
@@ -189,11 +188,8 @@ def stamps_from_times(times: ArrayF, start_epoch_ns: int = DEFAULT_START_EPOCH_N
 
 def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
     """The ``fkn_bench.provenance`` metadata (MCAP metadata values are strings): the versions,
-    machine and git commit of :func:`fkn_bench.harness.provenance.environment`, the mcap
-    packages' versions, the command line and the time."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    from fkn_bench.harness.provenance import environment
+    machine and git commit of :func:`fkn_bench.provenance.environment`, the mcap packages'
+    versions, the command line and the time."""
 
     def package_version(name: str) -> str:
         try:
@@ -218,22 +214,14 @@ def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
     return record
 
 
-def _check_rows(name: str, array: Any, n: int, width: tuple[int, ...]) -> ArrayF | None:
+def _checked(name: str, array: Any, shape: tuple[int, ...], dtype: type = np.float64) -> Any:
+    """``array`` as ``dtype``, checked to have ``shape``; None stays None."""
     if array is None:
         return None
-    out = np.asarray(array, dtype=np.float64)
-    if out.shape != (n, *width):
-        raise ValueError(f"{name} must have shape {(n, *width)} (got {out.shape})")
-    return out
-
-
-def _check_mask(name: str, mask: Any, n: int) -> ArrayB | None:
-    if mask is None:
-        return None
-    out = np.asarray(mask)
-    if out.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},) (got {out.shape})")
-    return out.astype(bool)
+    out = np.asarray(array)
+    if out.shape != shape:
+        raise ValueError(f"{name} must have shape {shape} (got {out.shape})")
+    return out.astype(dtype, copy=False)
 
 
 def _pose_values(states: ArrayF) -> ArrayF:
@@ -264,7 +252,6 @@ def write_recording(
     foxglove: bool = True,
     compression: str = "zstd",
     chunk_size: int = 4 * 1024 * 1024,
-    engine: str = "bulk",
 ) -> RecordingSummary:
     """Write one episode's arrays to an MCAP file (atomically).
 
@@ -285,8 +272,6 @@ def write_recording(
         foxglove: also write the ``foxglove.PoseInFrame`` channels.
         compression: chunk compression, ``"zstd"`` (default), ``"lz4"`` or ``"none"``.
         chunk_size: uncompressed bytes per chunk.
-        engine: ``"bulk"`` (default; :class:`~fkn_bench.recordings.bulk.BulkWriter`) or
-            ``"mcap"`` (``mcap.writer.Writer``, one call per message; the same bytes, slower).
 
     Returns:
         A :class:`RecordingSummary`.
@@ -298,12 +283,12 @@ def write_recording(
     if not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
         raise ValueError("times must be finite and strictly increasing")
     n = len(times)
-    truth = _check_rows("truth", truth, n, (13,))
-    measurements = _check_rows("measurements", measurements, n, (7,))
-    valid = _check_mask("valid", valid, n)
-    estimates = _check_rows("estimates", estimates, n, (13,))
-    covariances = _check_rows("estimate_error_covariances", estimate_error_covariances, n, (12, 12))
-    estimate_mask = _check_mask("estimate_mask", estimate_mask, n)
+    truth = _checked("truth", truth, (n, 13))
+    measurements = _checked("measurements", measurements, (n, 7))
+    valid = _checked("valid", valid, (n,), bool)
+    estimates = _checked("estimates", estimates, (n, 13))
+    covariances = _checked("estimate_error_covariances", estimate_error_covariances, (n, 12, 12))
+    estimate_mask = _checked("estimate_mask", estimate_mask, (n,), bool)
     if compression not in COMPRESSIONS:
         raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)} (got {compression!r})")
     topics = topics if topics is not None else RecordingTopics.with_namespace(namespace)
@@ -311,16 +296,16 @@ def write_recording(
     if np.any(np.diff(stamps) <= 0):
         raise ValueError("times closer than 1 ns cannot be stamped apart")
 
-    # (topic, schema name, message encoding, stamps, payloads) in per-step publishing order
-    streams: list[tuple[str, str, str, np.ndarray, list[bytes]]] = []
+    # (topic, schema name, rows, payloads) in per-step publishing order
+    streams: list[tuple[str, str, np.ndarray, list[bytes]]] = []
 
     def ros(topic: str, schema: str, rows: np.ndarray, values: ArrayF) -> None:
         if len(rows):
-            streams.append((topic, schema, "cdr", stamps[rows], encode_stamped(schema, "cdr", stamps[rows], values, frame_id)))
+            streams.append((topic, schema, rows, encode_ros2(schema, stamps[rows], values, frame_id)))
 
     def fox(topic: str, rows: np.ndarray, values: ArrayF) -> None:
         if foxglove and len(rows):
-            streams.append((topic, _FOXGLOVE_POSE, "json", stamps[rows], encode_pose_in_frame(stamps[rows], frame_id, values)))
+            streams.append((topic, _FOXGLOVE_POSE, rows, encode_pose_in_frame(stamps[rows], frame_id, values)))
 
     every = np.arange(n)
     if truth is not None:
@@ -345,12 +330,6 @@ def write_recording(
             ros(topics.estimated_pose_covariance, _POSE_COV, rows, values)
         fox(topics.foxglove_estimated_pose, rows, pose)
 
-    # interleave by stamp, keeping the stream order within a step
-    all_stamps = np.concatenate([s[3] for s in streams]) if streams else np.empty(0, np.int64)
-    stream_index = np.concatenate([np.full(len(s[3]), i) for i, s in enumerate(streams)]) if streams else np.empty(0, int)
-    order = np.lexsort((stream_index, all_stamps))
-    payloads = [p for s in streams for p in s[4]]
-
     recording_meta = {
         "format": RECORDING_FORMAT,
         "format_version": str(RECORDING_FORMAT_VERSION),
@@ -366,74 +345,71 @@ def write_recording(
             "error dtheta with q_true = exp(dtheta/2) (x) q_est"
         ),
     }
-    counts: dict[str, int] = {}
-    from fkn_bench import __version__
-
-    library = f"fkn-bench/{__version__}; {MCAP_LIBRARY}"
-    starts = np.cumsum([0] + [len(s[3]) for s in streams])
-    sequences = np.arange(len(all_stamps)) - starts[stream_index] if streams else np.empty(0, int)
     with atomic_path(path, suffix=".mcap") as tmp:
         with open(tmp, "wb") as fh:
-            if engine == "bulk":
-                writer: Any = BulkWriter(fh, chunk_size=chunk_size, compression=_COMPRESSION_NAMES[compression])
-            elif engine == "mcap":
-                writer = Writer(fh, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
-            else:
-                raise ValueError(f"engine must be 'bulk' or 'mcap' (got {engine!r})")
-            writer.start(profile="ros2", library=library)
+            writer = Writer(fh, chunk_size=chunk_size, compression=COMPRESSIONS[compression])
+            writer.start(profile="ros2", library=f"fkn-bench/{__version__}; {MCAP_LIBRARY}")
             writer.add_metadata("fkn_bench.recording", recording_meta)
             for name, record in (metadata or {}).items():
                 writer.add_metadata(name, {str(k): str(v) for k, v in record.items()})
             schema_ids: dict[str, int] = {}
-            channel_ids: list[int] = []
-            for topic, schema, encoding, _, _ in streams:
-                if schema not in schema_ids:
-                    if encoding == "cdr":
-                        schema_ids[schema] = writer.register_schema(schema, "ros2msg", ros2_schema_text(schema).encode())
-                    else:
-                        schema_ids[schema] = writer.register_schema(schema, "jsonschema", FOXGLOVE_SCHEMAS[schema])
-                channel_ids.append(writer.register_channel(topic, encoding, schema_ids[schema]))
-            channel_of = np.array(channel_ids, dtype=np.int64)[stream_index[order]] if streams else np.empty(0, int)
-            stamp_of = all_stamps[order]
-            sequence_of = sequences[order]
-            ordered_payloads = [payloads[i] for i in order.tolist()]
-            if engine == "bulk":
-                writer.add_messages(channel_of, stamp_of, stamp_of, sequence_of, ordered_payloads)
-            else:
-                add = writer.add_message
-                for c, t, q, data in zip(channel_of.tolist(), stamp_of.tolist(), sequence_of.tolist(), ordered_payloads):
-                    add(c, log_time=t, data=data, publish_time=t, sequence=q)
+            for schema in dict.fromkeys(s[1] for s in streams):
+                if schema == _FOXGLOVE_POSE:
+                    schema_ids[schema] = writer.register_schema(schema, "jsonschema", FOXGLOVE_SCHEMAS[schema])
+                else:
+                    schema_ids[schema] = writer.register_schema(schema, "ros2msg", ros2_schema_text(schema).encode())
+            channels = [
+                writer.register_channel(topic, "json" if schema == _FOXGLOVE_POSE else "cdr", schema_ids[schema])
+                for topic, schema, _, _ in streams
+            ]
+            # messages in step order, streams in publishing order within a step; sequence = index in the stream
+            queue = sorted(
+                (step, i, q) for i, (_, _, rows, _) in enumerate(streams) for q, step in enumerate(rows.tolist())
+            )
+            stamp_of = stamps.tolist()
+            for step, i, q in queue:
+                stamp = stamp_of[step]
+                writer.add_message(channels[i], log_time=stamp, data=streams[i][3][q], publish_time=stamp, sequence=q)
             writer.finish()
         size = tmp.stat().st_size
-    for topic, _, _, st, _ in streams:
-        counts[topic] = len(st)
     return RecordingSummary(
         path=Path(path),
         n_steps=n,
-        message_counts=counts,
+        message_counts={topic: len(rows) for topic, _, rows, _ in streams},
         size_bytes=size,
         write_seconds=time.perf_counter() - started,
         topics=topics,
     )
 
 
-def _scenario_metadata(scenario: Any) -> dict[str, str]:
-    data = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
-    data["config_hash"] = scenario.config_hash()
-    return data
-
-
-def _estimator_metadata(estimator: Any) -> dict[str, str]:
+def episode_metadata(
+    episode: Mapping[str, str],
+    *,
+    scenario: Any = None,
+    estimator: Any = None,
+    extra: Mapping[str, Mapping[str, str]] | None = None,
+    provenance_extra: Mapping[str, Any] | None = None,
+) -> dict[str, Mapping[str, str]]:
+    """The metadata records of a recorded episode: ``fkn_bench.scenario`` (each field of a
+    :class:`~fkn_bench.scenarios.Scenario` JSON-encoded, plus ``config_hash``), ``fkn_bench.episode``,
+    ``fkn_bench.estimator`` (name, class, JSON config of an estimator; a mapping is taken as it
+    is), ``fkn_bench.provenance`` (:func:`provenance`), then ``extra``."""
+    metadata: dict[str, Mapping[str, str]] = {}
+    if scenario is not None:
+        metadata["fkn_bench.scenario"] = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
+        metadata["fkn_bench.scenario"]["config_hash"] = scenario.config_hash()
+    metadata["fkn_bench.episode"] = dict(episode)
     if isinstance(estimator, Mapping):
-        return {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in estimator.items()}
-    cls = type(estimator)
-    record = {"name": str(getattr(estimator, "name", cls.__name__)), "class": f"{cls.__module__}:{cls.__qualname__}"}
-    to_config = getattr(estimator, "to_config", None)
-    if callable(to_config):
-        from fkn_bench.io import to_jsonable
-
-        record["config"] = json.dumps(to_jsonable(to_config()))
-    return record
+        metadata["fkn_bench.estimator"] = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in estimator.items()}
+    elif estimator is not None:
+        cls = type(estimator)
+        record = {"name": str(getattr(estimator, "name", cls.__name__)), "class": f"{cls.__module__}:{cls.__qualname__}"}
+        if callable(getattr(estimator, "to_config", None)):
+            record["config"] = json.dumps(to_jsonable(estimator.to_config()))
+        metadata["fkn_bench.estimator"] = record
+    metadata["fkn_bench.provenance"] = provenance(provenance_extra)
+    metadata.update(extra or {})
+    return metadata
 
 
 def record_episode(
@@ -469,20 +445,16 @@ def record_episode(
             covariances = estimates.error_covariances[index]
         if estimates.initialised is not None:
             mask = estimates.initialised[index]
-    metadata: dict[str, Mapping[str, str]] = {
-        "fkn_bench.scenario": _scenario_metadata(episodes.scenario),
-        "fkn_bench.episode": {
-            "seed": str(episodes.seeds[index]),
-            "split": split or ("full" if episodes.start == 0 and episodes.n_steps == episodes.scenario.n_steps else "window"),
-            "start_step": str(episodes.start),
-            "n_steps": str(episodes.n_steps),
-            "dt": repr(episodes.scenario.dt),
-        },
+    episode = {
+        "seed": str(episodes.seeds[index]),
+        "split": split or ("full" if episodes.start == 0 and episodes.n_steps == episodes.scenario.n_steps else "window"),
+        "start_step": str(episodes.start),
+        "n_steps": str(episodes.n_steps),
+        "dt": repr(episodes.scenario.dt),
     }
-    if estimator is not None:
-        metadata["fkn_bench.estimator"] = _estimator_metadata(estimator)
-    metadata["fkn_bench.provenance"] = provenance(provenance_extra)
-    metadata.update(extra_metadata or {})
+    metadata = episode_metadata(
+        episode, scenario=episodes.scenario, estimator=estimator, extra=extra_metadata, provenance_extra=provenance_extra
+    )
     return write_recording(
         path,
         times=episodes.times,
@@ -495,62 +467,3 @@ def record_episode(
         metadata=metadata,
         **options,
     )
-
-
-def record(
-    path: str | Path,
-    *,
-    scenario: Any = "ds1",
-    estimator: Any = "manual-ekf",
-    seed: int = 0,
-    split: str = "full",
-    n_steps: int | None = None,
-    estimator_options: Mapping[str, Any] | None = None,
-    **options: Any,
-) -> RecordingSummary:
-    """Generate episode ``seed`` of ``scenario``, run ``estimator`` on it (batch) and record both.
-
-    Args:
-        path: output ``.mcap`` file.
-        scenario: registered name or :class:`~fkn_bench.scenarios.Scenario`.
-        estimator: registered name, an :class:`~fkn_bench.estimators.Estimator`, the path of a
-            saved estimator (``.json``), or None to record truth and measurements only.
-        seed: episode seed.
-        split: ``full`` (default), ``train``, ``val`` or ``test``.
-        n_steps: record only the first ``n_steps`` steps of the split.
-        estimator_options: keyword options for the estimator factory.
-        options: :func:`record_episode` / :func:`write_recording` options.
-
-    Returns:
-        The :class:`RecordingSummary`, with ``timings`` ``generate_seconds`` and
-        ``estimate_seconds`` added.
-    """
-    from fkn_bench.envs import generate_episodes
-    from fkn_bench.estimators import Estimator, load_estimator, make_estimator
-    from fkn_bench.scenarios import get_scenario
-
-    sc = get_scenario(scenario)
-    started = time.perf_counter()
-    episodes = generate_episodes(sc, [int(seed)], split=split)
-    if n_steps is not None:
-        if int(n_steps) < 1:
-            raise ValueError(f"n_steps must be >= 1 (got {n_steps})")
-        episodes = episodes.window(0, int(n_steps))
-    generated = time.perf_counter()
-    est_obj = None
-    estimates = None
-    if estimator is not None:
-        if isinstance(estimator, Estimator):
-            est_obj = estimator
-        elif isinstance(estimator, (str, Path)) and str(estimator).endswith(".json") and Path(estimator).is_file():
-            est_obj = load_estimator(estimator)
-        else:
-            est_obj = make_estimator(str(estimator), scenario=sc, **dict(estimator_options or {}))
-        estimates = est_obj.estimate(episodes.measurements, episodes.valid, sc.dt)
-    estimated = time.perf_counter()
-    split_label = split if n_steps is None else f"{split}[:{int(n_steps)}]"
-    summary = record_episode(path, episodes, estimates, estimator=est_obj, split=split_label, **options)
-    summary.timings.update(
-        {"generate_seconds": generated - started, "estimate_seconds": estimated - generated}
-    )
-    return summary

@@ -60,7 +60,7 @@ def artifact_label(path: str | Path) -> str:
 
 def run_provenance() -> dict[str, Any]:
     """Versions, git commit, machine, command line and UTC time of this process."""
-    from fkn_bench.harness.provenance import environment
+    from fkn_bench.provenance import environment
 
     return {
         **environment(),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,8 +15,8 @@ from mcap.writer import CompressionType, Writer
 from fkn_bench.envs import Episodes, generate_episodes
 from fkn_bench.estimators import Estimates, make_estimator
 from fkn_bench.geometry import quaternion as quat
-from fkn_bench.recordings.codecs import encode_pose_in_frame, encode_stamped
-from fkn_bench.recordings.schemas import FOXGLOVE_SCHEMAS, ros1_schema_text, ros2_schema_text
+from fkn_bench.recordings.codecs import encode_pose_in_frame, encode_ros2
+from fkn_bench.recordings.schemas import FOXGLOVE_SCHEMAS, SEPARATOR, ros2_schema_text
 from fkn_bench.scenarios import get_scenario
 
 SHORT_STEPS = 300
@@ -140,13 +141,35 @@ def twist_channel(
     return _ros_channel(topic, "geometry_msgs/TwistStamped", encoding, stamps_ns, log_ns, values, frame_id, "")
 
 
+def ros1_schema_text(name: str) -> str:
+    """The ``ros1msg`` definition of ``name`` (fkn-bench writes only ROS 2): the ROS 2 one with
+    ROS 1's ``std_msgs/Header`` (``uint32 seq``, builtin ``time``) and no ``builtin_interfaces``."""
+    sections = ros2_schema_text(name).split(SEPARATOR + "\n")
+    text = (SEPARATOR + "\n").join(s for s in sections if not s.startswith("MSG: builtin_interfaces/Time"))
+    return text.replace("builtin_interfaces/Time stamp\n", "uint32 seq\ntime stamp\n")
+
+
+def ros1_message(seq: int, stamp: int, frame: str, child: str | None, values: Sequence[float]) -> bytes:
+    """ROS 1 wire format written field by field (fkn-bench reads ROS 1 but writes only ROS 2):
+    uint32 seq, time (uint32 secs, nsecs), string (uint32 length + bytes), then float64 fields,
+    little-endian and unaligned; ``child`` is Odometry's child_frame_id (None for other types)."""
+    sec, nsec = divmod(stamp, 10**9)
+    out = struct.pack("<III", seq, sec, nsec) + struct.pack("<I", len(frame)) + frame.encode()
+    if child is not None:
+        out += struct.pack("<I", len(child)) + child.encode()
+    return out + struct.pack(f"<{len(values)}d", *values)
+
+
 def _ros_channel(topic, type_name, encoding, stamps_ns, log_ns, values, frame_id, child) -> ChannelSpec:
     package, _, name = type_name.replace("/msg/", "/").partition("/")
     if encoding == "cdr":
         schema_name, schema_encoding, text = f"{package}/msg/{name}", "ros2msg", ros2_schema_text(type_name)
+        data = encode_ros2(type_name, stamps_ns, values, frame_id, child_frame_id=child)
     else:
         schema_name, schema_encoding, text = f"{package}/{name}", "ros1msg", ros1_schema_text(type_name)
-    data = encode_stamped(type_name, encoding, stamps_ns, values, frame_id, child_frame_id=child)
+        odometry = name == "Odometry"
+        data = [ros1_message(i, s, frame_id, child if odometry else None, v)
+                for i, (s, v) in enumerate(zip(stamps_ns.tolist(), np.asarray(values, float).tolist()))]
     return ChannelSpec(topic, schema_name, schema_encoding, text.encode(), encoding, list(zip(log_ns.tolist(), data)))
 
 
@@ -195,6 +218,8 @@ def tools() -> Any:
         write_mcap=write_mcap,
         pose_channel=pose_channel,
         twist_channel=twist_channel,
+        ros1_message=ros1_message,
+        ros1_schema_text=ros1_schema_text,
         pose_values=pose_values,
         forced_rotation=forced_rotation,
         EPOCH_NS=EPOCH_NS,

@@ -15,7 +15,6 @@ from fkn_bench.recordings import (
     DEFAULT_START_EPOCH_NS,
     RecordingTopics,
     read_metadata,
-    record,
     record_episode,
     ros_pose_covariance,
     write_recording,
@@ -224,12 +223,28 @@ def test_write_recording_input_checks(tmp_path) -> None:
     assert not (tmp_path / "a.mcap").exists()
 
 
-def test_record_generates_estimates_and_windows(tmp_path) -> None:
-    summary = record(tmp_path / "r.mcap", scenario="ds1", estimator="manual-ekf", seed=1, n_steps=120)
-    assert summary.n_steps == 120
-    assert summary.message_counts["/fkn_bench/measured_pose"] == 12
-    assert {"generate_seconds", "estimate_seconds"} <= set(summary.timings)
-    assert read_metadata(summary.path)["fkn_bench.episode"]["split"] == "full[:120]"
-    none = record(tmp_path / "n.mcap", estimator=None, n_steps=50)
-    assert "/loc/pose" not in none.message_counts
-    assert "fkn_bench.estimator" not in read_metadata(none.path)
+def test_chunking_and_compression_change_no_message(tmp_path, short_episode) -> None:
+    """The same messages (topic, times, sequence, bytes) whatever the chunk size and compression;
+    chunk CRCs validate and the statistics count every message."""
+    episodes, estimates, _ = short_episode
+    options = dict(
+        times=episodes.times,
+        truth=episodes.truth[0],
+        measurements=episodes.measurements[0],
+        valid=episodes.valid[0],
+        estimates=estimates.means[0],
+        estimate_error_covariances=estimates.error_covariances[0],
+        estimate_mask=estimates.initialised[0],
+        metadata={"fkn_bench.episode": {"seed": "3"}},
+    )
+    contents = []
+    for compression, chunk_size in [("zstd", 1), ("lz4", 20_000), ("none", 4 << 20)]:
+        path = tmp_path / f"{compression}.mcap"
+        summary = write_recording(path, compression=compression, chunk_size=chunk_size, **options)
+        with open(path, "rb") as fh:
+            reader = make_reader(fh, validate_crcs=True)
+            assert reader.get_summary().statistics.message_count == summary.message_count
+            contents.append(
+                [(c.topic, m.log_time, m.publish_time, m.sequence, m.data) for _, c, m in reader.iter_messages(log_time_order=False)]
+            )
+    assert contents[0] == contents[1] == contents[2]

@@ -1,7 +1,8 @@
 """Provenance of results: package version, git commit, library versions and machine.
 
-Recorded in every cell's JSON and in each results directory, so a number can always be traced to
-the code and machine that produced it.
+Recorded in every cell's JSON, each results directory, trained artefacts and MCAP recordings, so a
+number can always be traced to the code and machine that produced it. A ground-floor module: it
+imports nothing of fkn-bench but the package version.
 """
 
 from __future__ import annotations
