@@ -21,7 +21,7 @@ from fkn_bench.flexkalmannet import (
     load_checkpoint,
     train_flexkalmannet,
 )
-from fkn_bench.flexkalmannet.checkpoint import save_checkpoint
+from fkn_bench.training.checkpoint import CHECKPOINT_FORMAT, save_checkpoint
 from fkn_bench.scenarios import get_scenario
 from fkn_bench.training.artifacts import ArtifactError, read_artifact
 
@@ -105,10 +105,10 @@ def test_corrupt_and_foreign_checkpoints_are_refused(trained, tmp_path: Path) ->
         load_checkpoint(tmp_path / "missing.pt")
     foreign = tmp_path / "foreign.pt"
     torch.save({"weights": torch.zeros(3)}, foreign)
-    with pytest.raises(CheckpointError, match="not a FlexKalmanNet checkpoint"):
+    with pytest.raises(CheckpointError, match="not an fkn-bench checkpoint"):
         load_checkpoint(foreign)
     future = tmp_path / "future.pt"
-    torch.save({"format": "fkn-bench-flexkalmannet", "format_version": 99}, future)
+    torch.save({"format": CHECKPOINT_FORMAT, "format_version": 99}, future)
     with pytest.raises(CheckpointError, match="version 99"):
         load_checkpoint(future)
     document = load_checkpoint(trained.checkpoint)
