@@ -173,11 +173,9 @@ class TrainedKalmanEstimator(KalmanEstimator):
     def from_config(cls, config: Mapping[str, Any]) -> TrainedKalmanEstimator:
         config = dict(config)
         metadata = config.pop("metadata", None)
-        known = {"variant", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "name", "description"}
-        unknown = sorted(set(config) - known)
-        if unknown:
-            raise ValueError(f"unknown {cls.__name__} config keys {unknown}; valid: {sorted(known | {'metadata'})}")
-        return cls(metadata=metadata, **config)
+        estimator = super().from_config(config)
+        estimator.metadata = dict(metadata or {})
+        return estimator  # type: ignore[return-value]
 
 
 def artifact_factory(name: str, cls: type[TrainedKalmanEstimator] = TrainedKalmanEstimator) -> Callable[..., Any]:

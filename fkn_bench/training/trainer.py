@@ -3,15 +3,15 @@
 :class:`NoiseModel` is the interface: ``window_raw(sequences)`` gives the unconstrained parameter
 vector(s) for a batch of sequences (``(B, size)`` constant per sequence, or ``(B, T, size)``
 time-varying) and ``deployed_raw()`` the constant vector used after training. FlexKalmanNet's
-network and the directly tuned EKF both implement it, so they share this loop: Adam (or
-full-batch L-BFGS), ``ReduceLROnPlateau`` on the validation loss, early stopping after
-``patience`` epochs without improvement, fixed seeds, the best epoch's weights restored at the end.
+network and the directly tuned EKF (:class:`DirectParameters`) both implement it, so they share
+this loop: Adam (or full-batch L-BFGS), ``ReduceLROnPlateau`` on the validation loss, early
+stopping after ``patience`` epochs without improvement, fixed seeds, the best epoch's weights
+restored at the end.
 
 With Adam one epoch is one pass over the training windows in shuffled batches; each batch runs
 through the filter variant (any of ekf, ukf, mekf) in parallel and takes one optimiser step. With
 L-BFGS one epoch is one ``torch.optim.LBFGS`` step (up to ``lbfgs_iterations`` iterations,
-strong-Wolfe line search) on all training windows at once. Validation runs
-the variant with the deployed parameters over the whole val split and reports the 13-state RMSE
+strong-Wolfe line search) on all training windows at once. Validation runs the variant with the deployed parameters over the whole val split and reports the 13-state RMSE
 (supervised objective) or the innovation NLL (``nll``, which uses no ground truth for model
 selection; the RMSE is logged as a diagnostic only).
 """
@@ -34,7 +34,7 @@ from fkn_bench.runtime import torch_threads
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
 
-__all__ = ["NoiseModel", "TrainConfig", "Trainer", "EpochRecord", "OnEpoch"]
+__all__ = ["NoiseModel", "DirectParameters", "TrainConfig", "Trainer", "EpochRecord", "OnEpoch"]
 
 
 class NoiseModel(nn.Module, ABC):
@@ -49,6 +49,35 @@ class NoiseModel(nn.Module, ABC):
     @abstractmethod
     def deployed_raw(self) -> Tensor:
         """The constant unconstrained parameters ``(size,)`` used after training."""
+
+
+class DirectParameters(NoiseModel):
+    """A learnable unconstrained parameter vector, the same for every sequence: the noise
+    parameters themselves are the trainable variables, optimised through the differentiable
+    filter (X. Xu and R. Niu (2021), "EKFNet: learning system noise statistics from measurement
+    data", ICASSP). With the supervised objective this gives the best constant-parameter filter
+    on the training data; with the innovation NLL it is maximum-likelihood noise identification
+    without ground truth.
+
+    Args:
+        parameter_set: which parameters are learned, and their positivity map.
+        initial_std: starting standard deviations by entry (default: the set's fixed values,
+            i.e. the paper's manual tuning).
+    """
+
+    def __init__(self, parameter_set: ParameterSet, **initial_std: list[float]) -> None:
+        super().__init__()
+        self.parameter_set = parameter_set
+        self.raw = nn.Parameter(parameter_set.initial_values(**initial_std))
+
+    def window_raw(self, sequences: Sequences) -> Tensor:
+        return self.raw.expand(sequences.batch_size, -1)
+
+    def deployed_raw(self) -> Tensor:
+        return self.raw
+
+    def extra_repr(self) -> str:
+        return f"size={self.parameter_set.size}"
 
 
 @dataclass
