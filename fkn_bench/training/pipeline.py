@@ -205,7 +205,9 @@ def fit(
     if directory is not None:
         directory.mkdir(parents=True, exist_ok=True)
     if resume:
-        document = load_checkpoint(checkpoint or "checkpoint.pt")
+        if checkpoint is None:
+            raise ValueError("resume=True needs out=DIR (the directory of the checkpoint to resume)")
+        document = load_checkpoint(checkpoint)
         if document["estimator"] != estimator or document["config"] != config.to_dict():
             raise CheckpointError(f"cannot resume {checkpoint}: it was trained with another estimator or a different config")
         if document["scenario"] != scenario.to_dict():
@@ -238,9 +240,9 @@ def fit(
         estimator, model, config, scenario, history, trainer.best_epoch, trainer.best_loss, directory, {},
         0.0, deployed_estimator_config(model, settings.variant),
     )
+    outcome.seconds = time.perf_counter() - began
     if directory is not None:
         _write_outputs(outcome, declared, trainer, data, plots, began)
-    outcome.seconds = time.perf_counter() - began
     return outcome
 
 
@@ -248,12 +250,11 @@ def _write_outputs(outcome: TrainingOutcome, declared: Trainable, trainer: Train
                    began: float) -> None:
     from fkn_bench.training.plots import plot_losses, plot_parameters
 
-    history, name, scenario, out = outcome.history, outcome.estimator, outcome.scenario, Path(outcome.out or ".")
-    settings = trainer.config
+    history, name, scenario, out, settings = outcome.history, outcome.estimator, outcome.scenario, Path(outcome.out or "."), trainer.config
     with atomic_path(out / "history.csv") as tmp:
         history.to_csv(tmp, index=False)
     if plots and len(history):
-        label = "innovation NLL" if trainer.config.objective == "nll" else "13-state RMSE"
+        label = "innovation NLL" if settings.objective == "nll" else "13-state RMSE"
         plot_losses(history, out / "loss.png", title=f"{name} on {scenario.name} ({label})", best_epoch=trainer.best_epoch)
         plot_parameters(history, out / "parameters.png", title=f"{name}: learned standard deviations ({scenario.name})")
     outcome.test = split_metrics(outcome.model, settings, scenario)
