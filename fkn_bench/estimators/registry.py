@@ -15,7 +15,10 @@ Register your own estimator in one of two ways:
 
 A factory is called as ``factory(scenario=scenario, **options)`` where ``scenario`` is the
 :class:`~fkn_bench.scenarios.Scenario` being evaluated (estimators that do not need it ignore
-it) and returns an :class:`~fkn_bench.estimators.base.Estimator`.
+it) and returns an :class:`~fkn_bench.estimators.base.Estimator`. An estimator that can be
+trained also passes ``trainable=`` (a :class:`~fkn_bench.training.Trainable`: how to read its
+training options and which module to train); ``fkn-bench train`` and ``fkn-bench sweep`` then
+train it through :func:`fkn_bench.training.fit`.
 """
 
 from __future__ import annotations
