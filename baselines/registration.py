@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from fkn_bench.baselines.tuned import tuned_factory, tuned_trainable
 from fkn_bench.estimators.registry import register_estimator
 from fkn_bench.scenarios import Scenario
 
@@ -22,24 +23,6 @@ def _adaptive(module: str, cls: str) -> Any:
         return getattr(importlib.import_module(module), cls)(**options)
 
     return factory
-
-
-def _tuned(name: str) -> Any:
-    def factory(scenario: Scenario | None = None, **options: Any) -> Any:
-        from fkn_bench.baselines.tuned import tuned_factory
-
-        return tuned_factory(name)(scenario, **options)
-
-    return factory
-
-
-def _train(name: str) -> Any:
-    def train(scenario: Scenario, **kwargs: Any) -> dict[str, Any]:
-        from fkn_bench.baselines.tuned import train_for_cli
-
-        return train_for_cli(name)(scenario, **kwargs)
-
-    return train
 
 
 register_estimator(
@@ -59,13 +42,13 @@ register_estimator(
 )
 register_estimator(
     "nll-tuned-ekf",
-    _tuned("nll-tuned-ekf"),
+    tuned_factory("nll-tuned-ekf"),
     description="EKF with its 20 noise standard deviations fitted by innovation maximum likelihood (no ground truth)",
-    train=_train("nll-tuned-ekf"),
+    trainable=tuned_trainable("nll-tuned-ekf"),
 )
 register_estimator(
     "direct-tuned-ekf",
-    _tuned("direct-tuned-ekf"),
+    tuned_factory("direct-tuned-ekf"),
     description="EKF with its 20 noise standard deviations fitted to the truth through the filter (EKFNet-style)",
-    train=_train("direct-tuned-ekf"),
+    trainable=tuned_trainable("direct-tuned-ekf"),
 )

@@ -66,18 +66,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.cli import UsageError
-    from fkn_bench.estimators import UnknownEstimatorError, estimator_spec, estimator_specs
+    from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.scenarios import get_scenario
-    from fkn_bench.sweep import (
-        SearchSpace,
-        SpaceError,
-        SweepError,
-        SweepSettings,
-        load_space,
-        resolve_space,
-        run_sweep,
-        trial_config,
-    )
+    from fkn_bench.sweep import SearchSpace, SpaceError, SweepError, SweepSettings, load_space, resolve_space, run_sweep
+    from fkn_bench.sweep import trial_config
+    from fkn_bench.training import trainable
 
     load_scenario_files(args)
     try:
@@ -86,26 +79,14 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from None
     defaults = space.defaults
     estimator = args.estimator or defaults.get("estimator", "flexkalmannet")
-    try:
-        spec = estimator_spec(estimator)
-    except UnknownEstimatorError as exc:
-        raise UsageError(str(exc)) from None
-    if spec.train is None:
-        trainable = ", ".join(s.name for s in estimator_specs() if s.trainable)
-        raise UsageError(f"estimator {estimator!r} is not trainable; trainable estimators: {trainable}")
     scenario = get_scenario(args.scenario or defaults.get("scenario", "ds1"))
     sampler = args.sampler or defaults.get("sampler", "random-grid")
     try:
-        if estimator == "flexkalmannet":
-            import dataclasses
-
-            from fkn_bench.flexkalmannet import FlexKalmanNetConfig
-
-            space.check_fields([f.name for f in dataclasses.fields(FlexKalmanNetConfig)], "FlexKalmanNetConfig")
-            trial_config(space, {})  # the fixed values on their own must be valid
+        space.check_fields(trainable(estimator).config({}).to_dict(), f"{estimator} training config")
+        trial_config(estimator, space, {})  # the fixed values on their own must be valid
         if sampler == "grid":
             space.grid()
-    except (SpaceError, ValueError, TypeError) as exc:
+    except (UnknownEstimatorError, SpaceError, ValueError, TypeError) as exc:
         raise UsageError(str(exc)) from None
     trials = args.trials if args.trials is not None else defaults.get("trials", 20)
     study_name = args.study_name or f"{estimator}-{scenario.name}"

@@ -1,4 +1,5 @@
-"""``fkn-bench train``: fit a trainable estimator (FlexKalmanNet, the tuned baselines) to a scenario.
+"""``fkn-bench train``: fit a trainable estimator (FlexKalmanNet, the tuned baselines, any registered
+with a ``Trainable`` declaration) to a scenario.
 
 Writes a checkpoint, the training history (CSV), the two training figures (PNG) and the learned
 parameters (JSON) into ``--out`` (default ``runs/<estimator>-<scenario>``); ``--write-artifact``
@@ -22,7 +23,7 @@ __all__ = ["add_parser", "parse_options"]
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
-        "train", help="train FlexKalmanNet or a tuned baseline", description=__doc__,
+        "train", help="train a trainable estimator (FlexKalmanNet, the tuned baselines)", description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--estimator", default="flexkalmannet", help="trainable estimator (default: flexkalmannet)")
@@ -57,23 +58,18 @@ def parse_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fkn_bench.estimators import UnknownEstimatorError, estimator_spec, estimator_specs
+    from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.scenarios import get_scenario
+    from fkn_bench.training import fit
 
     load_scenario_files(args)
     scenario = get_scenario(args.scenario)
-    try:
-        spec = estimator_spec(args.estimator)
-    except UnknownEstimatorError as exc:
-        raise UsageError(str(exc)) from None
-    if spec.train is None:
-        trainable = ", ".join(s.name for s in estimator_specs() if s.trainable)
-        raise UsageError(f"estimator {args.estimator!r} is not trainable; trainable estimators: {trainable}")
     out = args.out if args.out is not None else Path("runs") / f"{args.estimator}-{scenario.name}"
     try:
-        summary = spec.train(scenario, out=out, options=parse_options(args), resume=args.resume, progress=not args.no_progress)
-    except (ValueError, TypeError) as exc:
+        outcome = fit(args.estimator, scenario, parse_options(args), out=out, resume=args.resume, progress=not args.no_progress)
+    except (UnknownEstimatorError, ValueError, TypeError) as exc:
         raise UsageError(str(exc)) from None
+    summary = outcome.summary()
     if args.write_artifact:
         from fkn_bench.io import write_bytes_atomic
         from fkn_bench.training.artifacts import artifact_path

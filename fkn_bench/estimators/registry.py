@@ -15,7 +15,10 @@ Register your own estimator in one of two ways:
 
 A factory is called as ``factory(scenario=scenario, **options)`` where ``scenario`` is the
 :class:`~fkn_bench.scenarios.Scenario` being evaluated (estimators that do not need it ignore
-it) and returns an :class:`~fkn_bench.estimators.base.Estimator`.
+it) and returns an :class:`~fkn_bench.estimators.base.Estimator`. An estimator that can be
+trained also passes ``trainable=`` (a :class:`~fkn_bench.training.Trainable`: how to read its
+training options and which module to train); ``fkn-bench train`` and ``fkn-bench sweep`` then
+train it through :func:`fkn_bench.training.fit`.
 """
 
 from __future__ import annotations
@@ -61,18 +64,14 @@ class UnknownEstimatorError(KeyError):
 
 @dataclass(frozen=True)
 class EstimatorSpec:
-    """A registered estimator: its name, factory, one-line description, and for estimators
-    that ``fkn-bench train`` can fit, the training function
-    ``train(scenario, *, out, options, resume, progress) -> summary dict``."""
+    """A registered estimator: its name, factory, one-line description, and for estimators that
+    ``fkn-bench train`` and ``fkn-bench sweep`` can fit, their
+    :class:`~fkn_bench.training.Trainable` declaration (None: not trainable)."""
 
     name: str
     factory: EstimatorFactory
     description: str = ""
-    train: Callable[..., dict[str, Any]] | None = None
-
-    @property
-    def trainable(self) -> bool:
-        return self.train is not None
+    trainable: Any = None
 
 
 _REGISTRY: dict[str, EstimatorSpec] = {}
@@ -84,20 +83,19 @@ def register_estimator(
     factory: EstimatorFactory,
     *,
     description: str = "",
-    train: Callable[..., dict[str, Any]] | None = None,
+    trainable: Any = None,
     overwrite: bool = False,
 ) -> EstimatorSpec:
-    """Register ``factory`` under ``name`` (see module docstring) and return its spec; ``train``
-    makes it trainable by ``fkn-bench train``."""
+    """Register ``factory`` under ``name`` (see module docstring) and return its spec; a
+    :class:`~fkn_bench.training.Trainable` ``trainable`` makes it trainable by
+    :func:`fkn_bench.training.fit` (``fkn-bench train``, ``fkn-bench sweep``)."""
     if not isinstance(name, str) or not name or any(c.isspace() for c in name):
         raise ValueError(f"estimator name must be a non-empty string without spaces (got {name!r})")
     if not callable(factory):
         raise TypeError(f"factory for estimator {name!r} must be callable")
     if name in _REGISTRY and not overwrite:
         raise ValueError(f"estimator {name!r} is already registered (pass overwrite=True to replace it)")
-    if train is not None and not callable(train):
-        raise TypeError(f"train function for estimator {name!r} must be callable")
-    spec = EstimatorSpec(name, factory, description, train)
+    spec = EstimatorSpec(name, factory, description, trainable)
     _REGISTRY[name] = spec
     return spec
 

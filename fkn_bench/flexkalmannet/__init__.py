@@ -1,11 +1,12 @@
 """FlexKalmanNet: a fully connected network that learns Kalman-filter parameters, trained through
 the filter recursion (Pinheiro-Torres Vogt, Huwald, Ben-Larbi & Stoll)."""
 
-from fkn_bench.flexkalmannet.checkpoint import CheckpointError, build_model, load_checkpoint, model_from_checkpoint
+from fkn_bench.flexkalmannet.checkpoint import build_model, model_from_checkpoint
 from fkn_bench.flexkalmannet.config import DEVIATIONS, PAPER_TABLE, FlexKalmanNetConfig
 from fkn_bench.flexkalmannet.estimator import AdaptiveFlexKalmanNetEstimator, FlexKalmanNetEstimator
 from fkn_bench.flexkalmannet.network import FlexKalmanNet, FlexKalmanNetwork
-from fkn_bench.flexkalmannet.train import TrainingOutcome, train_flexkalmannet
+from fkn_bench.flexkalmannet.train import train_flexkalmannet
+from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint
 
 __all__ = [
     "DEVIATIONS",
@@ -16,7 +17,6 @@ __all__ = [
     "FlexKalmanNetConfig",
     "FlexKalmanNetEstimator",
     "FlexKalmanNetwork",
-    "TrainingOutcome",
     "build_model",
     "load_checkpoint",
     "model_from_checkpoint",

@@ -20,7 +20,8 @@ from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
 from fkn_bench.flexkalmannet.reference import sequential_reference_epoch
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario, get_scenario
-from fkn_bench.training import Trainer, TrainingData
+from fkn_bench.training import Trainer
+from fkn_bench.training.data import training_data
 
 __all__ = ["TrainingSpeed", "measure_training_speed"]
 
@@ -57,13 +58,7 @@ def measure_training_speed(
     and the median of ``trainer_epochs`` trainer epochs."""
     scenario = get_scenario(scenario)
     config = config if config is not None else FlexKalmanNetConfig()
-    data = TrainingData(
-        scenario,
-        window=config.window,
-        stride=config.stride,
-        train_measurement_every=config.train_measurement_every,
-        episodes=config.episodes,
-    )
+    data = training_data(scenario, config)
     fresh = build_model(config, data)
     with torch_threads(config.threads):
         trainer = Trainer(copy.deepcopy(fresh), make_filter(config.variant), data, config.train_config())

@@ -1,23 +1,11 @@
-"""FlexKalmanNet checkpoints: build the model from a config, save and load it safely.
-
-A checkpoint is a ``torch.save`` dictionary of plain types and tensors (never a pickled module),
-read back with ``torch.load(weights_only=True)``:
-
-``format``, ``format_version``, ``config`` (:class:`FlexKalmanNetConfig` as a dict), ``scenario``
-(the training scenario's fields), ``data`` (window/normalisation description), ``state_dict``
-(network weights, normalisation statistics, reference measurements), ``trainer`` (optimiser,
-scheduler, RNG and history, to resume), ``deployed`` (the learned parameter values with labels
-and units), ``best_epoch``, ``provenance``.
-
-Files are written atomically. Loading refuses a missing, truncated or corrupt file, a file of
-another format or version, and a state dict that does not fit the config, each with a message
-that names the file and the problem.
+"""FlexKalmanNet's model: built fresh from a config for training, or rebuilt from a training
+checkpoint (:mod:`fkn_bench.training.checkpoint`, whose ``state_dict`` holds the network weights,
+normalisation statistics and reference measurements). A state dict that does not fit the
+checkpoint's config is refused with a message that names the file.
 """
 
 from __future__ import annotations
 
-import pickle
-import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -26,29 +14,14 @@ import torch
 from fkn_bench.filters import ParameterSet, make_filter
 from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
 from fkn_bench.flexkalmannet.network import FlexKalmanNet, FlexKalmanNetwork
-from fkn_bench.io import atomic_path
 from fkn_bench.scenarios import Scenario
 from fkn_bench.training import TrainingData
+from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint
 
-__all__ = [
-    "CHECKPOINT_FORMAT",
-    "CHECKPOINT_FORMAT_VERSION",
-    "CheckpointError",
-    "build_model",
-    "save_checkpoint",
-    "load_checkpoint",
-    "model_from_checkpoint",
-    "REFERENCE_SAMPLES",
-]
+__all__ = ["build_model", "model_from_checkpoint", "REFERENCE_SAMPLES"]
 
-CHECKPOINT_FORMAT = "fkn-bench-flexkalmannet"
-CHECKPOINT_FORMAT_VERSION = 1
 REFERENCE_SAMPLES = 2048
 """Training measurements (a fixed random subset) over which deployed parameters are averaged."""
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be used (missing, corrupt, wrong format/version, mismatched)."""
 
 
 def _model_skeleton(config: FlexKalmanNetConfig, reference: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> FlexKalmanNet:
@@ -92,39 +65,11 @@ def build_model(config: FlexKalmanNetConfig, data: TrainingData) -> FlexKalmanNe
     return _model_skeleton(config, measurements, data.position_mean, data.position_std)
 
 
-def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
-    """Write ``payload`` (see module docstring; format keys are added) atomically."""
-    document = {"format": CHECKPOINT_FORMAT, "format_version": CHECKPOINT_FORMAT_VERSION, **payload}
-    with atomic_path(path, suffix=".pt") as tmp:
-        torch.save(document, tmp)
-    return Path(path)
-
-
-def load_checkpoint(path: str | Path) -> dict[str, Any]:
-    """Read and check a checkpoint file; raises :class:`CheckpointError`."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"checkpoint not found: {path}")
-    try:
-        document = torch.load(path, map_location="cpu", weights_only=True)
-    except (RuntimeError, EOFError, OSError, pickle.UnpicklingError, zipfile.BadZipFile, ValueError) as exc:
-        raise CheckpointError(f"{path} is not a readable checkpoint (truncated or corrupt?): {exc}") from None
-    if not isinstance(document, dict) or document.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"{path} is not a FlexKalmanNet checkpoint (format '{CHECKPOINT_FORMAT}' expected)")
-    version = document.get("format_version")
-    if version != CHECKPOINT_FORMAT_VERSION:
-        raise CheckpointError(
-            f"{path} has checkpoint format version {version!r}; this fkn-bench reads version {CHECKPOINT_FORMAT_VERSION}"
-        )
-    for key in ("config", "scenario", "state_dict"):
-        if key not in document:
-            raise CheckpointError(f"{path} lacks '{key}'")
-    return document
-
-
 def model_from_checkpoint(path: str | Path) -> tuple[FlexKalmanNet, FlexKalmanNetConfig, Scenario, dict[str, Any]]:
     """Rebuild the trained model of a checkpoint: ``(model, config, scenario, document)``."""
     document = load_checkpoint(path)
+    if document["estimator"] != "flexkalmannet":
+        raise CheckpointError(f"{path} is a checkpoint of {document['estimator']!r}, not of flexkalmannet")
     try:
         config = FlexKalmanNetConfig.from_dict(document["config"])
         scenario = Scenario.from_dict(document["scenario"])

@@ -10,7 +10,6 @@ record the commands).
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +19,8 @@ import torch
 
 from fkn_bench.filters import VARIANTS
 from fkn_bench.filters.parameters import LEARNABLE_ENTRIES
-from fkn_bench.training import OBJECTIVES, TrainConfig
+from fkn_bench.training import TrainConfig
+from fkn_bench.training.pipeline import options_with_file
 
 __all__ = ["FlexKalmanNetConfig", "DEVIATIONS", "PAPER_TABLE"]
 
@@ -92,6 +92,8 @@ class FlexKalmanNetConfig:
     Optimisation: ``objective``, ``epochs``, ``patience``, ``lr``, ``weight_decay``,
     ``windows_per_batch``, ``loss_cut``, ``seed``, ``scheduler_factor``,
     ``scheduler_patience``, ``max_grad_norm``, ``threads``.
+    The data protocol's defaults are :class:`~fkn_bench.training.TrainConfig`'s (the benchmark's,
+    shared with the tuned baselines).
     """
 
     variant: str = "ekf"
@@ -106,18 +108,18 @@ class FlexKalmanNetConfig:
     mode: str = "constant"
     samples_per_window: int | None = 16
     history: int = 50
-    window: int = 800
+    window: int = TrainConfig.window
     stride: int | None = None
-    train_measurement_every: int | None = 10
-    episodes: int = 4
+    train_measurement_every: int | None = TrainConfig.train_measurement_every
+    episodes: int = TrainConfig.episodes
     objective: str = "supervised"
     epochs: int = 100
     patience: int = 20
     min_improvement: float = 1e-4
     lr: float = 5e-4
     weight_decay: float = 0.0
-    windows_per_batch: int = 64
-    loss_cut: int = 100
+    windows_per_batch: int = TrainConfig.windows_per_batch
+    loss_cut: int = TrainConfig.loss_cut
     seed: int = 0
     scheduler_factor: float = 0.5
     scheduler_patience: int = 8
@@ -125,14 +127,14 @@ class FlexKalmanNetConfig:
     threads: int = 1
 
     def __post_init__(self) -> None:
+        if isinstance(self.learn, str):  # "q_std,r_std" (a sweep's categorical value)
+            self.learn = tuple(part.strip() for part in self.learn.split(",") if part.strip())
         self.learn = tuple(self.learn)
         if self.variant not in VARIANTS:
             raise ValueError(f"variant must be one of {list(VARIANTS)} (got {self.variant!r})")
         bad = [e for e in self.learn if e not in LEARNABLE_ENTRIES]
         if bad:
             raise ValueError(f"learn: unknown entries {bad}; valid: {list(LEARNABLE_ENTRIES)}")
-        if self.objective not in OBJECTIVES:
-            raise ValueError(f"objective must be one of {OBJECTIVES} (got {self.objective!r})")
         if self.mode not in ("constant", "time_varying"):
             raise ValueError(f"mode must be 'constant' or 'time_varying' (got {self.mode!r})")
         if self.network_dtype not in ("float32", "float64"):
@@ -167,16 +169,12 @@ class FlexKalmanNetConfig:
     @classmethod
     def from_toml(cls, path: str | Path) -> FlexKalmanNetConfig:
         """Read a TOML file whose top level (or ``[flexkalmannet]`` table) holds config keys."""
-        path = Path(path)
-        try:
-            with path.open("rb") as fh:
-                document = tomllib.load(fh)
-        except FileNotFoundError:
-            raise ValueError(f"config file not found: {path}") from None
-        except tomllib.TOMLDecodeError as exc:
-            raise ValueError(f"config file {path} is not valid TOML: {exc}") from None
-        table = document.get("flexkalmannet", document)
-        return cls.from_dict(table)
+        return cls.from_options({"config": str(path)})
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, Any]) -> FlexKalmanNetConfig:
+        """The defaults, then the TOML file named by option ``config``, then the other options."""
+        return cls.from_dict(options_with_file(options, "flexkalmannet"))
 
     def replace(self, **changes: Any) -> FlexKalmanNetConfig:
         return dataclasses.replace(self, **changes)

@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -20,72 +19,32 @@ import numpy as np
 import torch
 
 from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, parse_observation
-from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
+from fkn_bench.estimators.kalman import filter_result_to_estimates
 from fkn_bench.filters import FilterState, make_filter
 from fkn_bench.filters import online_ekf
 from fkn_bench.filters.pose import with_unit_quaternion
 from fkn_bench.flexkalmannet.checkpoint import model_from_checkpoint
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
-from fkn_bench.training.artifacts import ArtifactError, artifact_label, artifact_path, read_artifact
+from fkn_bench.training.artifacts import TrainedKalmanEstimator, artifact_factory, deployed_estimator_config
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["FlexKalmanNetEstimator", "AdaptiveFlexKalmanNetEstimator", "flexkalmannet_factory", "deployed_estimator_config"]
 
 
-def deployed_estimator_config(model: Any, variant: str) -> dict[str, Any]:
-    """KalmanEstimator config (variant and noise matrices or stds) of a trained model's deployed
-    parameters."""
-    with torch.no_grad():
-        noise = model.parameter_set.to_noise(model.deployed_raw())
-    config: dict[str, Any] = {"variant": variant}
-    for entry, matrix in (("q", noise.process), ("r", noise.measurement), ("p0", noise.initial)):
-        m = matrix.detach().to(torch.float64).numpy()
-        if np.count_nonzero(m - np.diag(np.diag(m))) == 0:
-            config[f"{entry}_std"] = np.sqrt(np.diag(m)).tolist()
-        else:
-            config[f"{entry}_cov"] = m.tolist()
-    return config
+class FlexKalmanNetEstimator(TrainedKalmanEstimator):
+    """The filter with FlexKalmanNet's deployed constant parameters (see module docstring):
+    a :class:`~fkn_bench.training.artifacts.TrainedKalmanEstimator` (keyword-only arguments of
+    :class:`KalmanEstimator` plus ``metadata``), also built from a checkpoint."""
 
-
-class FlexKalmanNetEstimator(KalmanEstimator):
-    """The filter with FlexKalmanNet's deployed constant parameters (see module docstring).
-
-    Keyword-only arguments are those of :class:`KalmanEstimator` plus ``metadata`` (training and
-    provenance information, kept in the saved config).
-    """
-
-    def __init__(self, *, metadata: Mapping[str, Any] | None = None, **config: Any) -> None:
-        config.setdefault("name", "flexkalmannet")
-        config.setdefault("description", "FlexKalmanNet: EKF with noise parameters learned by a network")
-        super().__init__(**config)
-        self.metadata = dict(metadata or {})
-
-    @classmethod
-    def from_artifact(cls, path: str | Path) -> FlexKalmanNetEstimator:
-        document = read_artifact(path)
-        metadata = {k: document.get(k) for k in ("family", "scenario", "training", "provenance")}
-        metadata["artifact"] = artifact_label(path)
-        return cls(metadata=metadata, **document["estimator_config"])
+    default_name = "flexkalmannet"
+    descriptions = {"flexkalmannet": "FlexKalmanNet: EKF with noise parameters learned by a network"}
 
     @classmethod
     def from_checkpoint(cls, path: str | Path) -> FlexKalmanNetEstimator:
         model, config, scenario, document = model_from_checkpoint(path)
         metadata = {"checkpoint": str(path), "scenario": scenario.name, "best_epoch": document.get("best_epoch")}
         return cls(metadata=metadata, **deployed_estimator_config(model, config.variant))
-
-    def to_config(self) -> dict[str, Any]:
-        return {**super().to_config(), "metadata": self.metadata}
-
-    @classmethod
-    def from_config(cls, config: Mapping[str, Any]) -> FlexKalmanNetEstimator:
-        config = dict(config)
-        metadata = config.pop("metadata", None)
-        known = {"variant", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "name", "description"}
-        unknown = sorted(set(config) - known)
-        if unknown:
-            raise ValueError(f"unknown FlexKalmanNetEstimator config keys {unknown}; valid: {sorted(known | {'metadata'})}")
-        return cls(metadata=metadata, **config)
 
 
 class AdaptiveFlexKalmanNetEstimator(Estimator):
@@ -194,13 +153,4 @@ def flexkalmannet_factory(
         raise ValueError(f"mode must be 'constant' or 'time_varying' (got {mode!r})")
     if checkpoint is not None:
         return FlexKalmanNetEstimator.from_checkpoint(checkpoint)
-    if parameters is not None:
-        return FlexKalmanNetEstimator.from_artifact(parameters)
-    family = scenario.model_family if scenario is not None else "ds1"
-    path = artifact_path("flexkalmannet", family)
-    if not path.is_file():
-        raise ArtifactError(
-            f"no committed FlexKalmanNet parameters for model family '{family}' ({path}); train them with "
-            f"`fkn-bench train --estimator flexkalmannet --scenario {family} --write-artifact`"
-        )
-    return FlexKalmanNetEstimator.from_artifact(path)
+    return artifact_factory("flexkalmannet", FlexKalmanNetEstimator)(scenario, parameters=parameters)

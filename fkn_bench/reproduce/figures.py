@@ -1,7 +1,7 @@
 """The figures of the paper's results section, drawn headless into the report directory.
 
 Reuses the project's figure functions where they exist: the two training figures of
-:mod:`fkn_bench.flexkalmannet.plots` (loss curves, the 20 learned standard deviations over
+:mod:`fkn_bench.training.plots` (loss curves, the 20 learned standard deviations over
 epochs) and the state figure of :mod:`fkn_bench.harness.plots` (estimate, measurement and truth of
 the four state groups). :func:`omega_uncertainty_figure` is the paper's uncertainty figure: the
 three angular-rate components with the estimate's 2-sigma band over the first samples of a run.

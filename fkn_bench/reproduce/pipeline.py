@@ -40,7 +40,7 @@ import pandas as pd
 from fkn_bench.estimators import Estimator, make_estimator
 from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet import FlexKalmanNetConfig, FlexKalmanNetEstimator, train_flexkalmannet
-from fkn_bench.flexkalmannet.plots import plot_losses, plot_parameters
+from fkn_bench.training.plots import plot_losses, plot_parameters
 from fkn_bench.harness.reference import PAPER_TITLE
 from fkn_bench.io import read_json, write_json_atomic
 from fkn_bench.reproduce import figures as figs

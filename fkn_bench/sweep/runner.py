@@ -9,9 +9,9 @@ already in the study, so rerunning a finished sweep only rewrites the outputs.
 
 Outputs in ``out``:
 
-* ``best.toml``: the best trial's full configuration (``[flexkalmannet]`` table), loadable with
-  ``FlexKalmanNetConfig.from_toml`` and ``fkn-bench train --config best.toml`` (for other
-  estimators: their training options at the top level);
+* ``best.toml``: the best trial's full training configuration (``[<estimator>]`` table), for
+  ``fkn-bench train --estimator <estimator> --config best.toml`` (FlexKalmanNet's also loads with
+  ``FlexKalmanNetConfig.from_toml``);
 * ``trials.csv``: every trial of every stage (stage, number, state, value, params, user
   attributes such as ``best_epoch``, ``epochs_run``, ``error`` and the ``process`` id that ran
   it, the last reported epoch);
@@ -42,7 +42,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from fkn_bench.io import atomic_path, write_json_atomic, write_text_atomic
 from fkn_bench.scenarios import Scenario
-from fkn_bench.sweep.objective import CATCH, SweepTask, coerce_config, make_objective, trial_config
+from fkn_bench.sweep.objective import CATCH, SweepTask, make_objective, trial_config
 from fkn_bench.sweep.space import SAMPLERS, SearchSpace
 from fkn_bench.sweep.study import completed, make_sampler, open_storage, reduced_grid, stage_names, storage_label
 
@@ -63,7 +63,7 @@ class SweepSettings:
         space: the search space.
         scenario: training scenario.
         out: output directory.
-        estimator: trainable estimator (default ``flexkalmannet``).
+        estimator: a trainable estimator.
         sampler: one of :data:`~fkn_bench.sweep.space.SAMPLERS`.
         trials: trials of the random (or only) stage.
         grid_trials: most points of the reduced grid (``random-grid``; default ``trials``).
@@ -77,7 +77,7 @@ class SweepSettings:
     space: SearchSpace
     scenario: Scenario
     out: Path
-    estimator: str = "flexkalmannet"
+    estimator: str
     sampler: str = "random-grid"
     trials: int = 20
     grid_trials: int | None = None
@@ -341,13 +341,6 @@ def write_toml(path: str | Path, values: dict[str, Any], *, table: str | None = 
     return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
-def _best_config(settings: SweepSettings, params: dict[str, Any]) -> tuple[dict[str, Any], str | None]:
-    if settings.estimator == "flexkalmannet":
-        config = trial_config(settings.space, params).to_dict()
-        return config, "flexkalmannet"
-    return coerce_config({**settings.space.fixed, **params}, {}), None
-
-
 def _trials_frame(study: optuna.Study, stage: str) -> Any:
     import pandas as pd
 
@@ -415,7 +408,7 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
     if best is None:
         raise SweepError(f"no trial completed ({json.dumps(counts)}); see {trials_csv} for the errors")
     trial, stage = best
-    config, table = _best_config(settings, dict(trial.params))
+    config = trial_config(settings.estimator, settings.space, dict(trial.params)).to_dict()
     header = (
         f"Best configuration of fkn-bench sweep study {settings.name!r} ({settings.sampler}), {stage} trial "
         f"{trial.number}\nvalidation 13-state RMSE {trial.value:.6g} on scenario {settings.scenario.name}\n"
@@ -424,7 +417,7 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
            if settings.space.fixed else "")
         + f"use: fkn-bench train --estimator {settings.estimator} --scenario {settings.scenario.name} --config best.toml"
     )
-    best_config = write_toml(out / "best.toml", config, table=table, header=header)
+    best_config = write_toml(out / "best.toml", config, table=settings.estimator, header=header)
     figure = parallel_coordinates(
         everything, settings.space, out / "parallel_coordinates.png",
         f"{settings.name}: hyperparameters vs validation RMSE ({settings.sampler}, "

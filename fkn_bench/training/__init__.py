@@ -1,20 +1,25 @@
-"""Training filter parameters through the filter recursion (shared by FlexKalmanNet and the
-tuned baselines)."""
+"""Training filter parameters through the filter recursion: one pipeline (:func:`fit`) for every
+trainable estimator (FlexKalmanNet, the tuned baselines, the sweep's trials)."""
 
 from fkn_bench.training.data import Sequences, TrainingData
-from fkn_bench.training.direct import DirectParameters
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
-from fkn_bench.training.trainer import EpochRecord, NoiseModel, TrainConfig, Trainer
+from fkn_bench.training.pipeline import Trainable, TrainingOutcome, fit, trainable
+from fkn_bench.training.trainer import DirectParameters, EpochRecord, NoiseModel, OnEpoch, TrainConfig, Trainer
 
 __all__ = [
     "OBJECTIVES",
     "DirectParameters",
     "EpochRecord",
     "NoiseModel",
+    "OnEpoch",
     "Sequences",
+    "Trainable",
     "TrainConfig",
     "Trainer",
     "TrainingData",
+    "TrainingOutcome",
+    "fit",
     "innovation_nll",
     "state_mse",
+    "trainable",
 ]

@@ -9,6 +9,10 @@ e.g. ds1), ``scenario`` (training scenario name and config hash), ``estimator_co
 :class:`~fkn_bench.estimators.KalmanEstimator` config: variant and noise), ``parameters``
 (the learned values with labels and units), ``training`` (config, best epoch, losses, time,
 test metrics) and ``provenance`` (package and library versions, git commit, machine, command).
+
+:class:`TrainedKalmanEstimator` runs from such a file, and :func:`artifact_factory` is the registry
+factory of every trained estimator: the committed artefact of the scenario's model family, or
+``parameters=PATH``.
 """
 
 from __future__ import annotations
@@ -16,10 +20,16 @@ from __future__ import annotations
 import datetime as _dt
 import sys
 from importlib import resources
+from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
+import numpy as np
+import torch
+
+from fkn_bench.estimators.kalman import KalmanEstimator
 from fkn_bench.io import read_json, write_json_atomic
+from fkn_bench.scenarios import Scenario
 
 __all__ = [
     "ARTIFACT_FORMAT",
@@ -30,6 +40,9 @@ __all__ = [
     "write_artifact",
     "read_artifact",
     "run_provenance",
+    "deployed_estimator_config",
+    "TrainedKalmanEstimator",
+    "artifact_factory",
 ]
 
 ARTIFACT_FORMAT = "fkn-bench-learned-parameters"
@@ -115,3 +128,72 @@ def read_artifact(path: str | Path) -> dict[str, Any]:
         if key not in document:
             raise ArtifactError(f"{path} lacks '{key}'")
     return document
+
+
+def deployed_estimator_config(model: Any, variant: str) -> dict[str, Any]:
+    """KalmanEstimator config (variant and noise matrices or stds) of a trained
+    :class:`~fkn_bench.training.NoiseModel`'s deployed parameters."""
+    with torch.no_grad():
+        noise = model.parameter_set.to_noise(model.deployed_raw())
+    config: dict[str, Any] = {"variant": variant}
+    for entry, matrix in (("q", noise.process), ("r", noise.measurement), ("p0", noise.initial)):
+        m = matrix.detach().to(torch.float64).numpy()
+        if np.count_nonzero(m - np.diag(np.diag(m))) == 0:
+            config[f"{entry}_std"] = np.sqrt(np.diag(m)).tolist()
+        else:
+            config[f"{entry}_cov"] = m.tolist()
+    return config
+
+
+class TrainedKalmanEstimator(KalmanEstimator):
+    """A :class:`~fkn_bench.estimators.KalmanEstimator` with trained constant parameters and the
+    ``metadata`` (training and provenance) of the fit that produced them. Subclasses name the
+    estimator (``default_name``) and describe it by name (``descriptions``)."""
+
+    default_name: ClassVar[str] = "trained-kalman"
+    descriptions: ClassVar[dict[str, str]] = {}
+
+    def __init__(self, *, metadata: Mapping[str, Any] | None = None, **config: Any) -> None:
+        config.setdefault("name", self.default_name)
+        config.setdefault("description", self.descriptions.get(config["name"], ""))
+        super().__init__(**config)
+        self.metadata = dict(metadata or {})
+
+    @classmethod
+    def from_artifact(cls, path: str | Path, *, name: str | None = None) -> TrainedKalmanEstimator:
+        document = read_artifact(path)
+        metadata = {k: document.get(k) for k in ("family", "scenario", "training", "provenance")}
+        metadata["artifact"] = artifact_label(path)
+        return cls(metadata=metadata, **{**document["estimator_config"], "name": name or document["estimator"]})
+
+    def to_config(self) -> dict[str, Any]:
+        return {**super().to_config(), "metadata": self.metadata}
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any]) -> TrainedKalmanEstimator:
+        config = dict(config)
+        metadata = config.pop("metadata", None)
+        estimator = super().from_config(config)
+        estimator.metadata = dict(metadata or {})
+        return estimator  # type: ignore[return-value]
+
+
+def artifact_factory(name: str, cls: type[TrainedKalmanEstimator] = TrainedKalmanEstimator) -> Callable[..., Any]:
+    """Registry factory of the trained estimator ``name``: the committed artefact of the
+    scenario's model family (ds1 when no scenario is given), or ``parameters=PATH`` (a
+    ``parameters.json`` written by ``fkn-bench train``)."""
+
+    def factory(scenario: Scenario | None = None, *, parameters: str | Path | None = None) -> TrainedKalmanEstimator:
+        if parameters is not None:
+            return cls.from_artifact(parameters, name=name)
+        family = scenario.model_family if scenario is not None else "ds1"
+        path = artifact_path(name, family)
+        if not path.is_file():
+            raise ArtifactError(
+                f"no committed {name} parameters for model family '{family}' ({path}); train them with "
+                f"`fkn-bench train --estimator {name} --scenario {family} --write-artifact`"
+            )
+        return cls.from_artifact(path, name=name)
+
+    factory.__name__ = f"{name.replace('-', '_')}_factory"
+    return factory

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import torch
@@ -25,7 +26,7 @@ from torch import Tensor
 
 from fkn_bench.scenarios import Scenario, get_scenario
 
-__all__ = ["Sequences", "TrainingData"]
+__all__ = ["Sequences", "TrainingData", "training_data"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,3 +139,16 @@ class TrainingData:
             "position_mean_m": np.round(self.position_mean.numpy(), 6).tolist(),
             "position_std_m": np.round(self.position_std.numpy(), 6).tolist(),
         }
+
+
+@lru_cache(maxsize=4)
+def _cached(scenario: Scenario, window: int, stride: int | None, every: int | None, episodes: int) -> TrainingData:
+    return TrainingData(scenario, window=window, stride=stride, train_measurement_every=every, episodes=episodes)
+
+
+def training_data(scenario: Scenario, config: object) -> TrainingData:
+    """The :class:`TrainingData` of ``scenario`` with ``config``'s data protocol (``window``,
+    ``stride``, ``train_measurement_every``, ``episodes``: a
+    :class:`~fkn_bench.training.TrainConfig`); the last few are kept (a sweep's trials share them)."""
+    c = config
+    return _cached(scenario, int(c.window), c.stride, c.train_measurement_every, int(c.episodes))  # type: ignore[attr-defined]

@@ -33,18 +33,11 @@ def aligned_state_error(means: Tensor, truth: Tensor) -> Tensor:
     return torch.cat((means[..., :4] - q_true, means[..., 4:] - truth[..., 4:]), dim=-1)
 
 
-def state_mse(means: Tensor, truth: Tensor, loss_cut: int, weights: Tensor | None = None) -> Tensor:
-    """Mean squared 13-state error over steps ``loss_cut:`` of every sequence (a scalar).
-
-    ``weights (13,)``, when given, scale each component's squared error (mean of the weights
-    times the plain MSE for equal weights).
-    """
+def state_mse(means: Tensor, truth: Tensor, loss_cut: int) -> Tensor:
+    """Mean squared 13-state error over steps ``loss_cut:`` of every sequence (a scalar)."""
     if loss_cut >= means.shape[1]:
         raise ValueError(f"loss_cut {loss_cut} leaves no steps of {means.shape[1]}")
-    squared = aligned_state_error(means[:, loss_cut:], truth[:, loss_cut:]).square()
-    if weights is not None:
-        squared = squared * weights
-    return squared.mean()
+    return aligned_state_error(means[:, loss_cut:], truth[:, loss_cut:]).square().mean()
 
 
 def innovation_nll(result: FilterResult, loss_cut: int) -> Tensor:

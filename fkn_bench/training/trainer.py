@@ -3,13 +3,15 @@
 :class:`NoiseModel` is the interface: ``window_raw(sequences)`` gives the unconstrained parameter
 vector(s) for a batch of sequences (``(B, size)`` constant per sequence, or ``(B, T, size)``
 time-varying) and ``deployed_raw()`` the constant vector used after training. FlexKalmanNet's
-network and the directly tuned EKF both implement it, so they share this loop: Adam,
-``ReduceLROnPlateau`` on the validation loss, early stopping after ``patience`` epochs without
-improvement, fixed seeds, the best epoch's weights restored at the end.
+network and the directly tuned EKF (:class:`DirectParameters`) both implement it, so they share
+this loop: Adam (or full-batch L-BFGS), ``ReduceLROnPlateau`` on the validation loss, early
+stopping after ``patience`` epochs without improvement, fixed seeds, the best epoch's weights
+restored at the end.
 
-One epoch is one pass over the training windows in shuffled batches; each batch runs through the
-filter variant (any of ekf, ukf, mekf) in parallel and takes one optimiser step. Validation runs
-the variant with the deployed parameters over the whole val split and reports the 13-state RMSE
+With Adam one epoch is one pass over the training windows in shuffled batches; each batch runs
+through the filter variant (any of ekf, ukf, mekf) in parallel and takes one optimiser step. With
+L-BFGS one epoch is one ``torch.optim.LBFGS`` step (up to ``lbfgs_iterations`` iterations,
+strong-Wolfe line search) on all training windows at once. Validation runs the variant with the deployed parameters over the whole val split and reports the 13-state RMSE
 (supervised objective) or the innovation NLL (``nll``, which uses no ground truth for model
 selection; the RMSE is logged as a diagnostic only).
 """
@@ -32,7 +34,7 @@ from fkn_bench.runtime import torch_threads
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
 
-__all__ = ["NoiseModel", "TrainConfig", "Trainer", "EpochRecord"]
+__all__ = ["NoiseModel", "DirectParameters", "TrainConfig", "Trainer", "EpochRecord", "OnEpoch"]
 
 
 class NoiseModel(nn.Module, ABC):
@@ -49,12 +51,48 @@ class NoiseModel(nn.Module, ABC):
         """The constant unconstrained parameters ``(size,)`` used after training."""
 
 
+class DirectParameters(NoiseModel):
+    """A learnable unconstrained parameter vector, the same for every sequence: the noise
+    parameters themselves are the trainable variables, optimised through the differentiable
+    filter (X. Xu and R. Niu (2021), "EKFNet: learning system noise statistics from measurement
+    data", ICASSP). With the supervised objective this gives the best constant-parameter filter
+    on the training data; with the innovation NLL it is maximum-likelihood noise identification
+    without ground truth.
+
+    Args:
+        parameter_set: which parameters are learned, and their positivity map.
+        initial_std: starting standard deviations by entry (default: the set's fixed values,
+            i.e. the paper's manual tuning).
+    """
+
+    def __init__(self, parameter_set: ParameterSet, **initial_std: list[float]) -> None:
+        super().__init__()
+        self.parameter_set = parameter_set
+        self.raw = nn.Parameter(parameter_set.initial_values(**initial_std))
+
+    def window_raw(self, sequences: Sequences) -> Tensor:
+        return self.raw.expand(sequences.batch_size, -1)
+
+    def deployed_raw(self) -> Tensor:
+        return self.raw
+
+    def extra_repr(self) -> str:
+        return f"size={self.parameter_set.size}"
+
+
 @dataclass
 class TrainConfig:
-    """Optimisation settings (defaults from the paper's table where it has one).
+    """Data protocol and optimisation settings of a training run (optimisation defaults from the
+    paper's table where it has one; the data protocol is the benchmark's, FlexKalmanNet's
+    ``DEVIATIONS`` give the measurements behind it).
 
     Attributes:
+        variant: the filter variant trained through (ekf, ukf, mekf).
+        window, stride, train_measurement_every, episodes: the training windows (see
+            :class:`~fkn_bench.training.TrainingData`).
         objective: ``supervised`` (13-state MSE vs truth) or ``nll`` (innovation NLL).
+        optimizer: ``adam`` (mini-batches) or ``lbfgs`` (full batch, one step per epoch).
+        lbfgs_iterations, lbfgs_history: L-BFGS iterations per epoch and memory.
         epochs: maximum epochs (paper: 100).
         patience: early stopping after this many epochs without a better validation loss (20).
         min_improvement: relative decrease of the validation loss that counts as better
@@ -69,13 +107,21 @@ class TrainConfig:
         threads: torch threads during training.
     """
 
+    variant: str = "ekf"
+    window: int = 800
+    stride: int | None = None
+    train_measurement_every: int | None = 10
+    episodes: int = 4
     objective: str = "supervised"
+    optimizer: str = "adam"
+    lbfgs_iterations: int = 20
+    lbfgs_history: int = 10
     epochs: int = 100
     patience: int = 20
     min_improvement: float = 1e-4
     lr: float = 1e-5
     weight_decay: float = 0.0
-    windows_per_batch: int = 32
+    windows_per_batch: int = 64
     loss_cut: int = 100
     seed: int = 0
     scheduler_factor: float = 0.5
@@ -86,7 +132,9 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES} (got {self.objective!r})")
-        for name in ("epochs", "windows_per_batch", "threads"):
+        if self.optimizer not in ("adam", "lbfgs"):
+            raise ValueError(f"optimizer must be one of ['adam', 'lbfgs'] (got {self.optimizer!r})")
+        for name in ("epochs", "windows_per_batch", "threads", "lbfgs_iterations", "lbfgs_history"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {getattr(self, name)!r})")
         if self.patience < 1:
@@ -98,6 +146,9 @@ class TrainConfig:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+    def train_config(self) -> TrainConfig:
+        return self
 
 
 @dataclass
@@ -118,6 +169,13 @@ class EpochRecord:
         return row
 
 
+OnEpoch = Callable[[int, "list[EpochRecord]"], "bool | None"]
+"""``on_epoch(epoch, history)``: called after every epoch (numbered from 1) with the history so far
+(its last record is that epoch's: losses, validation RMSE, learning rate, deployed parameters).
+Returning True stops the training there (the best epoch's weights are still restored); an
+exception it raises (e.g. ``optuna.TrialPruned``) ends the training and propagates."""
+
+
 class Trainer:
     """Trains a :class:`NoiseModel` through ``variant`` on ``data`` (see module docstring)."""
 
@@ -125,7 +183,13 @@ class Trainer:
         if config.loss_cut >= data.window:
             raise ValueError(f"loss_cut ({config.loss_cut}) must be smaller than the window ({data.window})")
         self.model, self.variant, self.data, self.config = model, variant, data, config
-        self.optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
+        if config.optimizer == "lbfgs":
+            self.optimizer: torch.optim.Optimizer = torch.optim.LBFGS(
+                model.parameters(), lr=config.lr, max_iter=config.lbfgs_iterations, history_size=config.lbfgs_history,
+                line_search_fn="strong_wolfe", tolerance_grad=1e-10, tolerance_change=1e-12,
+            )
+        else:
+            self.optimizer = torch.optim.Adam(model.parameters(), lr=config.lr, weight_decay=config.weight_decay)
         self.scheduler = torch.optim.lr_scheduler.ReduceLROnPlateau(
             self.optimizer, mode="min", factor=config.scheduler_factor, patience=config.scheduler_patience
         )
@@ -135,6 +199,7 @@ class Trainer:
         self.best_epoch = 0
         self.best_state: dict[str, Tensor] = copy.deepcopy(model.state_dict())
         self.epochs_without_improvement = 0
+        self.evaluations = 0  # loss evaluations of the L-BFGS steps
 
     # ------------------------------------------------------------------ losses
     def loss(self, sequences: Sequences, raw: Tensor) -> tuple[Tensor, Tensor | None]:
@@ -157,7 +222,7 @@ class Trainer:
 
     def validate(self) -> tuple[float, float]:
         """``(validation loss, validation 13-state RMSE)`` with the deployed parameters; the loss
-        is the optimised objective (square root of the possibly weighted MSE, or the NLL) and
+        is the optimised objective (square root of the MSE, or the NLL) and
         selects the best epoch."""
         with torch.no_grad():
             raw = self.model.deployed_raw().expand(self.data.val.batch_size, -1)
@@ -167,19 +232,40 @@ class Trainer:
         return (math.sqrt(value) if self.config.objective == "supervised" else value), rmse
 
     # ------------------------------------------------------------------ epochs
+    def _checked(self, loss: Tensor) -> Tensor:
+        if not torch.isfinite(loss):
+            raise FloatingPointError(f"non-finite training loss at epoch {len(self.history) + 1}: lower the learning rate")
+        return loss
+
+    def _lbfgs_epoch(self) -> float:
+        batch = self.data.train
+
+        def closure() -> Tensor:
+            self.optimizer.zero_grad(set_to_none=True)
+            loss = self._checked(self.loss(batch, self.model.window_raw(batch))[0])
+            loss.backward()
+            self.evaluations += 1
+            return loss
+
+        self.model.train()
+        start = self.optimizer.step(closure)  # type: ignore[arg-type]
+        self.model.eval()
+        with torch.no_grad():  # the loss at the parameters the step ended with
+            end, _ = self.loss(batch, self.model.window_raw(batch))
+        value = float(end if torch.isfinite(end) else start)
+        return math.sqrt(value) if self.config.objective == "supervised" else value
+
     def run_epoch(self) -> float:
-        """One pass over the training windows; returns the mean training loss (the plain 13-state
-        RMSE for the supervised objective, whatever its weights; the NLL otherwise)."""
+        """One epoch (see module docstring); returns the mean training loss (the 13-state RMSE for
+        the supervised objective, the NLL otherwise)."""
+        if self.config.optimizer == "lbfgs":
+            return self._lbfgs_epoch()
         self.model.train()
         total, count = 0.0, 0
         for batch in self.data.batches(self.config.windows_per_batch, self.generator):
             self.optimizer.zero_grad(set_to_none=True)
             loss, mse = self.loss(batch, self.model.window_raw(batch))
-            if not torch.isfinite(loss):
-                raise FloatingPointError(
-                    f"non-finite training loss at epoch {len(self.history) + 1}: lower the learning rate"
-                )
-            loss.backward()
+            self._checked(loss).backward()
             if self.config.max_grad_norm is not None:
                 nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm)
             self.optimizer.step()
@@ -202,9 +288,11 @@ class Trainer:
                 out.update({f"sigma_{tag}_{label}": float(v) for label, v in zip(entry["labels"], entry["std"])})
         return out
 
-    def fit(self, *, on_epoch: Callable[[Trainer, EpochRecord], None] | None = None, progress: bool = True) -> list[EpochRecord]:
-        """Train until ``epochs`` or early stopping; restores the best weights. Resumable: a
-        trainer restored with :meth:`load_state_dict` continues from its last epoch."""
+    def fit(self, *, on_epoch: OnEpoch | None = None, progress: bool = True) -> list[EpochRecord]:
+        """Train until ``epochs``, early stopping or ``on_epoch`` asks to stop; restores the best
+        weights. Resumable: a trainer restored with :meth:`load_state_dict` continues from its
+        last epoch. ``on_epoch(epoch, history)`` is called after every epoch (see
+        :data:`OnEpoch`)."""
         from tqdm.auto import tqdm
 
         start = len(self.history) + 1
@@ -236,8 +324,8 @@ class Trainer:
                 else:
                     self.epochs_without_improvement += 1
                 bar.set_postfix(train=f"{train_loss:.4g}", val=f"{val_loss:.4g}", lr=f"{record.lr:.1e}", best=self.best_epoch)
-                if on_epoch is not None:
-                    on_epoch(self, record)
+                if on_epoch is not None and on_epoch(epoch, self.history):
+                    break
                 if self.epochs_without_improvement >= self.config.patience:
                     break
         bar.close()

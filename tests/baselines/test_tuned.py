@@ -12,19 +12,13 @@ import pandas as pd
 import pytest
 import torch
 
-from fkn_bench.baselines.tuned import (
-    TUNED_OBJECTIVES,
-    LBFGSTrainer,
-    TunedEKFEstimator,
-    TuningConfig,
-    fit_tuned_ekf,
-)
+from fkn_bench.baselines.tuned import TUNED_OBJECTIVES, TunedEKFEstimator, tuned_config
 from fkn_bench.envs import generate_episodes
 from fkn_bench.estimators import estimator_spec, load_estimator, make_estimator
 from fkn_bench.filters import ExtendedKalmanFilter, ParameterSet
 from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
 from fkn_bench.scenarios import get_scenario
-from fkn_bench.training import DirectParameters, Sequences, TrainConfig
+from fkn_bench.training import DirectParameters, Sequences, TrainConfig, Trainer, fit
 from fkn_bench.training.artifacts import artifact_path, read_artifact
 
 SHORT = get_scenario("ds1", n_steps=2000)
@@ -47,7 +41,8 @@ def test_nll_tuning_recovers_the_true_noise(balanced) -> None:
     parameter_set = ParameterSet(variant.layout)
     model = DirectParameters(parameter_set)
     data = SimpleNamespace(window=200, scenario=SimpleNamespace(dt=cv.dt), train=_sequences(cv, 100, 200, 0), val=_sequences(cv, 10, 200, 1))
-    trainer = LBFGSTrainer(model, variant, data, TrainConfig(objective="nll", lr=1.0, epochs=3, patience=1, loss_cut=10), iterations=40)  # type: ignore[arg-type]
+    config = TrainConfig(objective="nll", optimizer="lbfgs", lbfgs_iterations=40, lr=1.0, epochs=3, patience=1, loss_cut=10)
+    trainer = Trainer(model, variant, data, config)  # type: ignore[arg-type]
     trainer.fit(progress=False)
     with torch.no_grad():
         fitted = parameter_set.to_dict(model.deployed_raw())["entries"]
@@ -61,8 +56,8 @@ def test_nll_tuning_recovers_the_true_noise(balanced) -> None:
 def fits(tmp_path_factory: pytest.TempPathFactory):  # noqa: ANN201
     out = {}
     for name, optimizer in (("direct-tuned-ekf", "lbfgs"), ("nll-tuned-ekf", "adam")):
-        config = TuningConfig(objective=TUNED_OBJECTIVES[name], optimizer=optimizer, **TINY)
-        out[name] = fit_tuned_ekf(name, SHORT, config, out=tmp_path_factory.mktemp(name), progress=False)
+        config = tuned_config(name, {"optimizer": optimizer, **TINY})
+        out[name] = fit(name, SHORT, config, out=tmp_path_factory.mktemp(name), progress=False)
     return out
 
 
@@ -97,33 +92,37 @@ def test_the_nll_fit_uses_no_ground_truth(fits) -> None:
 
 @pytest.mark.parametrize("optimizer", ["lbfgs", "adam"])
 def test_fit_resumes(optimizer: str, tmp_path: Path) -> None:
-    config = TuningConfig(objective="supervised", optimizer=optimizer, **{**TINY, "epochs": 1})
-    fit_tuned_ekf("direct-tuned-ekf", SHORT, config, out=tmp_path, progress=False)
-    more = TuningConfig(objective="supervised", optimizer=optimizer, **{**TINY, "epochs": 1})
-    with pytest.raises(ValueError, match="another estimator or config"):
-        fit_tuned_ekf("direct-tuned-ekf", SHORT, TuningConfig(objective="supervised", optimizer=optimizer, **TINY), out=tmp_path, resume=True, progress=False)
-    again = fit_tuned_ekf("direct-tuned-ekf", SHORT, more, out=tmp_path, resume=True, progress=False)
+    config = tuned_config("direct-tuned-ekf", {"optimizer": optimizer, **TINY, "epochs": 1})
+    fit("direct-tuned-ekf", SHORT, config, out=tmp_path, progress=False)
+    with pytest.raises(ValueError, match="another estimator or a different config"):
+        fit("direct-tuned-ekf", SHORT, {"optimizer": optimizer, **TINY}, out=tmp_path, resume=True, progress=False)
+    with pytest.raises(ValueError, match="another estimator"):
+        fit("nll-tuned-ekf", SHORT, {"optimizer": optimizer, **TINY, "epochs": 1}, out=tmp_path, resume=True, progress=False)
+    again = fit("direct-tuned-ekf", SHORT, config, out=tmp_path, resume=True, progress=False)
     assert len(again.history) == 1  # already at its epoch budget: nothing more to do
-    with pytest.raises(ValueError, match="no checkpoint"):
-        fit_tuned_ekf("direct-tuned-ekf", SHORT, more, out=tmp_path / "fresh", resume=True, progress=False)
+    with pytest.raises(ValueError, match="checkpoint not found"):
+        fit("direct-tuned-ekf", SHORT, config, out=tmp_path / "fresh", resume=True, progress=False)
 
 
 def test_configuration_defaults_and_checks() -> None:
-    resolved = TuningConfig(objective="nll").resolved()
+    resolved = tuned_config("nll-tuned-ekf", {})
     fkn = FlexKalmanNetConfig()
-    assert (resolved.window, resolved.stride, resolved.train_measurement_every, resolved.episodes, resolved.loss_cut) == (
-        fkn.window, fkn.stride, fkn.train_measurement_every, fkn.episodes, fkn.loss_cut
+    assert (resolved.window, resolved.stride, resolved.train_measurement_every, resolved.episodes, resolved.loss_cut,
+            resolved.windows_per_batch) == (
+        fkn.window, fkn.stride, fkn.train_measurement_every, fkn.episodes, fkn.loss_cut, fkn.windows_per_batch
     )
-    assert (resolved.optimizer, resolved.lr) == ("lbfgs", 1.0)
-    assert TuningConfig(objective="supervised", optimizer="adam").resolved().lr == 0.05
+    assert (resolved.objective, resolved.optimizer, resolved.lr, resolved.epochs, resolved.patience) == ("nll", "lbfgs", 1.0, 15, 2)
+    adam = tuned_config("direct-tuned-ekf", {"optimizer": "adam"})
+    assert (adam.objective, adam.lr, adam.epochs, adam.patience) == ("supervised", 0.05, 150, 20)
+    assert tuned_config("direct-tuned-ekf", {"optimizer": "adam", "lr": 0.1}).lr == 0.1
     with pytest.raises(ValueError, match="trained with objective 'nll'"):
-        TuningConfig.from_options("nll-tuned-ekf", {"objective": "supervised"})
+        tuned_config("nll-tuned-ekf", {"objective": "supervised"})
     with pytest.raises(ValueError, match="unknown direct-tuned-ekf training options"):
-        TuningConfig.from_options("direct-tuned-ekf", {"hidden": 3})
+        tuned_config("direct-tuned-ekf", {"hidden": 3})
     with pytest.raises(ValueError, match="variant 'ekf'"):
-        TuningConfig.from_options("direct-tuned-ekf", {"variant": "ukf"})
+        tuned_config("direct-tuned-ekf", {"variant": "ukf"})
     with pytest.raises(ValueError, match="optimizer must be one of"):
-        TuningConfig.from_options("direct-tuned-ekf", {"optimizer": "sgd"})
+        tuned_config("direct-tuned-ekf", {"optimizer": "sgd"})
 
 
 def test_cli_trains_and_installs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:

@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-import torch
 
 from fkn_bench.envs import generate_episodes
 from fkn_bench.estimators import make_estimator
@@ -21,7 +20,7 @@ from fkn_bench.flexkalmannet import (
     load_checkpoint,
     train_flexkalmannet,
 )
-from fkn_bench.flexkalmannet.checkpoint import save_checkpoint
+from fkn_bench.training.checkpoint import save_checkpoint
 from fkn_bench.scenarios import get_scenario
 from fkn_bench.training.artifacts import ArtifactError, read_artifact
 
@@ -96,26 +95,17 @@ def test_resume_continues_from_the_checkpoint(trained, tmp_path: Path) -> None:
     assert resumed.history["val_loss"].iloc[0] == first.history["val_loss"].iloc[0]
 
 
-def test_corrupt_and_foreign_checkpoints_are_refused(trained, tmp_path: Path) -> None:
-    truncated = tmp_path / "truncated.pt"
-    truncated.write_bytes(trained.checkpoint.read_bytes()[:1000])
-    with pytest.raises(CheckpointError, match="truncated or corrupt"):
-        load_checkpoint(truncated)
-    with pytest.raises(CheckpointError, match="not found"):
-        load_checkpoint(tmp_path / "missing.pt")
-    foreign = tmp_path / "foreign.pt"
-    torch.save({"weights": torch.zeros(3)}, foreign)
-    with pytest.raises(CheckpointError, match="not a FlexKalmanNet checkpoint"):
-        load_checkpoint(foreign)
-    future = tmp_path / "future.pt"
-    torch.save({"format": "fkn-bench-flexkalmannet", "format_version": 99}, future)
-    with pytest.raises(CheckpointError, match="version 99"):
-        load_checkpoint(future)
+def test_a_checkpoint_whose_weights_do_not_fit_its_config_is_refused(trained, tmp_path: Path) -> None:
+    # the checkpoint format itself (corrupt, foreign, future files): tests/training/test_pipeline.py
     document = load_checkpoint(trained.checkpoint)
     document["config"]["hidden"] = 32  # weights no longer fit
     mismatched = tmp_path / "mismatched.pt"
     save_checkpoint(mismatched, {k: v for k, v in document.items() if k not in ("format", "format_version")})
     with pytest.raises(CheckpointError, match="do not match"):
+        FlexKalmanNetEstimator.from_checkpoint(mismatched)
+    document["estimator"] = "direct-tuned-ekf"
+    save_checkpoint(mismatched, {k: v for k, v in document.items() if k not in ("format", "format_version")})
+    with pytest.raises(CheckpointError, match="not of flexkalmannet"):
         FlexKalmanNetEstimator.from_checkpoint(mismatched)
 
 

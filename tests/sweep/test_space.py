@@ -69,7 +69,7 @@ def test_kinds_distributions_and_grids() -> None:
     assert grid["layers"] == [1, 2, 3] and grid["dropout"] == [0.0, 0.1, 0.2]
     assert grid["lr"] == pytest.approx([1e-4, 1e-3, 1e-2])
     space.check_fields(FIELDS, "FlexKalmanNetConfig")
-    config = trial_config(space, {"hidden": 16, "layers": 2, "lr": 1e-3, "dropout": 0.1, "learn": "q_chol,r_std"})
+    config = trial_config("flexkalmannet", space, {"hidden": 16, "layers": 2, "lr": 1e-3, "dropout": 0.1, "learn": "q_chol,r_std"})
     assert config.learn == ("q_chol", "r_std") and config.epochs == 3 and config.hidden == 16
 
 
@@ -120,7 +120,7 @@ def test_files_and_packaged_spaces(tmp_path: Path) -> None:
     for name in ("paper", "quick"):
         space = load_space(resolve_space(name))
         space.check_fields(FIELDS, "FlexKalmanNetConfig")
-        trial_config(space, {})
+        trial_config("flexkalmannet", space, {})
         assert space.defaults["sampler"] == "random-grid"
     paper = load_space(resolve_space("paper"))
     assert {"hidden", "layers", "lr", "window", "loss_cut", "dropout", "weight_decay", "activation", "variant",

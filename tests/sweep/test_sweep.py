@@ -1,5 +1,6 @@
 """Sweeps end to end: a tiny two-stage sweep with two worker processes on one journal file (with
-pruning), invalid and failing trials, a generic trainable estimator, and the CLI's usage errors."""
+pruning), invalid and failing trials, another trainable estimator (pruned too), and the CLI's
+usage errors."""
 
 from __future__ import annotations
 
@@ -11,11 +12,10 @@ from pathlib import Path
 from typing import Any
 
 import optuna
-import pandas as pd
 import pytest
 from optuna.storages import JournalStorage
 from optuna.storages.journal import JournalFileBackend
-from optuna.trial import TrialState
+from optuna.trial import FrozenTrial, TrialState
 
 from fkn_bench.cli import main
 from fkn_bench.flexkalmannet import FlexKalmanNetConfig
@@ -144,33 +144,26 @@ def test_an_invalid_trial_fails_without_stopping_the_study(tmp_path: Path) -> No
     assert sorted(done.intermediate_values) == [1, 2] and done.value == min(done.intermediate_values.values())
 
 
-def test_a_generic_trainable_estimator_is_swept_through_its_train_function(tmp_path: Path) -> None:
-    from fkn_bench.estimators import registry
-    from fkn_bench.estimators.builtin import manual_estimator
+def test_any_trainable_estimator_is_swept_and_pruned_through_on_epoch(tmp_path: Path) -> None:
+    """The sweep names no estimator: a tuned EKF trains through the same fit() and on_epoch, so
+    its trials report every epoch, are pruned, and fail on invalid options."""
+    space = parse_space({"fixed": {"window": 200, "loss_cut": 50, "episodes": 1, "epochs": 2, "lbfgs_iterations": 2},
+                         "params": {"lr": {"values": [-1.0, 1.0, 1e-9]}}}, "inline")
+    class PruneTinySteps(optuna.pruners.BasePruner):
+        def prune(self, study: optuna.Study, trial: FrozenTrial) -> bool:
+            return trial.params["lr"] < 1e-6
 
-    def train(scenario: Any, *, out: Path, options: dict[str, Any], resume: bool = False,
-              progress: bool = True) -> dict[str, Any]:
-        if options["alpha"] < 0:
-            raise ValueError("alpha must be >= 0")
-        out.mkdir(parents=True, exist_ok=True)
-        losses = [1.0 + abs(options["alpha"] - 0.3) / epoch for epoch in (1, 2, 3)]
-        pd.DataFrame({"epoch": [1, 2, 3], "val_loss": losses}).to_csv(out / "history.csv", index=False)
-        return {"best_epoch": 3}
-
-    registry.register_estimator("sweep-test-estimator", manual_estimator("ekf"), train=train, overwrite=True)
-    try:
-        space = parse_space({"fixed": {"beta": 1}, "params": {"alpha": {"values": [-1.0, 0.0, 0.3]}}}, "inline")
-        study = optuna.create_study(direction="minimize")
-        for alpha in (-1.0, 0.0, 0.3):
-            study.enqueue_trial({"alpha": alpha})
-        study.optimize(make_objective(SweepTask("sweep-test-estimator", get_scenario("ds1"), space, tmp_path)),
-                       n_trials=3, catch=CATCH)
-        assert [t.state for t in study.trials] == [TrialState.FAIL, TrialState.COMPLETE, TrialState.COMPLETE]
-        assert study.best_params == {"alpha": 0.3} and study.best_value == pytest.approx(1.0)
-        assert study.trials[1].intermediate_values == {1: pytest.approx(1.3), 2: pytest.approx(1.15), 3: pytest.approx(1.1)}
-        assert (tmp_path / "trials" / "00001" / "history.csv").is_file()
-    finally:
-        registry._REGISTRY.pop("sweep-test-estimator", None)
+    study = optuna.create_study(direction="minimize", pruner=PruneTinySteps())
+    for lr in (-1.0, 1.0, 1e-9):
+        study.enqueue_trial({"lr": lr})
+    task = SweepTask("direct-tuned-ekf", get_scenario("ds1", n_steps=3000), space, tmp_path)
+    study.optimize(make_objective(task), n_trials=3, catch=CATCH)
+    failed, done, pruned = study.trials
+    assert failed.state == TrialState.FAIL and "lr" in failed.user_attrs["error"]
+    assert done.state == TrialState.COMPLETE and sorted(done.intermediate_values) == [1, 2]
+    assert done.value == done.intermediate_values[done.user_attrs["best_epoch"]]
+    assert pruned.state == TrialState.PRUNED and sorted(pruned.intermediate_values) == [1]
+    assert not any(tmp_path.iterdir())  # trials write no files
 
 
 def test_cli_usage_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

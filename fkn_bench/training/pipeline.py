@@ -1,0 +1,286 @@
+"""The one training pipeline: :func:`fit` trains any registered trainable estimator.
+
+An estimator is trainable when its registry entry declares a :class:`Trainable` (how to read its
+training config from options, and how to build the module whose parameters are trained);
+``fit`` does the rest for all of them (FlexKalmanNet, the tuned EKFs, ``fkn-bench train``,
+``fkn-bench sweep``): data, objective, optimiser, early stopping, checkpoint and resume,
+per-epoch history, an ``on_epoch`` callback, and with ``out=DIR`` these files:
+
+* ``checkpoint.pt``: after every epoch (atomically), everything to resume (``resume=True``; see
+  :mod:`fkn_bench.training.checkpoint`);
+* ``history.csv``: epoch, losses, validation RMSE, learning rate, seconds and the deployed
+  standard deviations;
+* ``loss.png`` and ``parameters.png``: the loss curves and the learned standard deviations over
+  epochs (FlexKalmanNet's Fig. 3 and 4);
+* ``parameters.json``: the learned-parameter artefact of the best epoch (the format of the
+  committed ``baselines/params/<estimator>-<family>.json``, see
+  :mod:`fkn_bench.training.artifacts`), with the test-split metrics and the per-epoch history
+  (``training.history``: every column of ``history.csv`` but the seconds), so that a committed
+  artefact can be checked against a short retraining.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+
+from fkn_bench.filters import make_filter
+from fkn_bench.io import atomic_path
+from fkn_bench.runtime import torch_threads
+from fkn_bench.scenarios import Scenario, get_scenario
+from fkn_bench.training.artifacts import deployed_estimator_config, run_provenance, write_artifact
+from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+from fkn_bench.training.data import TrainingData, training_data
+from fkn_bench.training.objectives import aligned_state_error, state_mse
+from fkn_bench.training.trainer import NoiseModel, OnEpoch, TrainConfig, Trainer
+
+__all__ = ["Trainable", "TrainingOutcome", "fit", "options_with_file", "split_metrics", "trainable"]
+
+
+@dataclass(frozen=True)
+class Trainable:
+    """The declaration that makes a registered estimator trainable
+    (``register_estimator(name, factory, trainable=Trainable(...))``).
+
+    Attributes:
+        config: ``options -> config``: the estimator's training configuration from option values
+            (``fkn-bench train --set``/``--epochs``..., a sweep trial's values); raises ValueError
+            or TypeError for invalid ones. The config has ``to_dict()`` (stored in checkpoints and
+            artefacts; its keys are the options a sweep may search) and
+            ``train_config() -> TrainConfig`` (data protocol, filter variant, objective,
+            optimiser). ``config({})`` is the default configuration.
+        build: ``(config, data) -> NoiseModel``: the module whose parameters are trained,
+            initialised (seeded by the config).
+        notes: extra entries of the artefact's ``training`` record.
+    """
+
+    config: Callable[[Mapping[str, Any]], Any]
+    build: Callable[[Any, TrainingData], NoiseModel]
+    notes: Mapping[str, Any] = field(default_factory=dict)
+
+
+def trainable(estimator: str) -> Trainable:
+    """The :class:`Trainable` of the registered ``estimator`` (ValueError when it has none)."""
+    from fkn_bench.estimators.registry import estimator_spec, estimator_specs
+
+    declared = estimator_spec(estimator).trainable
+    if declared is None:
+        names = ", ".join(s.name for s in estimator_specs() if s.trainable)
+        raise ValueError(f"estimator {estimator!r} is not trainable; trainable estimators: {names}")
+    return declared
+
+
+def options_with_file(options: Mapping[str, Any], *tables: str) -> dict[str, Any]:
+    """``options`` over the values of the TOML file named by option ``config`` (its first table
+    of ``tables`` that exists, else its top level); ``options`` without ``config`` as they are."""
+    options = dict(options)
+    path = options.pop("config", None)
+    if not path:
+        return options
+    try:
+        with Path(path).open("rb") as fh:
+            document = tomllib.load(fh)
+    except FileNotFoundError:
+        raise ValueError(f"config file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"config file {path} is not valid TOML: {exc}") from None
+    table = next((document[t] for t in tables if t in document), document)
+    return {**table, **options}
+
+
+@dataclass
+class TrainingOutcome:
+    """What a training run produced (``out`` is None for a run without files, e.g. a sweep trial)."""
+
+    estimator: str
+    model: NoiseModel
+    config: Any
+    scenario: Scenario
+    history: pd.DataFrame
+    best_epoch: int
+    best_loss: float
+    out: Path | None
+    test: dict[str, Any]
+    seconds: float
+    estimator_config: dict[str, Any]
+
+    @property
+    def checkpoint(self) -> Path:
+        return Path(self.out or ".") / "checkpoint.pt"
+
+    @property
+    def artifact(self) -> Path:
+        return Path(self.out or ".") / "parameters.json"
+
+    def best(self) -> dict[str, float]:
+        """The history row of the best epoch (empty before any epoch)."""
+        rows = self.history[self.history["epoch"] == self.best_epoch] if len(self.history) else self.history
+        return {str(k): float(v) for k, v in rows.iloc[0].items()} if len(rows) else {}
+
+    def summary(self) -> dict[str, Any]:
+        """What ``fkn-bench train`` reports."""
+        return {
+            "estimator": self.estimator,
+            "scenario": self.scenario.name,
+            "out": str(self.out),
+            "checkpoint": str(self.checkpoint),
+            "artifact": str(self.artifact),
+            "epochs_run": len(self.history),
+            "best_epoch": self.best_epoch,
+            "seconds": self.seconds,
+            **{k: self.estimator_config[k] for k in ("q_std", "r_std") if k in self.estimator_config},
+            **self.test,
+        }
+
+
+def split_metrics(model: NoiseModel, settings: TrainConfig, scenario: Scenario) -> dict[str, Any]:
+    """13-state RMSE (FlexKalmanNet's test loss) and per-component RMSE of the deployed
+    parameters on the test split of the data set, scored after the loss cut, with the scenario's
+    measurement schedule."""
+    from fkn_bench.envs import generate_episodes
+    from fkn_bench.types import STATE_NAMES
+
+    episode = generate_episodes(scenario, [scenario.dataset_seed], split="test")
+    cut = settings.loss_cut
+    with torch.no_grad(), torch_threads(settings.threads):
+        noise = model.parameter_set.to_noise(model.deployed_raw())
+        z, mask = torch.as_tensor(episode.measurements), torch.as_tensor(episode.valid)
+        result = make_filter(settings.variant).run(noise, z, mask, dt=scenario.dt, store_covariances=False, store_innovations=False)
+        truth = torch.as_tensor(episode.truth)
+        mse = float(state_mse(result.means, truth, cut))
+        per_component = aligned_state_error(result.means[:, cut:], truth[:, cut:]).square().mean((0, 1)).sqrt().numpy()
+    return {
+        "test_rmse": math.sqrt(mse),
+        "test_rmse_components": dict(zip(STATE_NAMES, np.round(per_component, 8).tolist())),
+        "test_seed": scenario.dataset_seed,
+        "loss_cut": cut,
+    }
+
+
+def fit(
+    estimator: str,
+    scenario: str | Scenario = "ds1",
+    config: Any = None,
+    *,
+    out: str | Path | None = None,
+    resume: bool = False,
+    progress: bool = True,
+    plots: bool = True,
+    on_epoch: OnEpoch | None = None,
+) -> TrainingOutcome:
+    """Train the registered trainable ``estimator`` on ``scenario``'s data set (module docstring).
+
+    Args:
+        estimator: registry name of a trainable estimator.
+        scenario: training scenario (name or object); its train and val splits are used, the
+            test split scores the result.
+        config: the estimator's training config, or options for its :attr:`Trainable.config`
+            (None: the defaults).
+        out: output directory (created); None: no files, no test metrics.
+        resume: continue from ``out/checkpoint.pt`` (same estimator, config and scenario).
+        progress: show a progress bar on stderr.
+        plots: write the two training figures.
+        on_epoch: ``on_epoch(epoch, history)`` after every epoch (and its checkpoint); see
+            :data:`~fkn_bench.training.trainer.OnEpoch`.
+    """
+    declared = trainable(estimator)
+    scenario = get_scenario(scenario)
+    config = declared.config(config or {}) if config is None or isinstance(config, Mapping) else config
+    settings: TrainConfig = config.train_config()
+    began = time.perf_counter()
+    data = training_data(scenario, settings)
+    model = declared.build(config, data)
+    trainer = Trainer(model, make_filter(settings.variant), data, settings)
+    directory = None if out is None else Path(out)
+    checkpoint = None if directory is None else directory / "checkpoint.pt"
+    if directory is not None:
+        directory.mkdir(parents=True, exist_ok=True)
+    if resume:
+        if checkpoint is None:
+            raise ValueError("resume=True needs out=DIR (the directory of the checkpoint to resume)")
+        document = load_checkpoint(checkpoint)
+        if document["estimator"] != estimator or document["config"] != config.to_dict():
+            raise CheckpointError(f"cannot resume {checkpoint}: it was trained with another estimator or a different config")
+        if document["scenario"] != scenario.to_dict():
+            raise CheckpointError(f"cannot resume {checkpoint}: it was trained on a different scenario")
+        trainer.load_state_dict(document["trainer"])
+
+    def save() -> None:
+        if checkpoint is not None:
+            save_checkpoint(checkpoint, {
+                "estimator": estimator,
+                "config": config.to_dict(),
+                "scenario": scenario.to_dict(),
+                "data": data.describe(),
+                "state_dict": model.state_dict(),
+                "trainer": trainer.state_dict(),
+                "deployed": model.parameter_set.to_dict(model.deployed_raw().detach()),
+                "best_epoch": trainer.best_epoch,
+                "provenance": run_provenance(),
+            })
+
+    def after_epoch(epoch: int, history: list[Any]) -> bool | None:
+        save()
+        return on_epoch(epoch, history) if on_epoch is not None else None
+
+    torch.manual_seed(settings.seed)
+    trainer.fit(on_epoch=after_epoch, progress=progress)  # restores the best epoch's weights
+    save()
+    history = pd.DataFrame([record.flat() for record in trainer.history])
+    outcome = TrainingOutcome(
+        estimator, model, config, scenario, history, trainer.best_epoch, trainer.best_loss, directory, {},
+        0.0, deployed_estimator_config(model, settings.variant),
+    )
+    outcome.seconds = time.perf_counter() - began
+    if directory is not None:
+        _write_outputs(outcome, declared, trainer, data, plots, began)
+    return outcome
+
+
+def _write_outputs(outcome: TrainingOutcome, declared: Trainable, trainer: Trainer, data: TrainingData, plots: bool,
+                   began: float) -> None:
+    from fkn_bench.training.plots import plot_losses, plot_parameters
+
+    history, name, scenario, out, settings = outcome.history, outcome.estimator, outcome.scenario, Path(outcome.out or "."), trainer.config
+    with atomic_path(out / "history.csv") as tmp:
+        history.to_csv(tmp, index=False)
+    if plots and len(history):
+        label = "innovation NLL" if settings.objective == "nll" else "13-state RMSE"
+        plot_losses(history, out / "loss.png", title=f"{name} on {scenario.name} ({label})", best_epoch=trainer.best_epoch)
+        plot_parameters(history, out / "parameters.png", title=f"{name}: learned standard deviations ({scenario.name})")
+    outcome.test = split_metrics(outcome.model, settings, scenario)
+    outcome.seconds = time.perf_counter() - began
+    training = {
+        "objective": settings.objective,
+        "optimizer": settings.optimizer,
+        "config": outcome.config.to_dict(),
+        "data": data.describe(),
+        "epochs_run": len(history),
+        "best_epoch": outcome.best_epoch,
+        "best_val_loss": outcome.best_loss,
+        "val_loss_is": "innovation NLL per update" if settings.objective == "nll" else "13-state RMSE",
+        **declared.notes,
+        "seconds_total": outcome.seconds,
+        "seconds_per_epoch": float(history["seconds"].mean()) if len(history) else None,
+        "loss_evaluations": trainer.evaluations if settings.optimizer == "lbfgs" else None,
+        **outcome.test,
+        "history": {str(c): history[c].tolist() for c in history.columns if c != "seconds"},
+    }
+    write_artifact(
+        outcome.artifact,
+        estimator=outcome.estimator,
+        family=scenario.model_family,
+        scenario={"name": scenario.name, "config_hash": scenario.config_hash()},
+        estimator_config=outcome.estimator_config,
+        parameters=outcome.model.parameter_set.to_dict(outcome.model.deployed_raw().detach()),
+        training=training,
+    )

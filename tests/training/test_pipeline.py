@@ -1,0 +1,87 @@
+"""The one training pipeline: any registered Trainable is trained by fit() (files, artefact,
+estimator), on_epoch sees every epoch and can stop it, and checkpoints are checked on reading."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from fkn_bench.estimators import make_estimator, registry
+from fkn_bench.filters import ParameterSet, make_filter
+from fkn_bench.scenarios import get_scenario
+from fkn_bench.training import DirectParameters, Trainable, TrainConfig, fit
+from fkn_bench.training.artifacts import TrainedKalmanEstimator, artifact_factory, read_artifact
+from fkn_bench.training.checkpoint import CHECKPOINT_FORMAT, CheckpointError, load_checkpoint
+
+SHORT = get_scenario("ds1", n_steps=2000)
+OPTIONS = {"window": 200, "loss_cut": 50, "episodes": 1, "epochs": 2, "lr": 0.05, "windows_per_batch": 4}
+NAME = "pipeline-test-ekf"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def registered() -> Iterator[None]:
+    """A third-party trainable estimator: a TrainConfig and free noise parameters."""
+    trainable = Trainable(
+        config=lambda options: TrainConfig(**{**OPTIONS, **options}),
+        build=lambda config, data: DirectParameters(ParameterSet(make_filter(config.variant).layout)),
+        notes={"origin": "test"},
+    )
+    registry.register_estimator(NAME, artifact_factory(NAME), trainable=trainable, overwrite=True)
+    yield
+    registry._REGISTRY.pop(NAME, None)
+
+
+def test_fit_trains_any_registered_trainable_estimator(tmp_path: Path) -> None:
+    outcome = fit(NAME, SHORT, {}, out=tmp_path, progress=False)
+    for name in ("checkpoint.pt", "history.csv", "loss.png", "parameters.png", "parameters.json"):
+        assert (tmp_path / name).is_file(), name
+    assert list(pd.read_csv(tmp_path / "history.csv")["epoch"]) == [1, 2]
+    artifact = read_artifact(outcome.artifact)
+    assert artifact["estimator"] == NAME and artifact["training"]["origin"] == "test"
+    assert artifact["training"]["history"]["epoch"] == [1, 2] and np.isfinite(artifact["training"]["test_rmse"])
+    estimator = make_estimator(NAME, scenario=SHORT, parameters=str(outcome.artifact))
+    assert isinstance(estimator, TrainedKalmanEstimator) and estimator.name == NAME
+    np.testing.assert_allclose(estimator.q_std, outcome.estimator_config["q_std"])
+    assert outcome.summary()["epochs_run"] == 2 and load_checkpoint(outcome.checkpoint)["estimator"] == NAME
+
+
+def test_on_epoch_sees_every_epoch_and_can_stop_the_training(tmp_path: Path) -> None:
+    seen: list[tuple[int, int]] = []
+
+    def on_epoch(epoch: int, history: list) -> bool:
+        seen.append((epoch, len(history)))
+        return epoch == 2
+
+    outcome = fit(NAME, SHORT, {"epochs": 5}, progress=False, on_epoch=on_epoch)
+    assert seen == [(1, 1), (2, 2)] and len(outcome.history) == 2 and outcome.out is None and outcome.test == {}
+    with pytest.raises(KeyboardInterrupt):  # an exception (e.g. optuna.TrialPruned) ends it and propagates
+        fit(NAME, SHORT, {}, out=tmp_path, progress=False, on_epoch=lambda epoch, history: (_ for _ in ()).throw(KeyboardInterrupt))
+    assert load_checkpoint(tmp_path / "checkpoint.pt")["trainer"]["history"][0]["epoch"] == 1  # saved before on_epoch
+    with pytest.raises(ValueError, match="not trainable"):
+        fit("manual-ekf", SHORT)
+
+
+def test_corrupt_and_foreign_checkpoints_are_refused(tmp_path: Path) -> None:
+    fit(NAME, SHORT, {"epochs": 1}, out=tmp_path, progress=False, plots=False)
+    checkpoint = tmp_path / "checkpoint.pt"
+    truncated = tmp_path / "truncated.pt"
+    truncated.write_bytes(checkpoint.read_bytes()[:1000])
+    with pytest.raises(CheckpointError, match="truncated or corrupt"):
+        load_checkpoint(truncated)
+    with pytest.raises(CheckpointError, match="not found"):
+        load_checkpoint(tmp_path / "missing.pt")
+    foreign = tmp_path / "foreign.pt"
+    torch.save({"weights": torch.zeros(3)}, foreign)
+    with pytest.raises(CheckpointError, match="not an fkn-bench checkpoint"):
+        load_checkpoint(foreign)
+    future = tmp_path / "future.pt"
+    torch.save({"format": CHECKPOINT_FORMAT, "format_version": 99}, future)
+    with pytest.raises(CheckpointError, match="version 99"):
+        load_checkpoint(future)
+    with pytest.raises(CheckpointError, match="different scenario"):
+        fit(NAME, get_scenario("ds1", n_steps=2400), {"epochs": 1}, out=tmp_path, resume=True, progress=False)
