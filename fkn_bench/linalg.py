@@ -1,5 +1,12 @@
-"""Linear-algebra helpers shared by the torch filters and the numpy code (lowest layer: no
-imports from the rest of the package).
+"""Linear-algebra helpers shared by the filters and the numpy code (lowest layer: no imports from
+the rest of the package), and the small dispatch that lets one function run on numpy arrays
+(online, one sequence) and on torch tensors (batched, differentiable).
+
+The models and filter steps are written once against the API that numpy (2.x) and torch share
+(``@``, slicing, ``xp.concat``, ``xp.stack``, ``xp.where``, ``xp.sqrt``, ``axis=``/``keepdims=``
+keywords, ``swapaxes``): :func:`namespace` gives ``xp`` (the ``numpy`` or ``torch`` module) for
+an array. Where torch has a fused operation the batched path relies on for its speed
+(``addmm``/``baddbmm``, ``inv_ex``), a helper here dispatches to it.
 
 A covariance built from a product (``L L^T``, ``F P F^T + Q``, a Joseph update, a sigma-point
 sum) is symmetric only to rounding: ``(A B)_ij`` and ``(A B)_ji`` are different sums of products,
@@ -10,15 +17,26 @@ makes it symmetric bit for bit on any machine.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, TypeVar
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numpy as np
 
 if TYPE_CHECKING:
-    import numpy as np
     import torch
 
-__all__ = ["symmetrize"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "spd_inverse", "cholesky", "eye", "constant"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
+
+
+def namespace(x: Any) -> ModuleType:
+    """``numpy`` for a numpy array, else ``torch`` (the array namespace ``xp`` of ``x``)."""
+    if isinstance(x, np.ndarray):
+        return np
+    import torch
+
+    return torch
 
 
 def symmetrize(M: Matrices) -> Matrices:
@@ -31,3 +49,88 @@ def symmetrize(M: Matrices) -> Matrices:
     out = M + M.swapaxes(-1, -2)
     out *= 0.5  # in place on the fresh sum: one temporary less (autograd-safe: add keeps no output)
     return out
+
+
+def add_matmul(C: Matrices, A: Matrices, B: Matrices) -> Matrices:
+    """``C + A @ B`` (torch: the fused ``addmm``/``baddbmm``; ``C`` broadcasts)."""
+    if isinstance(A, np.ndarray):
+        return C + A @ B
+    import torch
+
+    if A.dim() == 2:
+        return torch.addmm(C, A, B)
+    if A.dim() == 3:
+        return torch.baddbmm(C, A, B)
+    return C + A @ B
+
+
+def spd_inverse(S: Matrices) -> Matrices:
+    """Inverse of a batch of symmetric positive definite matrices ``(B, m, m)``. numpy: LAPACK's
+    Cholesky solver per row, ``numpy.linalg.LinAlgError`` when a matrix is not positive definite;
+    torch: ``inv_ex`` (no error check: no synchronisation, and a batch keeps running)."""
+    if isinstance(S, np.ndarray):
+        from scipy.linalg import lapack
+
+        if S.shape[0] > 64:  # large batches: one batched call (the same result to rounding)
+            np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
+            return np.linalg.inv(S)
+        identity = np.eye(S.shape[-1])
+        out = np.empty(S.shape)
+        for row in range(S.shape[0]):
+            _, out[row], info = lapack.dposv(S[row], identity, lower=1)
+            if info != 0:
+                raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
+        return out
+    import torch
+
+    return torch.linalg.inv_ex(S)[0]
+
+
+def cholesky(S: Matrices) -> tuple[Matrices, Any]:
+    """Lower Cholesky factors of a batch ``(B, k, k)`` and a ``(B,)`` bool array, True where the
+    factorisation failed (torch: ``cholesky_ex``; numpy: LAPACK per row). Failed rows hold
+    garbage."""
+    if isinstance(S, np.ndarray):
+        from scipy.linalg import lapack
+
+        L = np.empty(S.shape, dtype=S.dtype)
+        failed = np.zeros(S.shape[0], dtype=bool)
+        for row in range(S.shape[0]):
+            L[row], info = lapack.dpotrf(S[row], lower=1, clean=1)
+            failed[row] = info != 0
+        return L, failed
+    import torch
+
+    L, info = torch.linalg.cholesky_ex(S)
+    return L, info != 0
+
+
+_CONSTANTS: dict[tuple, Any] = {}
+
+
+def constant(like: Any, key: Any, make: Any, cache: dict | None = None) -> Any:
+    """A cached constant array in the namespace and dtype of ``like``: ``make()`` (a float64
+    numpy array) converted once per (namespace, dtype, key), in ``cache`` (an object's own dict
+    for constants of that object) or a module cache bounded to 256 entries (irregular online
+    intervals must not grow it)."""
+    store = _CONSTANTS if cache is None else cache
+    full = (type(like), like.dtype, key)
+    value = store.get(full)
+    if value is None:
+        if len(store) >= 256:
+            store.clear()
+        array = make()
+        if isinstance(like, np.ndarray):
+            value = array.astype(like.dtype, copy=False)
+            value.flags.writeable = False
+        else:
+            import torch
+
+            value = torch.from_numpy(np.ascontiguousarray(array)).to(like.dtype)
+        store[full] = value
+    return value
+
+
+def eye(like: Any, n: int) -> Any:
+    """The ``n x n`` identity in the namespace and dtype of ``like`` (cached, read-only)."""
+    return constant(like, ("eye", n), lambda: np.eye(n))

@@ -1,29 +1,22 @@
 """Kalman-filter estimators with constant noise parameters (any variant of the filter core).
 
 :class:`KalmanEstimator` runs ``ekf``, ``ukf`` or ``mekf`` with fixed standard deviations of
-``Q``, ``R`` and ``P0`` (in the variant's layout). Batch ``estimate`` runs the torch core; online
-``step`` runs the lean numpy EKF (:mod:`fkn_bench.filters.online_ekf`) for the EKF and the torch
-core one step at a time for the other variants. Both paths follow the same rules and agree to
-1e-12.
-
-Online time handling: steps are taken ``dt`` apart. When an observation carries a ``time``, it
-must increase; an interval that differs from ``dt`` by more than 1e-6 s is predicted over its
-actual length.
+``Q``, ``R`` and ``P0`` (in the variant's layout). Batch ``estimate`` runs the variant on torch tensors;
+online ``step`` runs the same step functions on numpy arrays of one sequence (the shared online
+recursion of :class:`~fkn_bench.estimators.base.RecursiveEstimator`: time handling,
+initialisation, skipped updates). Both paths agree to 1e-12.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import torch
 
-from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, check_dt, parse_observation
+from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
 from fkn_bench.filters import VARIANTS, FilterState, KalmanFilter, NoiseParameters, make_filter
-from fkn_bench.filters import online_ekf
 from fkn_bench.filters.base import FilterResult
 from fkn_bench.filters.pose import (
     error_covariance_from_state,
@@ -36,17 +29,6 @@ from fkn_bench.runtime import torch_threads
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["KalmanEstimator", "filter_result_to_estimates"]
-
-_TIME_TOLERANCE = 1e-6
-
-
-@dataclass(frozen=True)
-class _OnlineState:
-    time: float
-    x: ArrayF
-    P: ArrayF
-    initialised: bool
-
 
 def filter_result_to_estimates(result: FilterResult, variant: KalmanFilter) -> Estimates:
     """Convert a torch :class:`FilterResult` of a pose filter to numpy :class:`Estimates`."""
@@ -79,7 +61,7 @@ def filter_result_to_estimates(result: FilterResult, variant: KalmanFilter) -> E
     )
 
 
-class KalmanEstimator(Estimator):
+class KalmanEstimator(RecursiveEstimator):
     """A filter variant with constant noise parameters.
 
     Keyword-only arguments:
@@ -128,8 +110,6 @@ class KalmanEstimator(Estimator):
         self._numpy_noise = tuple(matrices)
         self.name = name
         self.description = description
-        self._dt: float | None = None
-        self._online: _OnlineState | None = None
 
     @property
     def q_std(self) -> ArrayF:
@@ -177,62 +157,20 @@ class KalmanEstimator(Estimator):
         return filter_result_to_estimates(result, self.filter)
 
     # ------------------------------------------------------------------ online
-    def reset(self, *, dt: float) -> None:
-        self._dt = check_dt(dt)
-        self._online = None
+    def _online_prior(self) -> FilterState:
+        return self.filter.prior(1, self._numpy_noise[2], np.float64)
 
-    def _predict(self, x: ArrayF, P: ArrayF, dt: float) -> tuple[ArrayF, ArrayF]:
-        Q = self._numpy_noise[0]
-        if self.variant_name == "ekf":
-            return online_ekf.predict(x, P, Q, dt)
-        with torch.no_grad():  # torch.tensor copies: P is shared read-only with the last Estimate
-            state = self.filter.predict(FilterState(torch.tensor(x)[None], torch.tensor(P)[None]), torch.tensor(Q), dt)
-        return state.mean[0].numpy(), state.covariance[0].numpy()  # symmetrised by predict
+    def _online_predict(self, state: FilterState, dt: float) -> FilterState:
+        return self.filter.predict(state, self._numpy_noise[0], dt)
 
-    def _update(self, x: ArrayF, P: ArrayF, z: ArrayF) -> tuple[ArrayF, ArrayF]:
-        R = self._numpy_noise[1]
-        if self.variant_name == "ekf":
-            x, P, _, _ = online_ekf.update(x, P, z, R)
-            return x, P
-        with torch.no_grad():
-            state, _, _ = self.filter.update(
-                FilterState(torch.tensor(x)[None], torch.tensor(P)[None]), torch.tensor(z)[None], torch.tensor(R)
-            )
-        return state.mean[0].numpy(), state.covariance[0].numpy()  # symmetrised by update
+    def _online_initial(self, state: FilterState, z: ArrayF) -> FilterState:
+        return self.filter.initial_state(z, self._numpy_noise[2])
 
-    def step(self, observation: Any) -> Estimate:
-        if self._dt is None:
-            raise RuntimeError("call reset(dt=...) before step()")
-        pose, time = parse_observation(observation)
-        z = None if pose is None else online_ekf.sanitize_measurement(pose)
-        previous = self._online
-        if previous is None:
-            now = 0.0 if time is None else time
-            x = np.zeros(13)
-            x[0] = 1.0
-            P = self._numpy_noise[2]
-            initialised = False
-        else:
-            now = previous.time + self._dt if time is None else time
-            interval = now - previous.time
-            if interval <= 0:
-                raise ValueError(f"observation time {now} does not increase (previous {previous.time})")
-            if abs(interval - self._dt) <= _TIME_TOLERANCE:
-                interval = self._dt
-            x, P = self._predict(previous.x, previous.P, interval)
-            initialised = previous.initialised
-        updated = False
-        if z is not None:
-            if not initialised:
-                x, P, initialised = online_ekf.initial_state(z), self._numpy_noise[2], True
-            else:
-                x, P = self._update(x, P, z)
-                updated = True
-        # x and P are fresh arrays (the filter functions are pure): share P read-only
-        self._online = _OnlineState(now, x, P, initialised)
-        mean = x.copy()
-        mean[0:4] /= math.sqrt(mean[0:4] @ mean[0:4])
-        return Estimate(time=now, mean=mean, native_covariance=P, initialised=initialised, updated=updated)
+    def _online_update(self, state: FilterState, z: ArrayF) -> FilterState:
+        return self.filter.update(state, z, self._numpy_noise[1])[0]
+
+    def _online_report(self, state: FilterState) -> tuple[ArrayF, ArrayF]:
+        return state.mean[0], state.covariance[0]  # fresh arrays (the steps are pure) or P0's view
 
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:

@@ -22,7 +22,7 @@ import torch
 from torch import Tensor
 
 from fkn_bench.flexkalmannet.network import FlexKalmanNet
-from fkn_bench.geometry import quaternion_torch as qt
+from fkn_bench.geometry import quaternion_xp as qt
 from fkn_bench.linalg import symmetrize
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import aligned_state_error
