@@ -25,7 +25,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["symmetrize", "namespace", "add_matmul", "spd_inverse", "cholesky", "eye", "constant"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "spd_inverse", "cholesky", "eye", "constant"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
 
@@ -64,6 +64,16 @@ def add_matmul(C: Matrices, A: Matrices, B: Matrices) -> Matrices:
     return C + A @ B
 
 
+def broadcast(x: Matrices, shape: tuple[int, ...]) -> Matrices:
+    """``x`` broadcast to ``shape``: a view in torch (``expand``); in numpy a fresh array (faster
+    than ``numpy.broadcast_to`` at the sizes of one online step)."""
+    if isinstance(x, np.ndarray):
+        out = np.empty(shape, dtype=x.dtype)
+        out[...] = x
+        return out
+    return x.expand(shape)
+
+
 def spd_inverse(S: Matrices) -> Matrices:
     """Inverse of a batch of symmetric positive definite matrices ``(B, m, m)``. numpy: LAPACK's
     Cholesky solver per row, ``numpy.linalg.LinAlgError`` when a matrix is not positive definite;
@@ -74,7 +84,7 @@ def spd_inverse(S: Matrices) -> Matrices:
         if S.shape[0] > 64:  # large batches: one batched call (the same result to rounding)
             np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
             return np.linalg.inv(S)
-        identity = np.eye(S.shape[-1])
+        identity = eye(S, S.shape[-1])
         out = np.empty(S.shape)
         for row in range(S.shape[0]):
             _, out[row], info = lapack.dposv(S[row], identity, lower=1)

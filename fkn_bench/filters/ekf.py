@@ -21,9 +21,11 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
-from fkn_bench.linalg import add_matmul, eye, namespace, spd_inverse, symmetrize
+from fkn_bench.linalg import add_matmul, broadcast, eye, namespace, spd_inverse, symmetrize
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
 
@@ -65,15 +67,23 @@ def joseph_update(
     block = N = None
     if normalize is not None:
         x_post, block, N = normalize(x_post)
+    # T K and T A = T - (T K) H with T the identity but for the block N
+    if isinstance(x, np.ndarray):  # numpy (online): in place on fresh arrays
+        TA = broadcast(eye(x, n), (batch, n, n))
+        if block is not None and N is not None:
+            TK = K.copy()
+            TK[:, block] = N @ K[:, block]
+            TA[:, block, block] = N
+        if observed is not None:
+            TA[:, :, observed] -= TK
+        else:
+            TA -= TK @ H
+    else:  # torch: out of place (autograd)
         if block is not None and N is not None:
             TK = xp.concat((K[:, : block.start], N @ K[:, block], K[:, block.stop :]), axis=1)
-    # T A = T - (T K) H with T the identity but for the block N
-    T = _projection_matrix(block, N, x, batch, n)
-    if observed is not None:
-        TA = T - _pad_columns(TK, observed, n)
-    else:
-        TA = T - TK @ H
-    P_post = add_matmul(TA @ P @ TA.swapaxes(1, 2), TK @ xp.broadcast_to(R, (batch,) + tuple(R.shape[-2:])), TK.swapaxes(1, 2))
+        T = _projection_matrix(block, N, x, batch, n)
+        TA = T - (_pad_columns(TK, observed, n) if observed is not None else TK @ H)
+    P_post = add_matmul(TA @ P @ TA.swapaxes(1, 2), TK @ R, TK.swapaxes(1, 2))
     return x_post, symmetrize(P_post), S, K
 
 
@@ -123,8 +133,7 @@ def ekf_predict(model: StateSpaceModel, state: FilterState, process_noise: Array
     """``x- = f(x+)``, ``P- = F P+ F^T + Q`` (symmetrised); ``Q`` is ``(k, k)`` or ``(B, k, k)``."""
     mean, F = model.transition(state.mean, dt)
     FP = F @ state.covariance
-    Q = namespace(FP).broadcast_to(process_noise, FP.shape)
-    return FilterState(mean, symmetrize(add_matmul(Q, FP, F.swapaxes(1, 2))))
+    return FilterState(mean, symmetrize(add_matmul(process_noise, FP, F.swapaxes(1, 2))))
 
 
 class ExtendedKalmanFilter(KalmanFilter):

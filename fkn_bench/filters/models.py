@@ -27,7 +27,7 @@ import numpy as np
 
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import add_matmul, constant, namespace
+from fkn_bench.linalg import add_matmul, broadcast, constant, namespace
 from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES, STATE_UNITS
 
 __all__ = ["StateSpaceModel", "PoseTwistModel", "LinearGaussianModel", "PAPER_MANUAL_LAYOUT"]
@@ -191,33 +191,34 @@ class PoseTwistModel(StateSpaceModel):
         basis = constant(x, ("pose-basis", dt), lambda: (0.5 * dt) * _POSE_BASIS)
         E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
         increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
-        mean = add_matmul(xp.concat((increment, xp.broadcast_to(_zeros(x, (1, 9)), (batch, 9))), axis=1), x, At)
-        F = xp.concat((A[0:4] + E, xp.broadcast_to(A[4:13], (batch, 9, 13))), axis=1)
+        mean = add_matmul(xp.concat((increment, _zeros(x, (batch, 9))), axis=1), x, At)
+        F = xp.concat((A[0:4] + E, broadcast(A[4:13], (batch, 9, 13))), axis=1)
         return mean, F
 
     def sanitize(self, measurements: Array, mask: Array) -> tuple[Array, Array]:
         xp = namespace(measurements)
-        finite = xp.all(xp.isfinite(measurements), axis=-1)
-        z = xp.where(finite[..., None], measurements, 0.0)
-        with np.errstate(over="ignore", invalid="ignore"):
-            norm = xp.sqrt(xp.sum(z[..., :4] * z[..., :4], axis=-1, keepdims=True))
-            # a norm that overflows (components ~1e155 and up) leaves no usable direction either
-            usable = mask & finite & (norm[..., 0] >= self.min_quaternion_norm) & xp.isfinite(norm[..., 0])
-            q = xp.where(usable[..., None], z[..., :4] / xp.clip(norm, self.min_quaternion_norm, None), z[..., :4])
-        z = xp.concat((q, z[..., 4:]), axis=-1)
+        finite = xp.isfinite(measurements).all(-1)
+        z = measurements if bool(finite.all()) else xp.where(finite[..., None], measurements, 0.0)
+        norm = xp.sqrt((z[..., :4] * z[..., :4]).sum(-1, keepdims=True))
+        # a norm that overflows (components ~1e155 and up) leaves no usable direction either
+        usable = mask & finite & (norm[..., 0] >= self.min_quaternion_norm) & (norm[..., 0] < float("inf"))
+        q = z[..., :4] / xp.where(norm < self.min_quaternion_norm, self.min_quaternion_norm, norm)
+        if bool(usable.all()):
+            return xp.concat((q, z[..., 4:]), axis=-1), usable
+        z = xp.concat((xp.where(usable[..., None], q, z[..., :4]), z[..., 4:]), axis=-1)
         return xp.where(usable[..., None], z, 0.0), usable
 
     def align(self, z: Array, x_pred: Array) -> Array:
-        xp = namespace(z)
-        # copysign(1, z_q . q-) is -1 where the measured quaternion points away from the prediction
+        # the measured quaternion is flipped where it points away from the prediction: where
+        # z_q . q- has its sign bit set (copysign(1, z_q . q-) = -1)
         dot = (z[:, None, 0:4] @ x_pred[:, 0:4, None])[:, :, 0]
-        sign = xp.copysign(xp.ones_like(dot), dot)
-        return z * xp.concat((xp.broadcast_to(sign, (z.shape[0], 4)), xp.ones_like(z[:, 4:])), axis=1)
+        flip = constant(z, "pose-flip", lambda: np.array([-1.0] * 4 + [1.0] * 3))
+        return namespace(z).where(namespace(z).signbit(dot), z * flip, z)
 
     def normalize(self, x: Array) -> tuple[Array, slice | None, Array | None]:
         xp = namespace(x)
         q = x[:, :4]
-        norm = xp.sqrt(xp.sum(q * q, axis=1, keepdims=True))
+        norm = xp.sqrt((q * q).sum(1, keepdims=True))
         unit = q / norm
         N = (constant(x, ("eye", 4), lambda: np.eye(4)) - unit[:, :, None] * unit[:, None, :]) / norm[:, :, None]
         return xp.concat((unit, x[:, 4:]), axis=1), slice(0, 4), N  # N = (I - u u^T) / |q|

@@ -95,6 +95,7 @@ def _sanitized(z: np.ndarray) -> np.ndarray | None:
     return out[0] if usable[0] else None
 
 
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 def test_numpy_sanitize() -> None:
     np.testing.assert_allclose(_sanitized(np.array([0.0, 3.0, 0.0, 4.0, 1.0, 2.0, 3.0])), [0, 0.6, 0, 0.8, 1, 2, 3])
     assert _sanitized(np.array([np.nan] + [0.0] * 6)) is None
