@@ -30,7 +30,7 @@ from fkn_bench.filters.ekf import joseph_update
 from fkn_bench.filters.models import PoseTwistModel
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import add_matmul, constant, eye, namespace, symmetrize
+from fkn_bench.linalg import add_matmul, broadcast, constant, eye, namespace, symmetrize
 from fkn_bench.types import ERROR_NAMES
 
 __all__ = ["MultiplicativeEKF", "MEKF_MANUAL_LAYOUT", "left_jacobian"]
@@ -58,7 +58,7 @@ MEKF_MANUAL_LAYOUT = NoiseLayout(
 def left_jacobian(phi: Array) -> Array:
     """Left Jacobian of SO(3) ``(..., 3, 3)``: ``I + (1 - cos a)/a^2 [phi x] + (a - sin a)/a^3 [phi x]^2``."""
     xp = namespace(phi)
-    a2 = xp.sum(phi * phi, axis=-1, keepdims=True)[..., None]
+    a2 = (phi * phi).sum(-1, keepdims=True)[..., None]
     small = a2 < 1e-8
     safe = xp.where(small, 1.0, a2)
     a = xp.sqrt(safe)
@@ -86,23 +86,24 @@ class MultiplicativeEKF(KalmanFilter):
     def innovation_dim(self) -> int:
         return 6
 
-    def _transition(self, x: Array, dt: float) -> Array:
+    def _transition(self, x: Array, dq: Array, dt: float) -> Array:
+        """The error transition ``Phi (B, 12, 12)`` over ``dt``; ``dq = exp(w dt / 2)``."""
         xp = namespace(x)
         batch = x.shape[0]
-        phi = dt * x[:, 7:10]
-        zeros = xp.broadcast_to(xp.zeros((1, 3, 3), dtype=x.dtype), (batch, 3, 3))
-        top = xp.concat((qx.rotation_matrix(qx.from_rotation_vector(phi)), zeros, dt * left_jacobian(phi), zeros), axis=2)
+        zeros = xp.zeros((batch, 3, 3), dtype=x.dtype)
+        top = xp.concat((qx.rotation_matrix(dq), zeros, dt * left_jacobian(dt * x[:, 7:10]), zeros), axis=2)
         lower = constant(x, ("mekf-lower", float(dt)), lambda: _lower_rows(float(dt)))
-        return xp.concat((top, xp.broadcast_to(lower, (batch, 9, 12))), axis=1)
+        return xp.concat((top, broadcast(lower, (batch, 9, 12))), axis=1)
 
     def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
         x, P = state.mean, state.covariance
         xp = namespace(x)
-        Phi = self._transition(x, dt)
-        q = qx.multiply(qx.from_rotation_vector(dt * x[:, 7:10]), x[:, 0:4])
+        dq = qx.from_rotation_vector(dt * x[:, 7:10])
+        Phi = self._transition(x, dq, dt)
+        q = qx.multiply(dq, x[:, 0:4])
         mean = xp.concat((q, x[:, 4:7] + dt * x[:, 10:13], x[:, 7:]), axis=1)
         PhiP = Phi @ P
-        P_pred = add_matmul(xp.broadcast_to(process_noise, PhiP.shape), PhiP, Phi.swapaxes(1, 2))
+        P_pred = add_matmul(process_noise, PhiP, Phi.swapaxes(1, 2))
         return FilterState(mean, symmetrize(P_pred))
 
     def update(self, state: FilterState, z: Array, measurement_noise: Array) -> tuple[FilterState, Array, Array]:
@@ -119,7 +120,7 @@ class MultiplicativeEKF(KalmanFilter):
         # P_post comes back symmetrised (the reset's G P G^T is part of joseph_update's product)
         dx, P_post, S, _ = joseph_update(error, P, nu, measurement_noise, observed=slice(0, 6), normalize=reset)
         q_post = qx.multiply(qx.from_rotation_vector(dx[:, 0:3]), q)
-        q_post = q_post / xp.sqrt(xp.sum(q_post * q_post, axis=1, keepdims=True))
+        q_post = q_post / xp.sqrt((q_post * q_post).sum(1, keepdims=True))
         mean = xp.concat((q_post, x[:, 4:] + dx[:, 3:]), axis=1)
         return FilterState(mean, P_post), nu, S
 
