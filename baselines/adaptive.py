@@ -52,13 +52,12 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.linalg import lapack
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
+from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
 from fkn_bench.filters.base import FilterState
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
-from fkn_bench.filters.pose import error_covariance_from_state, pose_innovation, with_unit_quaternion
 from fkn_bench.linalg import symmetrize
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -84,26 +83,6 @@ Noise = dict[str, ArrayF]
 def outer(a: ArrayF) -> ArrayF:
     """``a a^T`` for vectors ``(B, k)`` -> ``(B, k, k)``."""
     return a[:, :, None] * a[:, None, :]
-
-
-SOLVE_LOOP_ROWS = 64
-"""Batches up to this many rows solve ``S X = M`` row by row with LAPACK's Cholesky solver
-(``dposv``), so that a batch row and the same sequence stepped online run identical arithmetic;
-larger batches use one batched ``numpy.linalg.solve`` (the same result to rounding)."""
-
-
-def solve_spd(S: ArrayF, M: ArrayF) -> ArrayF:
-    """``S^-1 M`` for symmetric positive definite ``S (b, m, m)`` and ``M (b, m, k)``; raises
-    ``numpy.linalg.LinAlgError`` when some ``S`` is not positive definite."""
-    batch = S.shape[0]
-    if batch > SOLVE_LOOP_ROWS:
-        return np.linalg.solve(S, M)
-    out = np.empty(M.shape)
-    for row in range(batch):
-        _, out[row], info = lapack.dposv(S[row], M[row], lower=1)
-        if info != 0:
-            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
-    return out
 
 
 _TEMPLATES: dict[int, ArrayF] = {}
@@ -310,12 +289,7 @@ def _put(noise: Mapping[str, ArrayF], rows: ArrayF, values: Mapping[str, ArrayF]
 
 
 def _std_matrix(name: str, values: Sequence[float] | None, default: Sequence[float]) -> ArrayF:
-    array = np.array(default if values is None else values, dtype=float)
-    if array.shape != (len(default),):
-        raise ValueError(f"{name} needs {len(default)} values (got shape {array.shape})")
-    if not np.all(np.isfinite(array)) or np.any(array <= 0):
-        raise ValueError(f"{name} values must be finite and > 0 (got {array.tolist()})")
-    return np.diag(array * array)
+    return np.diag(np.square(KalmanEstimator._check_std(name, values, default)))
 
 
 class AdaptiveKalmanFilter:
@@ -344,6 +318,14 @@ class AdaptiveKalmanFilter:
         self.Q0 = _std_matrix("q_std", q_std, layout.q_default)
         self.R0 = _std_matrix("r_std", r_std, layout.r_default)
         self.P0 = _std_matrix("p0_std", p0_std, layout.p0_default)
+
+    @property
+    def covariance_dim(self) -> int:
+        return self.model.state_dim
+
+    @property
+    def innovation_dim(self) -> int:
+        return self.model.measurement_dim
 
     def initial_state(self, batch: int) -> AdaptiveState:
         """``batch`` sequences before their first measurement (the model's prior, ``P0``)."""
@@ -501,22 +483,8 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
 
     # ------------------------------------------------------------------ batch
     def _estimates(self, result: AdaptiveResult) -> Estimates:
-        means = with_unit_quaternion(result.means)
-        covariances = result.covariances
-        innovations, innovation_covs = pose_innovation(result.prior_means[..., 0:4], result.innovations, result.innovation_covariances)
-        extras = {"r_diag": result.r_diag}
-        if result.q_diag is not None:
-            extras["q_diag"] = result.q_diag
-        return Estimates(
-            means=means,
-            covariances=covariances,
-            error_covariances=error_covariance_from_state(means[..., 0:4], covariances),
-            innovations=innovations,
-            innovation_covariances=innovation_covs,
-            innovation_mask=result.updated,
-            initialised=result.initialised,
-            extras=extras,
-        )
+        extras = {"r_diag": result.r_diag} if result.q_diag is None else {"r_diag": result.r_diag, "q_diag": result.q_diag}
+        return filter_result_to_estimates(result, self.filter, extras=extras)
 
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)

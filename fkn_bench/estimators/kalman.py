@@ -16,8 +16,7 @@ import numpy as np
 import torch
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
-from fkn_bench.filters import VARIANTS, FilterState, KalmanFilter, NoiseParameters, make_filter
-from fkn_bench.filters.base import FilterResult
+from fkn_bench.filters import VARIANTS, FilterState, NoiseParameters, make_filter
 from fkn_bench.filters.pose import (
     error_covariance_from_state,
     pose_innovation,
@@ -30,34 +29,31 @@ from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["KalmanEstimator", "filter_result_to_estimates"]
 
-def filter_result_to_estimates(result: FilterResult, variant: KalmanFilter) -> Estimates:
-    """Convert a torch :class:`FilterResult` of a pose filter to numpy :class:`Estimates`."""
-    means = with_unit_quaternion(result.means.detach().numpy())
+def filter_result_to_estimates(result: Any, variant: Any, *, extras: Mapping[str, ArrayF] | None = None) -> Estimates:
+    """Convert the result of a pose filter's ``run`` (a torch :class:`FilterResult`, or the numpy
+    result of an adaptive filter: the same fields) to numpy :class:`Estimates`; ``variant`` gives
+    ``covariance_dim`` (13 or 12) and ``innovation_dim`` (7 or 6)."""
+    numpy = lambda a: None if a is None else a.detach().numpy() if hasattr(a, "detach") else a  # noqa: E731
+    means = with_unit_quaternion(numpy(result.means))
     q = means[..., :4]
-    covariances = error_covariances = None
-    if result.covariances is not None:
-        native = result.covariances.detach().numpy()
+    covariances = error_covariances = native = numpy(result.covariances)
+    if native is not None:
         if variant.covariance_dim == 12:
-            error_covariances, covariances = native, state_covariance_from_error(q, native)
+            covariances = state_covariance_from_error(q, native)
         else:
-            covariances, error_covariances = native, error_covariance_from_state(q, native)
-    innovations = innovation_covariances = None
-    if result.innovations is not None and result.innovation_covariances is not None:
-        nu = result.innovations.detach().numpy()
-        S = result.innovation_covariances.detach().numpy()
-        if variant.innovation_dim == 6:
-            innovations, innovation_covariances = nu, S
-        else:
-            assert result.prior_means is not None
-            innovations, innovation_covariances = pose_innovation(result.prior_means.detach().numpy()[..., :4], nu, S)
+            error_covariances = error_covariance_from_state(q, native)
+    innovations, innovation_covariances = numpy(result.innovations), numpy(result.innovation_covariances)
+    if innovations is not None and variant.innovation_dim != 6:
+        innovations, innovation_covariances = pose_innovation(numpy(result.prior_means)[..., :4], innovations, innovation_covariances)
     return Estimates(
         means=means,
         covariances=covariances,
         error_covariances=error_covariances,
         innovations=innovations,
         innovation_covariances=innovation_covariances,
-        innovation_mask=result.updated.numpy(),
-        initialised=result.initialised.numpy(),
+        innovation_mask=numpy(result.updated),
+        initialised=numpy(result.initialised),
+        extras=dict(extras or {}),
     )
 
 
