@@ -280,8 +280,8 @@ class RecursiveEstimator(Estimator):
     The sequence initialises at its first usable measurement (:meth:`_online_initial`; that
     measurement is not used again in an update); later usable measurements update.
 
-    Subclasses implement the ``_online_*`` hooks on their filter's state; measurements reach
-    them sanitised, as ``(1, 7)`` arrays.
+    The ``_online_*`` hooks step a filter variant on numpy arrays by default; subclasses with
+    another filter state override them. Measurements reach them sanitised, as ``(1, 7)`` arrays.
     """
 
     _dt: float | None = None
@@ -329,25 +329,29 @@ class RecursiveEstimator(Estimator):
     def _online_observe(self, z: ArrayF | None) -> None:
         """Called first in every step with the sanitised measurement (None when unusable)."""
 
-    @abstractmethod
+    # default hooks: a filter variant (``self.filter``, a :class:`~fkn_bench.filters.KalmanFilter`)
+    # stepped on numpy arrays with the step's noise ``self._online_noise = (Q, R, P0)``
+    _online_noise: tuple[ArrayF, ArrayF, ArrayF]
+
     def _online_prior(self) -> Any:
         """The filter state before the first step's measurement."""
+        return self.filter.prior(1, self._online_noise[2], np.float64)  # type: ignore[attr-defined]
 
-    @abstractmethod
     def _online_predict(self, state: Any, dt: float) -> Any:
         """The state predicted over ``dt`` seconds."""
+        return self.filter.predict(state, self._online_noise[0], dt)  # type: ignore[attr-defined]
 
-    @abstractmethod
     def _online_initial(self, state: Any, z: ArrayF) -> Any:
         """The state initialised from the first usable measurement."""
+        return self.filter.initial_state(z, self._online_noise[2])  # type: ignore[attr-defined]
 
-    @abstractmethod
     def _online_update(self, state: Any, z: ArrayF) -> Any:
         """The state updated with a usable measurement."""
+        return self.filter.update(state, z, self._online_noise[1])[0]  # type: ignore[attr-defined]
 
-    @abstractmethod
     def _online_report(self, state: Any) -> tuple[ArrayF, ArrayF]:
-        """The mean ``(13,)`` and the native covariance (read-only, not modified later)."""
+        """The mean ``(13,)`` and the native covariance (read-only: the steps are pure)."""
+        return state.mean[0], state.covariance[0]
 
 
 _ONE = np.ones(1, dtype=bool)

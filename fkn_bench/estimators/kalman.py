@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
-from fkn_bench.filters import VARIANTS, FilterState, NoiseParameters, make_filter
+from fkn_bench.filters import VARIANTS, NoiseParameters, make_filter
 from fkn_bench.filters.pose import (
     error_covariance_from_state,
     pose_innovation,
@@ -103,7 +103,7 @@ class KalmanEstimator(RecursiveEstimator):
             else:
                 matrices.append(np.diag(np.square(self._check_std(f"{entry}_std", std, default))))
                 self._given[entry] = "std"
-        self._numpy_noise = tuple(matrices)
+        self._numpy_noise = self._online_noise = tuple(matrices)
         self.name = name
         self.description = description
 
@@ -151,22 +151,6 @@ class KalmanEstimator(RecursiveEstimator):
         with torch.no_grad(), torch_threads():
             result = self.filter.run(self.noise_parameters(), torch.from_numpy(z), torch.from_numpy(m), dt=step)
         return filter_result_to_estimates(result, self.filter)
-
-    # ------------------------------------------------------------------ online
-    def _online_prior(self) -> FilterState:
-        return self.filter.prior(1, self._numpy_noise[2], np.float64)
-
-    def _online_predict(self, state: FilterState, dt: float) -> FilterState:
-        return self.filter.predict(state, self._numpy_noise[0], dt)
-
-    def _online_initial(self, state: FilterState, z: ArrayF) -> FilterState:
-        return self.filter.initial_state(z, self._numpy_noise[2])
-
-    def _online_update(self, state: FilterState, z: ArrayF) -> FilterState:
-        return self.filter.update(state, z, self._numpy_noise[1])[0]
-
-    def _online_report(self, state: FilterState) -> tuple[ArrayF, ArrayF]:
-        return state.mean[0], state.covariance[0]  # fresh arrays (the steps are pure) or P0's view
 
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:

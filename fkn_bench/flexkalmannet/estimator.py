@@ -21,7 +21,7 @@ import torch
 
 from fkn_bench.estimators.base import Estimates, Estimator, RecursiveEstimator, check_batch_inputs
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
-from fkn_bench.filters import FilterState, make_filter
+from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet.checkpoint import model_from_checkpoint
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
@@ -129,22 +129,7 @@ class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
             if z is not None:
                 self._recent.append(self.model._outputs(torch.from_numpy(z))[0])
             noise = self.model.parameter_set.to_noise(self._current_raw()[None])
-        self._noise = tuple(m[0].to(torch.float64).numpy() for m in (noise.process, noise.measurement, noise.initial))
-
-    def _online_prior(self) -> FilterState:
-        return self.filter.prior(1, self._noise[2], np.float64)
-
-    def _online_predict(self, state: FilterState, dt: float) -> FilterState:
-        return self.filter.predict(state, self._noise[0], dt)
-
-    def _online_initial(self, state: FilterState, z: ArrayF) -> FilterState:
-        return self.filter.initial_state(z, self._noise[2])
-
-    def _online_update(self, state: FilterState, z: ArrayF) -> FilterState:
-        return self.filter.update(state, z, self._noise[1])[0]
-
-    def _online_report(self, state: FilterState) -> tuple[ArrayF, ArrayF]:
-        return state.mean[0], state.covariance[0]
+        self._online_noise = tuple(m[0].to(torch.float64).numpy() for m in (noise.process, noise.measurement, noise.initial))
 
     def to_config(self) -> dict[str, Any]:
         return {"checkpoint": self.checkpoint, "history": self.model.history}
