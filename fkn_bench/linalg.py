@@ -25,7 +25,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "stack", "spd_inverse", "cholesky", "eye", "constant"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "stack", "all_last", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
 
@@ -62,6 +62,16 @@ def add_matmul(C: Matrices, A: Matrices, B: Matrices) -> Matrices:
     if A.dim() == 3:
         return torch.baddbmm(C, A, B)
     return C + A @ B
+
+
+def all_last(a: Any) -> Any:
+    """``a.all(-1)`` (numpy: the ufunc reduction directly, without ``ndarray.all``'s wrapper)."""
+    return np.logical_and.reduce(a, axis=-1) if isinstance(a, np.ndarray) else a.all(-1)
+
+
+def sum_last(a: Any) -> Any:
+    """``a.sum(-1, keepdims=True)`` (numpy: the ufunc reduction directly)."""
+    return np.add.reduce(a, axis=-1, keepdims=True) if isinstance(a, np.ndarray) else a.sum(-1, keepdim=True)
 
 
 def broadcast(x: Matrices, shape: tuple[int, ...]) -> Matrices:
@@ -103,12 +113,13 @@ def spd_inverse(S: Matrices) -> Matrices:
             np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
             return np.linalg.inv(S)
         identity = eye(S, S.shape[-1])
-        out = np.empty(S.shape)
+        rows = []
         for row in range(S.shape[0]):
-            _, out[row], info = lapack.dposv(S[row], identity, lower=1)
+            _, inverse, info = lapack.dposv(S[row], identity, lower=1)
             if info != 0:
                 raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
-        return out
+            rows.append(inverse)
+        return inverse[None] if len(rows) == 1 else np.stack(rows)
     import torch
 
     return torch.linalg.inv_ex(S)[0]
@@ -161,4 +172,5 @@ def constant(like: Any, key: Any, make: Any, cache: dict | None = None) -> Any:
 
 def eye(like: Any, n: int) -> Any:
     """The ``n x n`` identity in the namespace and dtype of ``like`` (cached, read-only)."""
-    return constant(like, ("eye", n), lambda: np.eye(n))
+    value = _CONSTANTS.get((type(like), like.dtype, ("eye", n)))
+    return value if value is not None else constant(like, ("eye", n), lambda: np.eye(n))

@@ -27,7 +27,7 @@ import numpy as np
 
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import add_matmul, broadcast, constant, namespace
+from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, eye, namespace, sum_last
 from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES, STATE_UNITS
 
 __all__ = ["StateSpaceModel", "PoseTwistModel", "LinearGaussianModel", "PAPER_MANUAL_LAYOUT"]
@@ -186,9 +186,8 @@ class PoseTwistModel(StateSpaceModel):
         xp = namespace(x)
         batch = x.shape[0]
         dt = float(dt)
-        A = constant(x, ("pose-A", dt), lambda: _transition_matrix(dt))
-        At = constant(x, ("pose-At", dt), lambda: np.ascontiguousarray(_transition_matrix(dt).T))
-        basis = constant(x, ("pose-basis", dt), lambda: (0.5 * dt) * _POSE_BASIS)
+        # [A | A^T | dt/2 B] in one cached constant: A the identity plus r += dt v
+        A, At, basis = _split(constant(x, ("pose", dt), lambda: _pose_constants(dt)))
         E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
         increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
         mean = add_matmul(xp.concat((increment, _zeros(x, (batch, 9))), axis=1), x, At)
@@ -197,16 +196,13 @@ class PoseTwistModel(StateSpaceModel):
 
     def sanitize(self, measurements: Array, mask: Array) -> tuple[Array, Array]:
         xp = namespace(measurements)
-        finite = xp.isfinite(measurements).all(-1)
-        z = measurements if bool(finite.all()) else xp.where(finite[..., None], measurements, 0.0)
-        norm = xp.sqrt((z[..., :4] * z[..., :4]).sum(-1, keepdims=True))
+        finite = all_last(xp.isfinite(measurements))
+        z = xp.where(finite[..., None], measurements, 0.0)
+        norm = xp.sqrt(sum_last(z[..., :4] * z[..., :4]))
         # a norm that overflows (components ~1e155 and up) leaves no usable direction either
         usable = mask & finite & (norm[..., 0] >= self.min_quaternion_norm) & (norm[..., 0] < float("inf"))
         q = z[..., :4] / xp.where(norm < self.min_quaternion_norm, self.min_quaternion_norm, norm)
-        if bool(usable.all()):
-            return xp.concat((q, z[..., 4:]), axis=-1), usable
-        z = xp.concat((xp.where(usable[..., None], q, z[..., :4]), z[..., 4:]), axis=-1)
-        return xp.where(usable[..., None], z, 0.0), usable
+        return xp.where(usable[..., None], xp.concat((q, z[..., 4:]), axis=-1), 0.0), usable
 
     def align(self, z: Array, x_pred: Array) -> Array:
         # the measured quaternion is flipped where it points away from the prediction: where
@@ -218,9 +214,9 @@ class PoseTwistModel(StateSpaceModel):
     def normalize(self, x: Array) -> tuple[Array, slice | None, Array | None]:
         xp = namespace(x)
         q = x[:, :4]
-        norm = xp.sqrt((q * q).sum(1, keepdims=True))
+        norm = xp.sqrt(sum_last(q * q))
         unit = q / norm
-        N = (constant(x, ("eye", 4), lambda: np.eye(4)) - unit[:, :, None] * unit[:, None, :]) / norm[:, :, None]
+        N = (eye(x, 4) - unit[:, :, None] * unit[:, None, :]) / norm[:, :, None]
         return xp.concat((unit, x[:, 4:]), axis=1), slice(0, 4), N  # N = (I - u u^T) / |q|
 
     def null_direction(self, x: Array) -> Array | None:
@@ -235,11 +231,16 @@ class PoseTwistModel(StateSpaceModel):
         return _prior(batch, 13, dtype, first=1.0)
 
 
-def _transition_matrix(dt: float) -> np.ndarray:
-    """``A``: the identity plus ``r += dt v``."""
+def _pose_constants(dt: float) -> np.ndarray:
+    """``[A | A^T | dt/2 B] (13, 78)``: ``A`` the identity plus ``r += dt v``, ``B`` the
+    quaternion-row basis."""
     A = np.eye(13)
     A[4:7, 10:13] = dt * np.eye(3)
-    return A
+    return np.concatenate((A, A.T, (0.5 * dt) * _POSE_BASIS), axis=1)
+
+
+def _split(constants: Array) -> tuple[Array, Array, Array]:
+    return constants[:, 0:13], constants[:, 13:26], constants[:, 26:78]
 
 
 class LinearGaussianModel(StateSpaceModel):

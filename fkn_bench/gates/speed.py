@@ -331,6 +331,7 @@ def numpy_ekf_loop(measurements: ArrayF, valid: ArrayB, Q: ArrayF, R: ArrayF, P0
         basis[7 + i, :, 0:4] = ((0, -a, -b, -c), (a, 0, -c, b), (b, c, 0, -a), (c, -b, a, 0))
     basis = (0.5 * dt) * basis.reshape(13, 52)
     flip = np.array([-1.0] * 4 + [1.0] * 3)
+    eye4, gain_template = np.eye(4), np.concatenate((np.eye(13), np.zeros((13, 7))), axis=1)  # [I | 0]
     batch, steps, _ = measurements.shape
     means = np.zeros((batch, steps, 13))
     means[:, :, 0] = 1.0
@@ -362,10 +363,10 @@ def numpy_ekf_loop(measurements: ArrayF, valid: ArrayB, Q: ArrayF, R: ArrayF, P0
                     norm = float(np.sqrt(x[0:4] @ x[0:4]))
                     unit = x[0:4] / norm
                     x[0:4] = unit
-                    G = np.concatenate((np.eye(13), np.zeros((13, 7))), axis=1)  # T [I - K H | K]
+                    G = gain_template.copy()  # T [I - K H | K]
                     G[:, 0:7] -= Kt.T
                     G[:, 13:20] = Kt.T
-                    G[0:4] = ((np.eye(4) - unit[:, None] * unit) / norm) @ G[0:4]
+                    G[0:4] = ((eye4 - unit[:, None] * unit) / norm) @ G[0:4]
                     D = np.zeros((20, 20))
                     D[0:13, 0:13], D[13:20, 13:20] = P, R
                     P = G @ D @ G.T
