@@ -25,7 +25,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "stack", "all_last", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "stack", "divide_spd", "all_last", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
 
@@ -100,6 +100,25 @@ def stack(arrays: Any, axis: int = -1) -> Any:
     import torch
 
     return torch.stack(tuple(arrays), dim=axis)
+
+
+def divide_spd(M: Matrices, S: Matrices) -> Matrices:
+    """``M S^-1`` for ``M (B, n, m)`` and symmetric positive definite ``S (B, m, m)``. torch:
+    one product with ``inv_ex(S)``; numpy: LAPACK's Cholesky solver per row
+    (``S^-1 M^T``, ``numpy.linalg.LinAlgError`` when ``S`` is not positive definite)."""
+    if not isinstance(S, np.ndarray):
+        return M @ spd_inverse(S)
+    if S.shape[0] > 64:
+        return M @ spd_inverse(S)
+    from scipy.linalg import lapack
+
+    rows = []
+    for row in range(S.shape[0]):
+        _, solution, info = lapack.dposv(S[row], M[row].T, lower=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
+        rows.append(solution.T)
+    return solution.T[None] if len(rows) == 1 else np.stack(rows)
 
 
 def spd_inverse(S: Matrices) -> Matrices:

@@ -25,7 +25,7 @@ import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
-from fkn_bench.linalg import add_matmul, broadcast, eye, namespace, spd_inverse, symmetrize
+from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, symmetrize
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
 
@@ -60,29 +60,31 @@ def joseph_update(
         assert H is not None
         PHt = P @ H.swapaxes(0, 1)
         S = symmetrize(H @ PHt + R)
-    # S is symmetric positive definite (R is); its inverse gives K with one batched product
-    K = PHt @ spd_inverse(S)  # (B, n, m)
+    # S is symmetric positive definite (R is): K = P H^T S^-1 (torch: one product with the inverse)
+    K = divide_spd(PHt, S)  # (B, n, m)
     x_post = add_matmul(x[:, :, None], K, nu[:, :, None])[:, :, 0]
     TK = K
     block = N = None
     if normalize is not None:
         x_post, block, N = normalize(x_post)
-    # T K and T A = T - (T K) H with T the identity but for the block N
-    if isinstance(x, np.ndarray):  # numpy (online): in place on fresh arrays
-        TA = broadcast(eye(x, n), (batch, n, n))
-        if block is not None and N is not None:
-            TK = K.copy()
-            TK[:, block] = N @ K[:, block]
-            TA[:, block, block] = N
+    if isinstance(x, np.ndarray):  # numpy (online): the same product as G blockdiag(P, R) G^T
+        m = K.shape[2]  # with G = [T A | T K], built in place on fresh arrays
+        G = broadcast(constant(x, ("gain-template", n, m), lambda: np.eye(n, n + m)), (batch, n, n + m))
         if observed is not None:
-            TA[:, :, observed] -= TK
+            G[:, :, observed] -= K
         else:
-            TA -= TK @ H
-    else:  # torch: out of place (autograd)
+            G[:, :, :n] -= K @ H
+        G[:, :, n:] = K
         if block is not None and N is not None:
-            TK = xp.concat((K[:, : block.start], N @ K[:, block], K[:, block.stop :]), axis=1)
-        T = _projection_matrix(block, N, x, batch, n)
-        TA = T - (_pad_columns(TK, observed, n) if observed is not None else TK @ H)
+            G[:, block] = N @ G[:, block]
+        D = np.zeros((batch, n + m, n + m))
+        D[:, :n, :n], D[:, n:, n:] = P, R
+        return x_post, symmetrize(G @ D @ G.swapaxes(1, 2)), S, K
+    # torch: T K and T A = T - (T K) H with T the identity but for the block N, out of place
+    if block is not None and N is not None:
+        TK = xp.concat((K[:, : block.start], N @ K[:, block], K[:, block.stop :]), axis=1)
+    T = _projection_matrix(block, N, x, batch, n)
+    TA = T - (_pad_columns(TK, observed, n) if observed is not None else TK @ H)
     P_post = add_matmul(TA @ P @ TA.swapaxes(1, 2), TK @ R, TK.swapaxes(1, 2))
     return x_post, symmetrize(P_post), S, K
 

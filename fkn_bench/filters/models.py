@@ -190,6 +190,11 @@ class PoseTwistModel(StateSpaceModel):
         A, At, basis = _split(constant(x, ("pose", dt), lambda: _pose_constants(dt)))
         E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
         increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
+        if isinstance(x, np.ndarray):  # numpy (online): the same sums, in place on fresh arrays
+            mean, F = x @ At, broadcast(A, (batch, 13, 13))
+            mean[:, 0:4] += increment
+            F[:, 0:4] += E
+            return mean, F
         mean = add_matmul(xp.concat((increment, _zeros(x, (batch, 9))), axis=1), x, At)
         F = xp.concat((A[0:4] + E, broadcast(A[4:13], (batch, 9, 13))), axis=1)
         return mean, F
