@@ -104,12 +104,16 @@ def stack(arrays: Any, axis: int = -1) -> Any:
 
 def divide_spd(M: Matrices, S: Matrices) -> Matrices:
     """``M S^-1`` for ``M (B, n, m)`` and symmetric positive definite ``S (B, m, m)``. torch:
-    one product with ``inv_ex(S)``; numpy: LAPACK's Cholesky solver per row
-    (``S^-1 M^T``, ``numpy.linalg.LinAlgError`` when ``S`` is not positive definite)."""
+    one product with ``inv_ex(S)`` (no error check: no synchronisation, a batch keeps running);
+    numpy: LAPACK's Cholesky solver per row (``S^-1 M^T``; one batched inverse above 64 rows),
+    ``numpy.linalg.LinAlgError`` when ``S`` is not positive definite."""
     if not isinstance(S, np.ndarray):
-        return M @ spd_inverse(S)
+        import torch
+
+        return M @ torch.linalg.inv_ex(S)[0]
     if S.shape[0] > 64:
-        return M @ spd_inverse(S)
+        np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
+        return M @ np.linalg.inv(S)
     from scipy.linalg import lapack
 
     rows = []
@@ -118,30 +122,12 @@ def divide_spd(M: Matrices, S: Matrices) -> Matrices:
         if info != 0:
             raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
         rows.append(solution.T)
-    return solution.T[None] if len(rows) == 1 else np.stack(rows)
+    return rows[0][None] if len(rows) == 1 else np.stack(rows)
 
 
 def spd_inverse(S: Matrices) -> Matrices:
-    """Inverse of a batch of symmetric positive definite matrices ``(B, m, m)``. numpy: LAPACK's
-    Cholesky solver per row, ``numpy.linalg.LinAlgError`` when a matrix is not positive definite;
-    torch: ``inv_ex`` (no error check: no synchronisation, and a batch keeps running)."""
-    if isinstance(S, np.ndarray):
-        from scipy.linalg import lapack
-
-        if S.shape[0] > 64:  # large batches: one batched call (the same result to rounding)
-            np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
-            return np.linalg.inv(S)
-        identity = eye(S, S.shape[-1])
-        rows = []
-        for row in range(S.shape[0]):
-            _, inverse, info = lapack.dposv(S[row], identity, lower=1)
-            if info != 0:
-                raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
-            rows.append(inverse)
-        return inverse[None] if len(rows) == 1 else np.stack(rows)
-    import torch
-
-    return torch.linalg.inv_ex(S)[0]
+    """``S^-1`` for symmetric positive definite ``S (B, m, m)`` (see :func:`divide_spd`)."""
+    return divide_spd(broadcast(eye(S, S.shape[-1]), tuple(S.shape)), S)
 
 
 def cholesky(S: Matrices) -> tuple[Matrices, Any]:
