@@ -10,8 +10,8 @@ training):
 * ``vbakf`` (:mod:`~fkn_bench.baselines.vbakf`): Huang et al. (2018, IEEE TAC 63(2)),
   variational Bayes with inverse-Wishart priors on ``P-`` and ``R``.
 
-They share one batched numpy recursion (:mod:`~fkn_bench.baselines.adaptive`) over numpy twins
-of the filter core's models (:mod:`~fkn_bench.baselines.numpy_models`).
+They share one batched numpy recursion (:mod:`~fkn_bench.baselines.adaptive`) over the filter
+core's models and EKF step functions, run on numpy arrays.
 
 Offline-tuned constant filters (:mod:`~fkn_bench.baselines.tuned`), refitted by
 ``fkn-bench train --estimator NAME --scenario S`` and run from ``params/<name>-<family>.json``:

@@ -52,12 +52,12 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.linalg import lapack
 
-from fkn_bench.baselines.numpy_models import NumpyModel, numpy_model
-from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, check_dt, parse_observation
-from fkn_bench.filters.models import StateSpaceModel
-from fkn_bench.filters.pose import error_covariance_from_state, pose_innovation, with_unit_quaternion
+from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
+from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
+from fkn_bench.filters.base import FilterState
+from fkn_bench.filters.ekf import ekf_predict, joseph_update
+from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
 from fkn_bench.linalg import symmetrize
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -85,37 +85,15 @@ def outer(a: ArrayF) -> ArrayF:
     return a[:, :, None] * a[:, None, :]
 
 
-SOLVE_LOOP_ROWS = 64
-"""Batches up to this many rows solve ``S X = M`` row by row with LAPACK's Cholesky solver
-(``dposv``), so that a batch row and the same sequence stepped online run identical arithmetic;
-larger batches use one batched ``numpy.linalg.solve`` (the same result to rounding)."""
+_TEMPLATES: dict[int, ArrayF] = {}
 
 
-def solve_spd(S: ArrayF, M: ArrayF) -> ArrayF:
-    """``S^-1 M`` for symmetric positive definite ``S (b, m, m)`` and ``M (b, m, k)``; raises
-    ``numpy.linalg.LinAlgError`` when some ``S`` is not positive definite."""
-    batch = S.shape[0]
-    if batch > SOLVE_LOOP_ROWS:
-        return np.linalg.solve(S, M)
-    out = np.empty(M.shape)
-    for row in range(batch):
-        _, out[row], info = lapack.dposv(S[row], M[row], lower=1)
-        if info != 0:
-            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
-    return out
-
-
-_TEMPLATES: dict[tuple[str, int, int], ArrayF] = {}
-
-
-def _template(kind: str, n: int, m: int) -> ArrayF:
-    """Cached constant arrays: ``G0 = [I_n | 0]`` (``n x (n + m)``) and ``I_m``."""
-    key = (kind, n, m)
-    value = _TEMPLATES.get(key)
+def _eye(m: int) -> ArrayF:
+    """The cached read-only identity ``I_m``."""
+    value = _TEMPLATES.get(m)
     if value is None:
-        value = np.concatenate((np.eye(n), np.zeros((n, m))), axis=1) if kind == "G" else np.eye(m)
+        value = _TEMPLATES[m] = np.eye(m)
         value.flags.writeable = False
-        _TEMPLATES[key] = value
     return value
 
 
@@ -148,40 +126,18 @@ class KalmanUpdate:
     K: ArrayF
 
 
-def kalman_update(model: NumpyModel, x: ArrayF, P: ArrayF, nu: ArrayF, R: ArrayF) -> KalmanUpdate:
+def kalman_update(model: StateSpaceModel, x: ArrayF, P: ArrayF, nu: ArrayF, R: ArrayF) -> KalmanUpdate:
     """Kalman update of ``x (b, n)``, ``P (b, n, n)`` with innovation ``nu (b, m)`` and
-    measurement noise ``R (b, m, m)``: gain ``K = P H^T S^-1``, Joseph form and the model's
-    normalisation in one product (see module docstring; Bucy & Joseph 1968; Simon, Optimal State
-    Estimation, 2006, eq. 5.19)."""
-    batch, n = x.shape
-    m = nu.shape[1]
-    observed = model.observed
-    if observed is not None:
-        HP = P[:, observed]  # (b, m, n)
-        S = HP[:, :, observed] + R  # a block of P plus R: exactly symmetric, as they are
-    else:
-        HP = model.H @ P
-        S = symmetrize(HP @ model.H.T + R)
-    Kt = solve_spd(S, HP)  # K^T = S^-1 H P   (b, m, n)
-    K = Kt.swapaxes(1, 2)
-    x_post = x + (nu[:, None, :] @ Kt)[:, 0]
-    x_post, block, N = model.normalize(x_post)
-    G = np.empty((batch, n, n + m))
-    G[:] = _template("G", n, m)
-    if observed is not None:
-        G[:, :, observed] -= K
-    else:
-        G[:, :, :n] -= K @ model.H
-    G[:, :, n:] = K
-    if block is not None and N is not None:
-        G[:, block] = N @ G[:, block]
-    D = np.zeros((batch, n + m, n + m))
-    D[:, :n, :n] = P
-    D[:, n:, n:] = R
-    return KalmanUpdate(x_post, symmetrize(G @ D @ G.swapaxes(1, 2)), S, K)
+    measurement noise ``R (b, m, m)``: the filters' update step
+    (:func:`fkn_bench.filters.ekf.joseph_update`: gain ``K = P H^T S^-1``, Joseph form and the
+    model's normalisation in one product; Bucy & Joseph 1968; Simon, Optimal State Estimation,
+    2006, eq. 5.19)."""
+    H = None if model.observed is not None else model.H
+    x_post, P_post, S, K = joseph_update(x, P, nu, R, H=H, observed=model.observed, normalize=model.normalize)
+    return KalmanUpdate(x_post, P_post, S, K)
 
 
-def projected_covariance(model: NumpyModel, P: ArrayF) -> ArrayF:
+def projected_covariance(model: StateSpaceModel, P: ArrayF) -> ArrayF:
     """``H P H^T`` for ``P (b, n, n)`` (exactly symmetric when ``P`` is)."""
     if model.observed is not None:
         return P[:, model.observed, model.observed]
@@ -203,7 +159,7 @@ class UpdateContext:
         steps: ``(b,)`` predictions since the previous update (or the initialisation), >= 1.
     """
 
-    model: NumpyModel
+    model: StateSpaceModel
     x_pred: ArrayF
     P_pred: ArrayF
     z: ArrayF
@@ -333,12 +289,7 @@ def _put(noise: Mapping[str, ArrayF], rows: ArrayF, values: Mapping[str, ArrayF]
 
 
 def _std_matrix(name: str, values: Sequence[float] | None, default: Sequence[float]) -> ArrayF:
-    array = np.array(default if values is None else values, dtype=float)
-    if array.shape != (len(default),):
-        raise ValueError(f"{name} needs {len(default)} values (got shape {array.shape})")
-    if not np.all(np.isfinite(array)) or np.any(array <= 0):
-        raise ValueError(f"{name} values must be finite and > 0 (got {array.tolist()})")
-    return np.diag(array * array)
+    return np.diag(np.square(KalmanEstimator._check_std(name, values, default)))
 
 
 class AdaptiveKalmanFilter:
@@ -356,22 +307,30 @@ class AdaptiveKalmanFilter:
         self,
         rule: NoiseRule,
         *,
-        model: StateSpaceModel | NumpyModel | None = None,
+        model: StateSpaceModel | None = None,
         q_std: Sequence[float] | None = None,
         r_std: Sequence[float] | None = None,
         p0_std: Sequence[float] | None = None,
     ) -> None:
         self.rule = rule
-        self.model = numpy_model(model)
+        self.model = model if model is not None else PoseTwistModel()
         layout = self.model.layout
         self.Q0 = _std_matrix("q_std", q_std, layout.q_default)
         self.R0 = _std_matrix("r_std", r_std, layout.r_default)
         self.P0 = _std_matrix("p0_std", p0_std, layout.p0_default)
 
+    @property
+    def covariance_dim(self) -> int:
+        return self.model.state_dim
+
+    @property
+    def innovation_dim(self) -> int:
+        return self.model.measurement_dim
+
     def initial_state(self, batch: int) -> AdaptiveState:
         """``batch`` sequences before their first measurement (the model's prior, ``P0``)."""
         return AdaptiveState(
-            x=self.model.prior_state(batch),
+            x=self.model.prior_state(batch, np.float64),
             P=np.broadcast_to(self.P0, (batch,) + self.P0.shape).copy(),
             initialised=np.zeros(batch, dtype=bool),
             since=np.zeros(batch),
@@ -385,8 +344,8 @@ class AdaptiveKalmanFilter:
         model, rule = self.model, self.rule
         x, P, since, noise = state.x, state.P, state.since, state.noise
         if predict:
-            x, F = model.transition(x, dt)
-            P = symmetrize(F @ P @ F.swapaxes(1, 2) + rule.process_noise(noise))
+            predicted = ekf_predict(model, FilterState(x, P), rule.process_noise(noise), dt)
+            x, P = predicted.mean, predicted.covariance
             since = since + 1.0
         prior = x
         if not usable.any():
@@ -408,7 +367,7 @@ class AdaptiveKalmanFilter:
                 since = np.zeros(batch)
             else:
                 nu, S = np.zeros((batch, m)), np.empty((batch, m, m))
-                S[:] = _template("I", m, m)
+                S[:] = _eye(m)
                 x, P = x.copy(), P.copy()
                 x[rows], P[rows], nu[rows], S[rows] = result.x, result.P, nu_rows, result.S
                 noise = _put(noise, rows, noise_rows)
@@ -452,7 +411,7 @@ class AdaptiveKalmanFilter:
             means[t], covariances[t] = state.x, state.P
             prior_means[t] = out.prior_mean
             if out.innovation is None or out.innovation_covariance is None:
-                innovations[t], innovation_covs[t] = 0.0, _template("I", m, m)
+                innovations[t], innovation_covs[t] = 0.0, _eye(m)
             else:
                 innovations[t], innovation_covs[t] = out.innovation, out.innovation_covariance
             updated[t], initialised[t] = out.updated, state.initialised
@@ -476,16 +435,10 @@ class AdaptiveKalmanFilter:
 
 # ---------------------------------------------------------------------------------------------
 # the estimator
-_TIME_TOLERANCE = 1e-6
+_NO_MEASUREMENT, _NOT_USABLE, _USABLE = np.zeros((1, 7)), np.zeros(1, dtype=bool), np.ones(1, dtype=bool)
 
 
-@dataclass(frozen=True, eq=False)
-class _Online:
-    time: float
-    state: AdaptiveState
-
-
-class AdaptiveEKFEstimator(Estimator):
+class AdaptiveEKFEstimator(RecursiveEstimator):
     """An adaptive EKF on the paper's pose-and-twist model as an estimator of the common API.
 
     Subclasses set ``name``, ``description``, ``rule_class`` (a :class:`NoiseRule` built from
@@ -527,61 +480,31 @@ class AdaptiveEKFEstimator(Estimator):
             self.name = name
         if description is not None:
             self.description = description
-        self._dt: float | None = None
-        self._online: _Online | None = None
 
     # ------------------------------------------------------------------ batch
     def _estimates(self, result: AdaptiveResult) -> Estimates:
-        means = with_unit_quaternion(result.means)
-        covariances = result.covariances
-        innovations, innovation_covs = pose_innovation(result.prior_means[..., 0:4], result.innovations, result.innovation_covariances)
-        extras = {"r_diag": result.r_diag}
-        if result.q_diag is not None:
-            extras["q_diag"] = result.q_diag
-        return Estimates(
-            means=means,
-            covariances=covariances,
-            error_covariances=error_covariance_from_state(means[..., 0:4], covariances),
-            innovations=innovations,
-            innovation_covariances=innovation_covs,
-            innovation_mask=result.updated,
-            initialised=result.initialised,
-            extras=extras,
-        )
+        extras = {"r_diag": result.r_diag} if result.q_diag is None else {"r_diag": result.r_diag, "q_diag": result.q_diag}
+        return filter_result_to_estimates(result, self.filter, extras=extras)
 
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)
         return self._estimates(self.filter.run(z, m, dt=step))
 
     # ------------------------------------------------------------------ online
-    def reset(self, *, dt: float) -> None:
-        self._dt = check_dt(dt)
-        self._online = None
+    def _online_prior(self) -> AdaptiveState:
+        return self.filter.initial_state(1)
 
-    def step(self, observation: Any) -> Estimate:
-        if self._dt is None:
-            raise RuntimeError("call reset(dt=...) before step()")
-        pose, time = parse_observation(observation)
-        if pose is None:
-            z, usable = np.zeros((1, 7)), np.zeros(1, dtype=bool)
-        else:
-            z, usable = self.filter.sanitize(pose[None], np.ones(1, dtype=bool))
-        previous = self._online
-        if previous is None:
-            now = 0.0 if time is None else time
-            state, out = self.filter.step(self.filter.initial_state(1), z, usable, self._dt, predict=False)
-        else:
-            now = previous.time + self._dt if time is None else time
-            interval = now - previous.time
-            if interval <= 0:
-                raise ValueError(f"observation time {now} does not increase (previous {previous.time})")
-            if abs(interval - self._dt) <= _TIME_TOLERANCE:
-                interval = self._dt
-            state, out = self.filter.step(previous.state, z, usable, interval)
-        self._online = _Online(now, state)
-        mean = state.x[0].copy()
-        mean[0:4] /= math.sqrt(mean[0:4] @ mean[0:4])
-        return Estimate(time=now, mean=mean, native_covariance=state.P[0].copy(), initialised=bool(state.initialised[0]), updated=bool(out.updated[0]))
+    def _online_predict(self, state: AdaptiveState, dt: float) -> AdaptiveState:
+        return self.filter.step(state, _NO_MEASUREMENT, _NOT_USABLE, dt)[0]
+
+    def _online_update(self, state: AdaptiveState, z: ArrayF) -> AdaptiveState:
+        # also initialises: AdaptiveKalmanFilter.step initialises a row without a first update
+        return self.filter.step(state, z, _USABLE, 0.0, predict=False)[0]
+
+    _online_initial = _online_update
+
+    def _online_report(self, state: AdaptiveState) -> tuple[ArrayF, ArrayF]:
+        return state.x[0], state.P[0]
 
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:

@@ -66,9 +66,8 @@ from fkn_bench.baselines.adaptive import (
     kalman_update,
     outer,
     projected_covariance,
-    solve_spd,
 )
-from fkn_bench.linalg import symmetrize
+from fkn_bench.linalg import spd_inverse, symmetrize
 from fkn_bench.types import ArrayF
 
 __all__ = ["VBAKFRule", "VBAKFEstimator", "DEFAULT_RHO"]
@@ -152,7 +151,7 @@ class VBAKFRule(NoiseRule):
             else:
                 HP = model.H @ P_hat
                 S = symmetrize(HP @ model.H.T + R_hat)
-            Kt = solve_spd(S, HP)  # K^T (b, m, n)
+            Kt = spd_inverse(S) @ HP  # K^T = S^-1 H P (b, m, n)
             x = x_pred + (nu[:, None, :] @ Kt)[:, 0]
             # symmetrised: P feeds P^ and U (R's posterior), which then stay exactly symmetric
             # (sums of symmetric matrices and outer products)

@@ -1,5 +1,12 @@
-"""Linear-algebra helpers shared by the torch filters and the numpy code (lowest layer: no
-imports from the rest of the package).
+"""Linear-algebra helpers shared by the filters and the numpy code (lowest layer: no imports from
+the rest of the package), and the small dispatch that lets one function run on numpy arrays
+(online, one sequence) and on torch tensors (batched, differentiable).
+
+The models and filter steps are written once against the API that numpy (2.x) and torch share
+(``@``, slicing, ``xp.concat``, ``xp.stack``, ``xp.where``, ``xp.sqrt``, ``axis=``/``keepdims=``
+keywords, ``swapaxes``): :func:`namespace` gives ``xp`` (the ``numpy`` or ``torch`` module) for
+an array. Where torch has a fused operation the batched path relies on for its speed
+(``addmm``/``baddbmm``, ``inv_ex``), a helper here dispatches to it.
 
 A covariance built from a product (``L L^T``, ``F P F^T + Q``, a Joseph update, a sigma-point
 sum) is symmetric only to rounding: ``(A B)_ij`` and ``(A B)_ji`` are different sums of products,
@@ -10,15 +17,26 @@ makes it symmetric bit for bit on any machine.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, TypeVar
+from types import ModuleType
+from typing import TYPE_CHECKING, Any, TypeVar
+
+import numpy as np
 
 if TYPE_CHECKING:
-    import numpy as np
     import torch
 
-__all__ = ["symmetrize"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "stack", "divide_spd", "all_last", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
+
+
+def namespace(x: Any) -> ModuleType:
+    """``numpy`` for a numpy array, else ``torch`` (the array namespace ``xp`` of ``x``)."""
+    if isinstance(x, np.ndarray):
+        return np
+    import torch
+
+    return torch
 
 
 def symmetrize(M: Matrices) -> Matrices:
@@ -31,3 +49,133 @@ def symmetrize(M: Matrices) -> Matrices:
     out = M + M.swapaxes(-1, -2)
     out *= 0.5  # in place on the fresh sum: one temporary less (autograd-safe: add keeps no output)
     return out
+
+
+def add_matmul(C: Matrices, A: Matrices, B: Matrices) -> Matrices:
+    """``C + A @ B`` (torch: the fused ``addmm``/``baddbmm``; ``C`` broadcasts)."""
+    if isinstance(A, np.ndarray):
+        return C + A @ B
+    import torch
+
+    if A.dim() == 2:
+        return torch.addmm(C, A, B)
+    if A.dim() == 3:
+        return torch.baddbmm(C, A, B)
+    return C + A @ B
+
+
+def all_last(a: Any) -> Any:
+    """``a.all(-1)`` (numpy: the ufunc reduction directly, without ``ndarray.all``'s wrapper)."""
+    return np.logical_and.reduce(a, axis=-1) if isinstance(a, np.ndarray) else a.all(-1)
+
+
+def sum_last(a: Any) -> Any:
+    """``a.sum(-1, keepdims=True)`` (numpy: the ufunc reduction directly)."""
+    return np.add.reduce(a, axis=-1, keepdims=True) if isinstance(a, np.ndarray) else a.sum(-1, keepdim=True)
+
+
+def broadcast(x: Matrices, shape: tuple[int, ...]) -> Matrices:
+    """``x`` broadcast to ``shape``: a view in torch (``expand``); in numpy a fresh array (faster
+    than ``numpy.broadcast_to`` at the sizes of one online step)."""
+    if isinstance(x, np.ndarray):
+        out = np.empty(shape, dtype=x.dtype)
+        out[...] = x
+        return out
+    return x.expand(shape)
+
+
+def stack(arrays: Any, axis: int = -1) -> Any:
+    """``stack`` of equally shaped arrays along a new ``axis`` (-1 or -2); numpy fills one fresh
+    array (``numpy.stack`` costs several microseconds at the sizes of one online step)."""
+    first = arrays[0]
+    if isinstance(first, np.ndarray):
+        k, shape = len(arrays), first.shape
+        out = np.empty(shape + (k,) if axis == -1 else shape[:-1] + (k, shape[-1]), dtype=first.dtype)
+        for i, a in enumerate(arrays):
+            if axis == -1:
+                out[..., i] = a
+            else:
+                out[..., i, :] = a
+        return out
+    import torch
+
+    return torch.stack(tuple(arrays), dim=axis)
+
+
+def divide_spd(M: Matrices, S: Matrices) -> Matrices:
+    """``M S^-1`` for ``M (B, n, m)`` and symmetric positive definite ``S (B, m, m)``. torch:
+    one product with ``inv_ex(S)`` (no error check: no synchronisation, a batch keeps running);
+    numpy: LAPACK's Cholesky solver per row (``S^-1 M^T``; one batched inverse above 64 rows),
+    ``numpy.linalg.LinAlgError`` when ``S`` is not positive definite."""
+    if not isinstance(S, np.ndarray):
+        import torch
+
+        return M @ torch.linalg.inv_ex(S)[0]
+    if S.shape[0] > 64:
+        np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
+        return M @ np.linalg.inv(S)
+    from scipy.linalg import lapack
+
+    rows = []
+    for row in range(S.shape[0]):
+        _, solution, info = lapack.dposv(S[row], M[row].T, lower=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
+        rows.append(solution.T)
+    return rows[0][None] if len(rows) == 1 else np.stack(rows)
+
+
+def spd_inverse(S: Matrices) -> Matrices:
+    """``S^-1`` for symmetric positive definite ``S (B, m, m)`` (see :func:`divide_spd`)."""
+    return divide_spd(broadcast(eye(S, S.shape[-1]), tuple(S.shape)), S)
+
+
+def cholesky(S: Matrices) -> tuple[Matrices, Any]:
+    """Lower Cholesky factors of a batch ``(B, k, k)`` and a ``(B,)`` bool array, True where the
+    factorisation failed (torch: ``cholesky_ex``; numpy: LAPACK per row). Failed rows hold
+    garbage."""
+    if isinstance(S, np.ndarray):
+        from scipy.linalg import lapack
+
+        L = np.empty(S.shape, dtype=S.dtype)
+        failed = np.zeros(S.shape[0], dtype=bool)
+        for row in range(S.shape[0]):
+            L[row], info = lapack.dpotrf(S[row], lower=1, clean=1)
+            failed[row] = info != 0
+        return L, failed
+    import torch
+
+    L, info = torch.linalg.cholesky_ex(S)
+    return L, info != 0
+
+
+_CONSTANTS: dict[tuple, Any] = {}
+
+
+def constant(like: Any, key: Any, make: Any, cache: dict | None = None) -> Any:
+    """A cached constant array in the namespace and dtype of ``like``: ``make()`` (a float64
+    numpy array) converted once per (namespace, dtype, key), in ``cache`` (an object's own dict
+    for constants of that object) or a module cache bounded to 256 entries (irregular online
+    intervals must not grow it)."""
+    store = _CONSTANTS if cache is None else cache
+    full = (type(like), like.dtype, key)
+    value = store.get(full)
+    if value is None:
+        if len(store) >= 256:
+            store.clear()
+        array = make()
+        if isinstance(like, np.ndarray):
+            value = array.astype(like.dtype, copy=False)
+            value.flags.writeable = False
+        else:
+            import torch
+
+            value = torch.from_numpy(np.array(array, dtype=np.float64)).to(like.dtype)
+        store[full] = value
+    return value
+
+
+def eye(like: Any, n: int) -> Any:
+    """The ``n x n`` identity in the namespace and dtype of ``like`` (cached, read-only)."""
+    value = _CONSTANTS.get((type(like), like.dtype, ("eye", n)))
+    return value if value is not None else constant(like, ("eye", n), lambda: np.eye(n))

@@ -23,6 +23,7 @@ through the registry and refuses unknown formats or versions with a message that
 from __future__ import annotations
 
 import functools
+import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from fkn_bench.filters.base import check_dt
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 from fkn_bench.io import read_json, write_json_atomic
 from fkn_bench.types import ArrayB, ArrayF
@@ -39,6 +41,10 @@ __all__ = [
     "Estimate",
     "Estimates",
     "Estimator",
+    "OnlineState",
+    "RecursiveEstimator",
+    "TIME_TOLERANCE",
+    "check_dt",
     "ESTIMATOR_FORMAT",
     "ESTIMATOR_FORMAT_VERSION",
     "EstimatorFileError",
@@ -154,17 +160,6 @@ def check_batch_inputs(measurements: Any, mask: Any, dt: Any) -> tuple[ArrayF, A
     return z, m, check_dt(dt)
 
 
-def check_dt(dt: Any) -> float:
-    """The time step ``dt`` (s) as a float; ``ValueError`` unless it is a finite number > 0."""
-    try:
-        step = float(dt)
-    except (TypeError, ValueError):
-        raise ValueError(f"dt must be a number (got {dt!r})") from None
-    if not np.isfinite(step) or step <= 0:
-        raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
-    return step
-
-
 def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
     """Measurement ``(7,)`` (None when missing) and time (None when absent) of an observation.
 
@@ -256,6 +251,110 @@ class Estimator(ABC):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(name={self.name!r})"
+
+
+TIME_TOLERANCE = 1e-6
+"""Online observation intervals within this many seconds of ``dt`` are taken as ``dt``."""
+
+
+@dataclass(frozen=True, eq=False)
+class OnlineState:
+    """An online estimator's state after a step (an immutable value): the time (s), the filter's
+    own state (e.g. a batch-1 :class:`~fkn_bench.filters.FilterState`) and whether the sequence
+    has initialised."""
+
+    time: float
+    state: Any
+    initialised: bool
+
+
+class RecursiveEstimator(Estimator):
+    """An estimator whose online ``reset``/``step`` is a filter's one-step function: the one
+    online recursion of the project (every built-in estimator uses it).
+
+    Rules of :meth:`step`: steps are taken ``dt`` apart; when an observation carries a ``time``,
+    it must increase (``ValueError`` otherwise), and an interval that differs from ``dt`` by more
+    than :data:`TIME_TOLERANCE` is predicted over its actual length. The measurement is cleaned
+    by :meth:`_online_sanitize` (the model's rule; unusable measurements skip the update). The
+    first step starts from :meth:`_online_prior` without a prediction; later steps predict first.
+    The sequence initialises at its first usable measurement (:meth:`_online_initial`; that
+    measurement is not used again in an update); later usable measurements update.
+
+    The ``_online_*`` hooks step a filter variant on numpy arrays by default; subclasses with
+    another filter state override them. Measurements reach them sanitised, as ``(1, 7)`` arrays.
+    """
+
+    _dt: float | None = None
+    _online: OnlineState | None = None
+
+    def reset(self, *, dt: float) -> None:
+        self._dt = check_dt(dt)
+        self._online = None
+
+    def step(self, observation: Any) -> Estimate:
+        if self._dt is None:
+            raise RuntimeError("call reset(dt=...) before step()")
+        pose, time = parse_observation(observation)
+        z = None if pose is None else self._online_sanitize(pose[None])
+        self._online_observe(z)
+        previous = self._online
+        if previous is None:
+            now = 0.0 if time is None else time
+            state, initialised = self._online_prior(), False
+        else:
+            now = previous.time + self._dt if time is None else time
+            interval = now - previous.time
+            if interval <= 0:
+                raise ValueError(f"observation time {now} does not increase (previous {previous.time})")
+            if abs(interval - self._dt) <= TIME_TOLERANCE:
+                interval = self._dt
+            state, initialised = self._online_predict(previous.state, interval), previous.initialised
+        updated = False
+        if z is not None:
+            if initialised:
+                state, updated = self._online_update(state, z), True
+            else:
+                state, initialised = self._online_initial(state, z), True
+        self._online = OnlineState(now, state, initialised)
+        mean, covariance = self._online_report(state)
+        mean = mean.copy()
+        mean[0:4] /= math.sqrt(mean[0:4] @ mean[0:4])
+        return Estimate(time=now, mean=mean, native_covariance=covariance, initialised=initialised, updated=updated)
+
+    def _online_sanitize(self, z: ArrayF) -> ArrayF | None:
+        """The measurement ``(1, 7)`` cleaned by the model's rule, or None when unusable."""
+        out, usable = self.filter.model.sanitize(z, _ONE)  # type: ignore[attr-defined]
+        return out if usable[0] else None
+
+    def _online_observe(self, z: ArrayF | None) -> None:
+        """Called first in every step with the sanitised measurement (None when unusable)."""
+
+    # default hooks: a filter variant (``self.filter``, a :class:`~fkn_bench.filters.KalmanFilter`)
+    # stepped on numpy arrays with the step's noise ``self._online_noise = (Q, R, P0)``
+    _online_noise: tuple[ArrayF, ArrayF, ArrayF]
+
+    def _online_prior(self) -> Any:
+        """The filter state before the first step's measurement."""
+        return self.filter.prior(1, self._online_noise[2], np.float64)  # type: ignore[attr-defined]
+
+    def _online_predict(self, state: Any, dt: float) -> Any:
+        """The state predicted over ``dt`` seconds."""
+        return self.filter.predict(state, self._online_noise[0], dt)  # type: ignore[attr-defined]
+
+    def _online_initial(self, state: Any, z: ArrayF) -> Any:
+        """The state initialised from the first usable measurement."""
+        return self.filter.initial_state(z, self._online_noise[2])  # type: ignore[attr-defined]
+
+    def _online_update(self, state: Any, z: ArrayF) -> Any:
+        """The state updated with a usable measurement."""
+        return self.filter.update(state, z, self._online_noise[1])[0]  # type: ignore[attr-defined]
+
+    def _online_report(self, state: Any) -> tuple[ArrayF, ArrayF]:
+        """The mean ``(13,)`` and the native covariance (read-only: the steps are pure)."""
+        return state.mean[0], state.covariance[0]
+
+
+_ONE = np.ones(1, dtype=bool)
 
 
 def read_estimator_document(path: str | Path) -> dict[str, Any]:

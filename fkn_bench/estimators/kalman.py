@@ -1,30 +1,22 @@
 """Kalman-filter estimators with constant noise parameters (any variant of the filter core).
 
 :class:`KalmanEstimator` runs ``ekf``, ``ukf`` or ``mekf`` with fixed standard deviations of
-``Q``, ``R`` and ``P0`` (in the variant's layout). Batch ``estimate`` runs the torch core; online
-``step`` runs the lean numpy EKF (:mod:`fkn_bench.filters.online_ekf`) for the EKF and the torch
-core one step at a time for the other variants. Both paths follow the same rules and agree to
-1e-12.
-
-Online time handling: steps are taken ``dt`` apart. When an observation carries a ``time``, it
-must increase; an interval that differs from ``dt`` by more than 1e-6 s is predicted over its
-actual length.
+``Q``, ``R`` and ``P0`` (in the variant's layout). Batch ``estimate`` runs the variant on torch tensors;
+online ``step`` runs the same step functions on numpy arrays of one sequence (the shared online
+recursion of :class:`~fkn_bench.estimators.base.RecursiveEstimator`: time handling,
+initialisation, skipped updates). Both paths agree to 1e-12.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import torch
 
-from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, check_dt, parse_observation
-from fkn_bench.filters import VARIANTS, FilterState, KalmanFilter, NoiseParameters, make_filter
-from fkn_bench.filters import online_ekf
-from fkn_bench.filters.base import FilterResult
+from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
+from fkn_bench.filters import VARIANTS, NoiseParameters, make_filter
 from fkn_bench.filters.pose import (
     error_covariance_from_state,
     pose_innovation,
@@ -37,49 +29,35 @@ from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["KalmanEstimator", "filter_result_to_estimates"]
 
-_TIME_TOLERANCE = 1e-6
-
-
-@dataclass(frozen=True)
-class _OnlineState:
-    time: float
-    x: ArrayF
-    P: ArrayF
-    initialised: bool
-
-
-def filter_result_to_estimates(result: FilterResult, variant: KalmanFilter) -> Estimates:
-    """Convert a torch :class:`FilterResult` of a pose filter to numpy :class:`Estimates`."""
-    means = with_unit_quaternion(result.means.detach().numpy())
+def filter_result_to_estimates(result: Any, variant: Any, *, extras: Mapping[str, ArrayF] | None = None) -> Estimates:
+    """Convert the result of a pose filter's ``run`` (a torch :class:`FilterResult`, or the numpy
+    result of an adaptive filter: the same fields) to numpy :class:`Estimates`; ``variant`` gives
+    ``covariance_dim`` (13 or 12) and ``innovation_dim`` (7 or 6)."""
+    numpy = lambda a: None if a is None else a.detach().numpy() if hasattr(a, "detach") else a  # noqa: E731
+    means = with_unit_quaternion(numpy(result.means))
     q = means[..., :4]
-    covariances = error_covariances = None
-    if result.covariances is not None:
-        native = result.covariances.detach().numpy()
+    covariances = error_covariances = native = numpy(result.covariances)
+    if native is not None:
         if variant.covariance_dim == 12:
-            error_covariances, covariances = native, state_covariance_from_error(q, native)
+            covariances = state_covariance_from_error(q, native)
         else:
-            covariances, error_covariances = native, error_covariance_from_state(q, native)
-    innovations = innovation_covariances = None
-    if result.innovations is not None and result.innovation_covariances is not None:
-        nu = result.innovations.detach().numpy()
-        S = result.innovation_covariances.detach().numpy()
-        if variant.innovation_dim == 6:
-            innovations, innovation_covariances = nu, S
-        else:
-            assert result.prior_means is not None
-            innovations, innovation_covariances = pose_innovation(result.prior_means.detach().numpy()[..., :4], nu, S)
+            error_covariances = error_covariance_from_state(q, native)
+    innovations, innovation_covariances = numpy(result.innovations), numpy(result.innovation_covariances)
+    if innovations is not None and variant.innovation_dim != 6:
+        innovations, innovation_covariances = pose_innovation(numpy(result.prior_means)[..., :4], innovations, innovation_covariances)
     return Estimates(
         means=means,
         covariances=covariances,
         error_covariances=error_covariances,
         innovations=innovations,
         innovation_covariances=innovation_covariances,
-        innovation_mask=result.updated.numpy(),
-        initialised=result.initialised.numpy(),
+        innovation_mask=numpy(result.updated),
+        initialised=numpy(result.initialised),
+        extras=dict(extras or {}),
     )
 
 
-class KalmanEstimator(Estimator):
+class KalmanEstimator(RecursiveEstimator):
     """A filter variant with constant noise parameters.
 
     Keyword-only arguments:
@@ -125,11 +103,9 @@ class KalmanEstimator(Estimator):
             else:
                 matrices.append(np.diag(np.square(self._check_std(f"{entry}_std", std, default))))
                 self._given[entry] = "std"
-        self._numpy_noise = tuple(matrices)
+        self._numpy_noise = self._online_noise = tuple(matrices)
         self.name = name
         self.description = description
-        self._dt: float | None = None
-        self._online: _OnlineState | None = None
 
     @property
     def q_std(self) -> ArrayF:
@@ -175,64 +151,6 @@ class KalmanEstimator(Estimator):
         with torch.no_grad(), torch_threads():
             result = self.filter.run(self.noise_parameters(), torch.from_numpy(z), torch.from_numpy(m), dt=step)
         return filter_result_to_estimates(result, self.filter)
-
-    # ------------------------------------------------------------------ online
-    def reset(self, *, dt: float) -> None:
-        self._dt = check_dt(dt)
-        self._online = None
-
-    def _predict(self, x: ArrayF, P: ArrayF, dt: float) -> tuple[ArrayF, ArrayF]:
-        Q = self._numpy_noise[0]
-        if self.variant_name == "ekf":
-            return online_ekf.predict(x, P, Q, dt)
-        with torch.no_grad():  # torch.tensor copies: P is shared read-only with the last Estimate
-            state = self.filter.predict(FilterState(torch.tensor(x)[None], torch.tensor(P)[None]), torch.tensor(Q), dt)
-        return state.mean[0].numpy(), state.covariance[0].numpy()  # symmetrised by predict
-
-    def _update(self, x: ArrayF, P: ArrayF, z: ArrayF) -> tuple[ArrayF, ArrayF]:
-        R = self._numpy_noise[1]
-        if self.variant_name == "ekf":
-            x, P, _, _ = online_ekf.update(x, P, z, R)
-            return x, P
-        with torch.no_grad():
-            state, _, _ = self.filter.update(
-                FilterState(torch.tensor(x)[None], torch.tensor(P)[None]), torch.tensor(z)[None], torch.tensor(R)
-            )
-        return state.mean[0].numpy(), state.covariance[0].numpy()  # symmetrised by update
-
-    def step(self, observation: Any) -> Estimate:
-        if self._dt is None:
-            raise RuntimeError("call reset(dt=...) before step()")
-        pose, time = parse_observation(observation)
-        z = None if pose is None else online_ekf.sanitize_measurement(pose)
-        previous = self._online
-        if previous is None:
-            now = 0.0 if time is None else time
-            x = np.zeros(13)
-            x[0] = 1.0
-            P = self._numpy_noise[2]
-            initialised = False
-        else:
-            now = previous.time + self._dt if time is None else time
-            interval = now - previous.time
-            if interval <= 0:
-                raise ValueError(f"observation time {now} does not increase (previous {previous.time})")
-            if abs(interval - self._dt) <= _TIME_TOLERANCE:
-                interval = self._dt
-            x, P = self._predict(previous.x, previous.P, interval)
-            initialised = previous.initialised
-        updated = False
-        if z is not None:
-            if not initialised:
-                x, P, initialised = online_ekf.initial_state(z), self._numpy_noise[2], True
-            else:
-                x, P = self._update(x, P, z)
-                updated = True
-        # x and P are fresh arrays (the filter functions are pure): share P read-only
-        self._online = _OnlineState(now, x, P, initialised)
-        mean = x.copy()
-        mean[0:4] /= math.sqrt(mean[0:4] @ mean[0:4])
-        return Estimate(time=now, mean=mean, native_covariance=P, initialised=initialised, updated=updated)
 
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:

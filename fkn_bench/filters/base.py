@@ -30,14 +30,16 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import Tensor
 
 from fkn_bench.filters.models import StateSpaceModel
 from fkn_bench.filters.parameters import NoiseLayout, NoiseParameters
+from fkn_bench.linalg import namespace
 
-__all__ = ["KalmanFilter", "FilterResult", "FilterState"]
+__all__ = ["KalmanFilter", "FilterResult", "FilterState", "check_dt"]
 
 
 @dataclass(frozen=True)
@@ -84,7 +86,8 @@ def _select(condition: Tensor, a: Tensor, b: Tensor) -> Tensor:
     return torch.where(condition.view(-1, *([1] * (a.dim() - 1))), a, b)
 
 
-def _check_dt(dt: float) -> float:
+def check_dt(dt: Any) -> float:
+    """The time step ``dt`` (s) as a float; ``ValueError`` unless it is a finite number > 0."""
     try:
         step = float(dt)
     except (TypeError, ValueError):
@@ -161,25 +164,30 @@ class KalmanFilter(ABC):
 
     @abstractmethod
     def predict(self, state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
-        """One prediction over ``dt`` seconds with process noise ``Q`` ``(B or 1, k, k)``; the
-        predicted covariance is exactly symmetric (symmetrised)."""
+        """One prediction over ``dt`` seconds with process noise ``Q`` ``(k, k)`` or
+        ``(B or 1, k, k)``; the predicted covariance is exactly symmetric (symmetrised). Pure, and
+        the same code for torch tensors (batched, differentiable) and numpy arrays (online)."""
 
     @abstractmethod
     def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
-        """One measurement update of every batch row with ``z (B, m)``.
+        """One measurement update of every batch row with ``z (B, m)`` (usable: sanitised); pure,
+        numpy or torch.
 
         Returns the posterior state, the innovation ``(B, m)`` and its covariance ``(B, m, m)``;
         both covariances exactly symmetric (the posterior symmetrised).
         """
 
     def initial_state(self, z: Tensor, initial_covariance: Tensor) -> FilterState:
-        """State initialised from measurements ``z (B, m)``."""
+        """State initialised from measurements ``z (B, m)`` (numpy or torch)."""
         mean = self.model.initial_state(z)
-        return FilterState(mean, initial_covariance.expand(mean.shape[0], -1, -1))
+        k = initial_covariance.shape[-1]
+        return FilterState(mean, namespace(mean).broadcast_to(initial_covariance, (mean.shape[0], k, k)))
 
-    def prior(self, batch: int, initial_covariance: Tensor, dtype: torch.dtype) -> FilterState:
-        """State reported before a sequence's first measurement."""
-        return FilterState(self.model.prior_state(batch, dtype), initial_covariance.expand(batch, -1, -1))
+    def prior(self, batch: int, initial_covariance: Tensor, dtype: Any) -> FilterState:
+        """State reported before a sequence's first measurement (numpy for a numpy ``dtype``)."""
+        mean = self.model.prior_state(batch, dtype)
+        k = initial_covariance.shape[-1]
+        return FilterState(mean, namespace(mean).broadcast_to(initial_covariance, (batch, k, k)))
 
     def run(
         self,
@@ -215,7 +223,7 @@ class KalmanFilter(ABC):
             raise ValueError(f"measurements must be floating point (got {dtype})")
         if batch == 0 or steps == 0:
             raise ValueError(f"measurements hold no sequences or no time steps (shape {tuple(measurements.shape)})")
-        dt = _check_dt(dt)
+        dt = check_dt(dt)
         _check_noise_shapes(noise, batch, steps, self.covariance_dim, self.innovation_dim)
         noise = noise.to(dtype)
         time_varying = noise.time_varying

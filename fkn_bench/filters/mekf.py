@@ -21,18 +21,21 @@ and covariance, and the reset ``q <- exp(dtheta / 2) (x) q`` maps the covariance
 
 from __future__ import annotations
 
-import torch
-from torch import Tensor
+from typing import Any
+
+import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.ekf import joseph_update
 from fkn_bench.filters.models import PoseTwistModel
 from fkn_bench.filters.parameters import NoiseLayout
-from fkn_bench.geometry import quaternion_torch as qt
-from fkn_bench.linalg import symmetrize
+from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.linalg import add_matmul, broadcast, constant, eye, namespace, symmetrize
 from fkn_bench.types import ERROR_NAMES
 
 __all__ = ["MultiplicativeEKF", "MEKF_MANUAL_LAYOUT", "left_jacobian"]
+
+Array = Any
 
 _ERROR_UNITS = ("rad",) * 3 + ("m",) * 3 + ("rad/s",) * 3 + ("m/s",) * 3
 
@@ -52,28 +55,28 @@ MEKF_MANUAL_LAYOUT = NoiseLayout(
 """Components (error state), units and defaults of the multiplicative EKF."""
 
 
-def left_jacobian(phi: Tensor) -> Tensor:
+def left_jacobian(phi: Array) -> Array:
     """Left Jacobian of SO(3) ``(..., 3, 3)``: ``I + (1 - cos a)/a^2 [phi x] + (a - sin a)/a^3 [phi x]^2``."""
-    a2 = (phi * phi).sum(-1, keepdim=True)[..., None]
+    xp = namespace(phi)
+    a2 = (phi * phi).sum(-1, keepdims=True)[..., None]
     small = a2 < 1e-8
-    safe = torch.where(small, torch.ones_like(a2), a2)
-    a = safe.sqrt()
-    c1 = torch.where(small, 0.5 - a2 / 24.0, (1.0 - torch.cos(a)) / safe)
-    c2 = torch.where(small, 1.0 / 6.0 - a2 / 120.0, (a - torch.sin(a)) / (safe * a))
-    K = qt.skew(phi)
-    eye = torch.eye(3, dtype=phi.dtype)
-    return eye + c1 * K + c2 * (K @ K)
+    safe = xp.where(small, 1.0, a2)
+    a = xp.sqrt(safe)
+    c1 = xp.where(small, 0.5 - a2 / 24.0, (1.0 - xp.cos(a)) / safe)
+    c2 = xp.where(small, 1.0 / 6.0 - a2 / 120.0, (a - xp.sin(a)) / (safe * a))
+    K = qx.skew(phi)
+    return eye(phi, 3) + c1 * K + c2 * (K @ K)
 
 
 class MultiplicativeEKF(KalmanFilter):
-    """Error-state (multiplicative) EKF for the pose-and-twist state (see module docstring)."""
+    """Error-state (multiplicative) EKF for the pose-and-twist state (see module docstring);
+    its steps run on torch tensors (batched) and numpy arrays (online) alike."""
 
     name = "mekf"
 
     def __init__(self, *, model: PoseTwistModel | None = None) -> None:
         self.model = model if model is not None else PoseTwistModel()
         self.layout = MEKF_MANUAL_LAYOUT
-        self._lower_cache: dict = {}
 
     @property
     def covariance_dim(self) -> int:
@@ -83,49 +86,47 @@ class MultiplicativeEKF(KalmanFilter):
     def innovation_dim(self) -> int:
         return 6
 
-    def _transition(self, x: Tensor, dt: float) -> Tensor:
-        batch, dtype = x.shape[0], x.dtype
-        phi = dt * x[:, 7:10]
-        top = torch.cat(
-            (
-                qt.rotation_matrix(qt.from_rotation_vector(phi)),
-                torch.zeros(batch, 3, 3, dtype=dtype),
-                dt * left_jacobian(phi),
-                torch.zeros(batch, 3, 3, dtype=dtype),
-            ),
-            dim=2,
-        )
-        key = (dtype, float(dt))
-        lower = self._lower_cache.get(key)
-        if lower is None:
-            lower = torch.eye(12, dtype=dtype)[3:].clone()
-            lower[0:3, 9:12] = dt * torch.eye(3, dtype=dtype)
-            self._lower_cache[key] = lower
-        return torch.cat((top, lower.expand(batch, 9, 12)), dim=1)
+    def _transition(self, x: Array, dq: Array, dt: float) -> Array:
+        """The error transition ``Phi (B, 12, 12)`` over ``dt``; ``dq = exp(w dt / 2)``."""
+        xp = namespace(x)
+        batch = x.shape[0]
+        zeros = xp.zeros((batch, 3, 3), dtype=x.dtype)
+        top = xp.concat((qx.rotation_matrix(dq), zeros, dt * left_jacobian(dt * x[:, 7:10]), zeros), axis=2)
+        lower = constant(x, ("mekf-lower", float(dt)), lambda: _lower_rows(float(dt)))
+        return xp.concat((top, broadcast(lower, (batch, 9, 12))), axis=1)
 
-    def predict(self, state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
+    def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
         x, P = state.mean, state.covariance
-        Phi = self._transition(x, dt)
-        q = qt.multiply(qt.from_rotation_vector(dt * x[:, 7:10]), x[:, 0:4])
-        mean = torch.cat((q, x[:, 4:7] + dt * x[:, 10:13], x[:, 7:]), dim=1)
+        xp = namespace(x)
+        dq = qx.from_rotation_vector(dt * x[:, 7:10])
+        Phi = self._transition(x, dq, dt)
+        q = qx.multiply(dq, x[:, 0:4])
+        mean = xp.concat((q, x[:, 4:7] + dt * x[:, 10:13], x[:, 7:]), axis=1)
         PhiP = Phi @ P
-        P_pred = torch.baddbmm(process_noise.expand(x.shape[0], -1, -1), PhiP, Phi.transpose(1, 2))
+        P_pred = add_matmul(process_noise, PhiP, Phi.swapaxes(1, 2))
         return FilterState(mean, symmetrize(P_pred))
 
-    def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
+    def update(self, state: FilterState, z: Array, measurement_noise: Array) -> tuple[FilterState, Array, Array]:
         x, P = state.mean, state.covariance
+        xp = namespace(x)
         q = x[:, 0:4]
-        z_q = qt.align_sign(z[:, 0:4], q)
-        nu = torch.cat((qt.to_rotation_vector(qt.multiply(z_q, qt.conjugate(q))), z[:, 4:7] - x[:, 4:7]), dim=1)
-        eye3 = torch.eye(3, dtype=x.dtype)
+        z_q = qx.align_sign(z[:, 0:4], q)
+        nu = xp.concat((qx.to_rotation_vector(qx.multiply(z_q, qx.conjugate(q))), z[:, 4:7] - x[:, 4:7]), axis=1)
 
-        def reset(dx: Tensor) -> tuple[Tensor, slice, Tensor]:
-            return dx, slice(0, 3), eye3 + 0.5 * qt.skew(dx[:, 0:3])
+        def reset(dx: Array) -> tuple[Array, slice, Array]:
+            return dx, slice(0, 3), eye(dx, 3) + 0.5 * qx.skew(dx[:, 0:3])
 
-        error = torch.zeros(x.shape[0], 12, dtype=x.dtype)
+        error = xp.zeros((x.shape[0], 12), dtype=x.dtype)
         # P_post comes back symmetrised (the reset's G P G^T is part of joseph_update's product)
-        dx, P_post, S = joseph_update(error, P, nu, measurement_noise, observed=slice(0, 6), normalize=reset)
-        q_post = qt.multiply(qt.from_rotation_vector(dx[:, 0:3]), q)
-        q_post = q_post / q_post.norm(dim=1, keepdim=True)
-        mean = torch.cat((q_post, x[:, 4:] + dx[:, 3:]), dim=1)
+        dx, P_post, S, _ = joseph_update(error, P, nu, measurement_noise, observed=slice(0, 6), normalize=reset)
+        q_post = qx.multiply(qx.from_rotation_vector(dx[:, 0:3]), q)
+        q_post = q_post / xp.sqrt((q_post * q_post).sum(1, keepdims=True))
+        mean = xp.concat((q_post, x[:, 4:] + dx[:, 3:]), axis=1)
         return FilterState(mean, P_post), nu, S
+
+
+def _lower_rows(dt: float) -> np.ndarray:
+    """Rows 3-11 of the error transition: ``dr' = dr + dt dv``, ``dw' = dw``, ``dv' = dv``."""
+    lower = np.eye(12)[3:].copy()
+    lower[0:3, 9:12] = dt * np.eye(3)
+    return lower

@@ -1,13 +1,17 @@
-"""State-space models for the filter core: the paper's pose-and-twist model and a linear model.
+"""State-space models, written once for numpy arrays (online, one sequence) and torch tensors
+(batched, differentiable): the paper's pose-and-twist model and a linear model.
 
-A model tells a filter how the state moves (``predict``, its Jacobian ``jacobian``), what is
-measured (a linear ``H``; ``observed`` names the measured slice when ``H = [I 0]``), and how to
-keep states and measurements well-formed (``sanitize``, ``align``, ``normalize``). Filters
-(:mod:`fkn_bench.filters.ekf`, ``ukf``) are generic over models; nothing in a filter knows about
-quaternions except through these hooks.
+A model tells a filter how the state moves (``transition``: the mean ``f(x)`` and its Jacobian
+``F``), what is measured (a linear ``H``; ``observed`` names the measured slice when
+``H = [I 0]``), and how to keep states and measurements well-formed (``sanitize``, ``align``,
+``normalize``). Filters (:mod:`fkn_bench.filters.ekf`, ``ukf``, ``mekf``) are generic over models;
+nothing in a filter knows about quaternions except through these hooks. Every hook takes arrays
+with a leading batch axis (``(B, n)`` states, ``(B, m)`` measurements) of either library and
+returns the same library's arrays (:func:`fkn_bench.linalg.namespace`).
 
 :class:`PoseTwistModel` is FlexKalmanNet's model (section 2, eqs. 6-11): state
-``[q(4), r(3), w(3), v(3)]`` with world-frame ``w``, measurement ``[q, r]``::
+``[q(4), r(3), w(3), v(3)]`` (Hamilton, scalar-first ``wxyz``) with world-frame ``w``,
+measurement ``[q, r]``::
 
     r' = r + v dt,   v' = v,   q' = q + dt/2 Theta(q) w,   w' = w,   y = [q, r] = H x, H = [I7 0]
 
@@ -17,14 +21,19 @@ Kalman filter; the tests use it to check the EKF and UKF against a plain KF.
 
 from __future__ import annotations
 
-import torch
-from torch import Tensor
+from typing import Any
+
+import numpy as np
 
 from fkn_bench.filters.parameters import NoiseLayout
-from fkn_bench.geometry import quaternion_torch as qt
+from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, eye, namespace, sum_last
 from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES, STATE_UNITS
 
 __all__ = ["StateSpaceModel", "PoseTwistModel", "LinearGaussianModel", "PAPER_MANUAL_LAYOUT"]
+
+Array = Any
+"""A numpy array or a torch tensor."""
 
 PAPER_MANUAL_LAYOUT = NoiseLayout(
     q_labels=STATE_NAMES,
@@ -46,38 +55,58 @@ PAPER_MANUAL_LAYOUT = NoiseLayout(
 """Components, units and defaults (the paper's manual tuning) of the additive pose-twist model."""
 
 
+def _zeros(like: Array, shape: tuple[int, ...]) -> Array:
+    return namespace(like).zeros(shape, dtype=like.dtype)
+
+
 class StateSpaceModel:
-    """Interface of a model (see module docstring). Subclasses set the attributes below."""
+    """Interface of a model (see module docstring). Subclasses set the attributes below; ``H``
+    is a float64 numpy array (:meth:`measurement_matrix` gives it in an array's namespace)."""
 
     state_dim: int
     measurement_dim: int
-    H: Tensor
+    H: np.ndarray
     observed: slice | None = None
     layout: NoiseLayout
 
-    def predict(self, x: Tensor, dt: float) -> Tensor:
+    def _constants(self) -> dict:
+        """This model's cache of constant arrays (see :func:`fkn_bench.linalg.constant`)."""
+        return self.__dict__.setdefault("_cache", {})
+
+    def predict(self, x: Array, dt: float) -> Array:
         """Mean propagation ``f(x)`` of ``(B, n)`` states over ``dt`` seconds."""
-        raise NotImplementedError
+        return self.transition(x, dt)[0]
 
-    def jacobian(self, x: Tensor, dt: float) -> Tensor:
+    def jacobian(self, x: Array, dt: float) -> Array:
         """``F = df/dx`` ``(B, n, n)`` at ``x``."""
+        return self.transition(x, dt)[1]
+
+    def transition(self, x: Array, dt: float) -> tuple[Array, Array]:
+        """``(f(x), F)`` together."""
         raise NotImplementedError
 
-    def transition(self, x: Tensor, dt: float) -> tuple[Tensor, Tensor]:
-        """``(f(x), F)`` together; models override it when sharing work makes it cheaper."""
-        return self.predict(x, dt), self.jacobian(x, dt)
+    def measurement_matrix(self, like: Array) -> Array:
+        """``H (m, n)`` in the namespace and dtype of ``like``."""
+        return constant(like, "H", lambda: self.H, self._constants())
 
-    def sanitize(self, measurements: Tensor, mask: Tensor) -> tuple[Tensor, Tensor]:
-        """Clean inputs once per sequence: drop non-finite measurements from the mask."""
-        finite = torch.isfinite(measurements).all(-1)
-        mask = mask & finite
-        return torch.where(mask[..., None], measurements, torch.zeros_like(measurements)), mask
+    def measure(self, x: Array) -> Array:
+        """``H x`` for states ``(B, n)``."""
+        if self.observed is not None:
+            return x[:, self.observed]
+        return x @ self.measurement_matrix(x).swapaxes(0, 1)
 
-    def align(self, z: Tensor, x_pred: Tensor) -> Tensor:
+    def sanitize(self, measurements: Array, mask: Array) -> tuple[Array, Array]:
+        """Clean inputs once per sequence: drop non-finite measurements from the mask (zeros in
+        their place)."""
+        xp = namespace(measurements)
+        mask = mask & xp.all(xp.isfinite(measurements), axis=-1)
+        return xp.where(mask[..., None], measurements, 0.0), mask
+
+    def align(self, z: Array, x_pred: Array) -> Array:
         """Measurement made comparable with the prediction (identity by default)."""
         return z
 
-    def normalize(self, x: Tensor) -> tuple[Tensor, slice | None, Tensor | None]:
+    def normalize(self, x: Array) -> tuple[Array, slice | None, Array | None]:
         """Posterior state projected onto the state's manifold, and the projection's Jacobian.
 
         The Jacobian is the identity except on one diagonal block: returns ``(x, block, N)``
@@ -85,18 +114,42 @@ class StateSpaceModel:
         """
         return x, None, None
 
-    def null_direction(self, x: Tensor) -> Tensor | None:
+    def null_direction(self, x: Array) -> Array | None:
         """Unit direction ``(B, n)`` that :meth:`normalize`'s projection removes from the
         covariance (``None``: none), so that square-root filters can regularise along it."""
         return None
 
-    def initial_state(self, z: Tensor) -> Tensor:
+    def initial_state(self, z: Array) -> Array:
         """State ``(B, n)`` initialised from measurements ``(B, m)``."""
         raise NotImplementedError
 
-    def prior_state(self, batch: int, dtype: torch.dtype) -> Tensor:
-        """State ``(B, n)`` reported before a sequence's first measurement."""
-        return torch.zeros(batch, self.state_dim, dtype=dtype)
+    def prior_state(self, batch: int, dtype: Any) -> Array:
+        """State ``(B, n)`` reported before a sequence's first measurement (a torch tensor for a
+        torch ``dtype``, else a numpy array)."""
+        return _prior(batch, self.state_dim, dtype, first=0.0)
+
+
+def _prior(batch: int, n: int, dtype: Any, *, first: float) -> Array:
+    x = np.zeros((batch, n))
+    x[:, 0] = first
+    if type(dtype).__module__.startswith("torch"):
+        import torch
+
+        return torch.from_numpy(x).to(dtype)
+    return x.astype(dtype, copy=False)
+
+
+def _pose_row_basis() -> np.ndarray:
+    """``B (13, 52)`` with ``x @ B = [Omega(w) | 0 | Theta(q) | 0]`` (4 x 13, flattened): the
+    quaternion rows of ``2 (F - A) / dt`` are linear in the state (FlexKalmanNet eqs. 8-11)."""
+    basis = np.zeros((13, 4, 13))
+    unit = np.eye(13)
+    basis[0:4, :, 7:10] = qx.theta_matrix(unit[0:4, 0:4])  # d(Theta(q) w)/dw rows, per q_i
+    basis[7:10, :, 0:4] = qx.omega_matrix(unit[7:10, 7:10])  # Omega(w) per w_i
+    return basis.reshape(13, 52)
+
+
+_POSE_BASIS = _pose_row_basis()
 
 
 class PoseTwistModel(StateSpaceModel):
@@ -114,19 +167,12 @@ class PoseTwistModel(StateSpaceModel):
     measurement_dim = 7
     observed = slice(0, 7)
     layout = PAPER_MANUAL_LAYOUT
+    H = np.concatenate((np.eye(7), np.zeros((7, 6))), axis=1)
 
     def __init__(self, *, min_quaternion_norm: float = 1e-6) -> None:
         self.min_quaternion_norm = float(min_quaternion_norm)
-        self.H = torch.cat((torch.eye(7), torch.zeros(7, 6)), dim=1).double()
-        self._cache: dict = {}
 
-    def predict(self, x: Tensor, dt: float) -> Tensor:
-        return self.transition(x, dt)[0]
-
-    def jacobian(self, x: Tensor, dt: float) -> Tensor:
-        return self.transition(x, dt)[1]
-
-    def transition(self, x: Tensor, dt: float) -> tuple[Tensor, Tensor]:
+    def transition(self, x: Array, dt: float) -> tuple[Array, Array]:
         """Mean and Jacobian with few batched operations (the filter's hot path).
 
         ``E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]`` (the quaternion rows of ``F - A``, with
@@ -137,74 +183,75 @@ class PoseTwistModel(StateSpaceModel):
         a (B, 13, 13) product for the mean would cost a (B, 13, 13) outer product in the backward
         pass at every step.
         """
+        xp = namespace(x)
         batch = x.shape[0]
-        A, basis, zeros = self._transition_constants(x.dtype, dt)
-        E = (x @ basis).view(batch, 4, 13)  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
-        increment = (E[:, :, 0:4] @ x[:, 0:4].unsqueeze(-1)).squeeze(-1)  # dt/2 Omega(w) q
-        mean = torch.addmm(torch.cat((increment, zeros[:, 0].expand(batch, 9)), dim=1), x, A.T)
-        F = torch.cat((A[0:4] + E, A[4:13].expand(batch, 9, 13)), dim=1)
+        dt = float(dt)
+        # [A | A^T | dt/2 B] in one cached constant: A the identity plus r += dt v
+        A, At, basis = _split(constant(x, ("pose", dt), lambda: _pose_constants(dt)))
+        E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
+        increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
+        if isinstance(x, np.ndarray):  # numpy (online): the same sums, in place on fresh arrays
+            mean, F = x @ At, broadcast(A, (batch, 13, 13))
+            mean[:, 0:4] += increment
+            F[:, 0:4] += E
+            return mean, F
+        mean = add_matmul(xp.concat((increment, _zeros(x, (batch, 9))), axis=1), x, At)
+        F = xp.concat((A[0:4] + E, broadcast(A[4:13], (batch, 9, 13))), axis=1)
         return mean, F
 
-    def _transition_constants(self, dtype: torch.dtype, dt: float) -> tuple[Tensor, Tensor, Tensor]:
-        key = ("transition", dtype, float(dt))
-        constants = self._cache.get(key)
-        if constants is None:
-            A = torch.eye(13, dtype=dtype)
-            A[4:7, 10:13] = dt * torch.eye(3, dtype=dtype)
-            basis = torch.zeros(13, 4, 13, dtype=dtype)
-            unit = torch.eye(13, dtype=dtype)
-            basis[0:4, :, 7:10] = qt.theta_matrix(unit[0:4, 0:4])  # d(Theta(q) w)/dw rows, per q_i
-            basis[7:10, :, 0:4] = qt.omega_matrix(unit[7:10, 7:10])  # Omega(w) per w_i
-            constants = (A, (0.5 * dt) * basis.reshape(13, 52), torch.zeros(9, 13, dtype=dtype))
-            self._cache[key] = constants
-        return constants
-
-    def _eye4(self, dtype: torch.dtype) -> Tensor:
-        return self._constant("eye4", dtype, lambda: torch.eye(4, dtype=dtype))
-
-    def _constant(self, name: str, dtype: torch.dtype, make) -> Tensor:  # type: ignore[no-untyped-def]
-        key = (name, dtype)
-        value = self._cache.get(key)
-        if value is None:
-            value = self._cache[key] = make()
-        return value
-
-    def sanitize(self, measurements: Tensor, mask: Tensor) -> tuple[Tensor, Tensor]:
-        finite = torch.isfinite(measurements).all(-1)
-        z = torch.where(finite[..., None], measurements, torch.zeros_like(measurements))
-        norm = z[..., :4].norm(dim=-1, keepdim=True)
+    def sanitize(self, measurements: Array, mask: Array) -> tuple[Array, Array]:
+        xp = namespace(measurements)
+        finite = all_last(xp.isfinite(measurements))
+        if isinstance(measurements, np.ndarray):  # numpy (no gradients): the same rule in place
+            norm = np.sqrt(np.add.reduce(measurements[..., :4] * measurements[..., :4], axis=-1))
+            usable = mask & finite & (norm >= self.min_quaternion_norm) & (norm < float("inf"))
+            out = np.where(usable[..., None], measurements, 0.0)
+            out[..., :4] /= np.where(usable, norm, 1.0)[..., None]
+            return out, usable
+        z = xp.where(finite[..., None], measurements, 0.0)
+        norm = xp.sqrt(sum_last(z[..., :4] * z[..., :4]))
         # a norm that overflows (components ~1e155 and up) leaves no usable direction either
-        usable = mask & finite & (norm[..., 0] >= self.min_quaternion_norm) & torch.isfinite(norm[..., 0])
-        q = torch.where(usable[..., None], z[..., :4] / norm.clamp_min(self.min_quaternion_norm), z[..., :4])
-        z = torch.cat((q, z[..., 4:]), dim=-1)
-        return torch.where(usable[..., None], z, torch.zeros_like(z)), usable
+        usable = mask & finite & (norm[..., 0] >= self.min_quaternion_norm) & (norm[..., 0] < float("inf"))
+        q = z[..., :4] / xp.where(norm < self.min_quaternion_norm, self.min_quaternion_norm, norm)
+        return xp.where(usable[..., None], xp.concat((q, z[..., 4:]), axis=-1), 0.0), usable
 
-    def align(self, z: Tensor, x_pred: Tensor) -> Tensor:
-        # copysign(1, z_q . q-) is -1 where the measured quaternion points away from the prediction
-        dot = (z[:, None, 0:4] @ x_pred[:, 0:4, None]).squeeze(-1)
-        sign = torch.copysign(torch.ones_like(dot), dot)
-        return z * torch.cat((sign.expand(-1, 4), torch.ones_like(z[:, 4:])), dim=1)
+    def align(self, z: Array, x_pred: Array) -> Array:
+        # the measured quaternion is flipped where it points away from the prediction: where
+        # z_q . q- has its sign bit set (copysign(1, z_q . q-) = -1)
+        dot = (z[:, None, 0:4] @ x_pred[:, 0:4, None])[:, :, 0]
+        flip = constant(z, "pose-flip", lambda: np.array([-1.0] * 4 + [1.0] * 3))
+        return namespace(z).where(namespace(z).signbit(dot), z * flip, z)
 
-    def normalize(self, x: Tensor) -> tuple[Tensor, slice | None, Tensor | None]:
+    def normalize(self, x: Array) -> tuple[Array, slice | None, Array | None]:
+        xp = namespace(x)
         q = x[:, :4]
-        norm = q.norm(dim=1, keepdim=True)
+        norm = xp.sqrt(sum_last(q * q))
         unit = q / norm
-        # N = (I - u u^T) / |q|
-        N = torch.baddbmm(self._eye4(x.dtype), unit[:, :, None], unit[:, None, :], alpha=-1.0) / norm[:, :, None]
-        return torch.cat((unit, x[:, 4:]), dim=1), slice(0, 4), N
+        N = (eye(x, 4) - unit[:, :, None] * unit[:, None, :]) / norm[:, :, None]
+        return xp.concat((unit, x[:, 4:]), axis=1), slice(0, 4), N  # N = (I - u u^T) / |q|
 
-    def null_direction(self, x: Tensor) -> Tensor | None:
+    def null_direction(self, x: Array) -> Array | None:
+        xp = namespace(x)
         q = x[:, :4]
-        return torch.cat((q / q.norm(dim=1, keepdim=True), torch.zeros_like(x[:, 4:])), dim=1)
+        return xp.concat((q / xp.sqrt(xp.sum(q * q, axis=1, keepdims=True)), xp.zeros_like(x[:, 4:])), axis=1)
 
-    def initial_state(self, z: Tensor) -> Tensor:
-        zeros = torch.zeros(z.shape[0], 6, dtype=z.dtype)
-        return torch.cat((z[:, :4], z[:, 4:7], zeros), dim=1)
+    def initial_state(self, z: Array) -> Array:
+        return namespace(z).concat((z[:, :7], _zeros(z, (z.shape[0], 6))), axis=1)
 
-    def prior_state(self, batch: int, dtype: torch.dtype) -> Tensor:
-        x = torch.zeros(batch, 13, dtype=dtype)
-        x[:, 0] = 1.0
-        return x
+    def prior_state(self, batch: int, dtype: Any) -> Array:
+        return _prior(batch, 13, dtype, first=1.0)
+
+
+def _pose_constants(dt: float) -> np.ndarray:
+    """``[A | A^T | dt/2 B] (13, 78)``: ``A`` the identity plus ``r += dt v``, ``B`` the
+    quaternion-row basis."""
+    A = np.eye(13)
+    A[4:7, 10:13] = dt * np.eye(3)
+    return np.concatenate((A, A.T, (0.5 * dt) * _POSE_BASIS), axis=1)
+
+
+def _split(constants: Array) -> tuple[Array, Array, Array]:
+    return constants[:, 0:13], constants[:, 13:26], constants[:, 26:78]
 
 
 class LinearGaussianModel(StateSpaceModel):
@@ -214,21 +261,19 @@ class LinearGaussianModel(StateSpaceModel):
     deviations. ``initial_state`` solves ``H x = z`` in the least-squares sense.
     """
 
-    def __init__(self, A: Tensor, H: Tensor) -> None:
-        self.A = torch.as_tensor(A, dtype=torch.float64)
-        self.H = torch.as_tensor(H, dtype=torch.float64)
+    def __init__(self, A: Array, H: Array, *, layout: NoiseLayout | None = None) -> None:
+        self.A, self.H = (np.array(a.detach().numpy() if hasattr(a, "detach") else a, dtype=np.float64) for a in (A, H))
         n, m = self.A.shape[0], self.H.shape[0]
         if self.A.shape != (n, n) or self.H.shape != (m, n):
             raise ValueError(f"A must be (n, n) and H (m, n); got {tuple(self.A.shape)} and {tuple(self.H.shape)}")
         self.state_dim, self.measurement_dim = n, m
         xs, ys = tuple(f"x{i}" for i in range(n)), tuple(f"y{i}" for i in range(m))
-        self.layout = NoiseLayout(xs, ("1",) * n, (1.0,) * n, ys, ("1",) * m, (1.0,) * m, xs, ("1",) * n, (1.0,) * n)
+        default = NoiseLayout(xs, ("1",) * n, (1.0,) * n, ys, ("1",) * m, (1.0,) * m, xs, ("1",) * n, (1.0,) * n)
+        self.layout = layout if layout is not None else default
 
-    def predict(self, x: Tensor, dt: float) -> Tensor:
-        return x @ self.A.to(x.dtype).T
+    def transition(self, x: Array, dt: float) -> tuple[Array, Array]:
+        A = constant(x, "A", lambda: self.A, self._constants())
+        return x @ A.swapaxes(0, 1), namespace(x).broadcast_to(A, (x.shape[0],) + self.A.shape)
 
-    def jacobian(self, x: Tensor, dt: float) -> Tensor:
-        return self.A.to(x.dtype).expand(x.shape[0], -1, -1)
-
-    def initial_state(self, z: Tensor) -> Tensor:
-        return z @ torch.linalg.pinv(self.H.to(z.dtype)).T
+    def initial_state(self, z: Array) -> Array:
+        return z @ constant(z, "pinv-H^T", lambda: np.linalg.pinv(self.H).T, self._constants())

@@ -22,38 +22,50 @@ that remains (it should not) falls back to ``P + sqrt(eps) mean(diag(P)) I`` for
 
 from __future__ import annotations
 
-import torch
-from torch import Tensor
+from typing import Any
+
+import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.ekf import linear_measurement_update
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
-from fkn_bench.linalg import symmetrize
+from fkn_bench.linalg import cholesky, constant, eye, namespace, symmetrize
 
 __all__ = ["UnscentedKalmanFilter", "sigma_point_weights"]
 
+Array = Any
 
-def sigma_point_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, Tensor, Tensor]:
+
+def _diagonal(P: Array) -> Array:
+    """``(B, k)`` diagonals of ``(B, k, k)`` matrices."""
+    return namespace(P).diagonal(P, axis1=1, axis2=2) if isinstance(P, np.ndarray) else P.diagonal(dim1=1, dim2=2)
+
+
+def _eps(P: Array) -> float:
+    """Machine epsilon of ``P``'s dtype."""
+    return float(np.finfo(str(P.dtype).removeprefix("torch.")).eps)
+
+
+def sigma_point_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, np.ndarray, np.ndarray]:
     """``(scale, Wm, Wc)``: the spread ``sqrt(n + lambda)`` and the ``2n + 1`` weights."""
     lam = alpha**2 * (n + kappa) - n
     if n + lam <= 0:
         raise ValueError(f"alpha^2 (n + kappa) must be > 0 (got alpha={alpha}, kappa={kappa}, n={n})")
-    wm = torch.full((2 * n + 1,), 1.0 / (2.0 * (n + lam)), dtype=torch.float64)
-    wc = wm.clone()
+    wm = np.full(2 * n + 1, 1.0 / (2.0 * (n + lam)))
+    wc = wm.copy()
     wm[0] = lam / (n + lam)
     wc[0] = lam / (n + lam) + 1.0 - alpha**2 + beta
     return (n + lam) ** 0.5, wm, wc
 
 
-def _safe_cholesky(P: Tensor) -> Tensor:
-    L, info = torch.linalg.cholesky_ex(P)
-    failed = info != 0
+def _safe_cholesky(P: Array) -> Array:
+    L, failed = cholesky(P)
     if bool(failed.any()):
-        eps = torch.finfo(P.dtype).eps
-        jitter = eps**0.5 * P.diagonal(dim1=1, dim2=2).mean(1).clamp_min(eps)
-        eye = torch.eye(P.shape[-1], dtype=P.dtype)
-        L_jittered = torch.linalg.cholesky_ex(P + jitter[:, None, None] * eye)[0]
-        L = torch.where(failed[:, None, None], L_jittered, L)
+        xp = namespace(P)
+        eps = _eps(P)
+        jitter = eps**0.5 * xp.clip(xp.mean(_diagonal(P), axis=1), eps, None)
+        L_jittered = cholesky(P + jitter[:, None, None] * eye(P, P.shape[-1]))[0]
+        L = xp.where(failed[:, None, None], L_jittered, L)
     return L
 
 
@@ -74,23 +86,26 @@ class UnscentedKalmanFilter(KalmanFilter):
         self.layout = self.model.layout
         self.alpha, self.beta, self.kappa = float(alpha), float(beta), float(kappa)
         self._scale, self._wm, self._wc = sigma_point_weights(self.model.state_dim, self.alpha, self.beta, self.kappa)
+        self._cache: dict = {}
 
-    def predict(self, state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
+    def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
         x, P = state.mean, state.covariance
+        xp = namespace(x)
         batch, n = x.shape
         direction = self.model.null_direction(x)
         if direction is not None:
-            eps = max(1e-10, 100.0 * torch.finfo(P.dtype).eps) * P.diagonal(dim1=1, dim2=2).amax(1)
+            eps = max(1e-10, 100.0 * _eps(P)) * xp.amax(_diagonal(P), axis=1)
             P = P + eps[:, None, None] * (direction[:, :, None] * direction[:, None, :])  # e e^T: exactly symmetric
         L = _safe_cholesky(P) * self._scale
-        spread = L.transpose(1, 2)  # rows are the columns of L
-        points = torch.cat((x[:, None, :], x[:, None, :] + spread, x[:, None, :] - spread), dim=1)
-        moved = self.model.predict(points.reshape(-1, n), dt).reshape(batch, 2 * n + 1, n)
-        wm, wc = self._wm.to(x.dtype), self._wc.to(x.dtype)
-        mean = torch.einsum("p,bpn->bn", wm, moved)
+        spread = L.swapaxes(1, 2)  # rows are the columns of L
+        points = xp.concat((x[:, None, :], x[:, None, :] + spread, x[:, None, :] - spread), axis=1)
+        moved = xp.reshape(self.model.predict(xp.reshape(points, (-1, n)), dt), (batch, 2 * n + 1, n))
+        wm = constant(x, ("ukf-wm", id(self)), lambda: self._wm, self._cache)
+        wc = constant(x, ("ukf-wc", id(self)), lambda: self._wc, self._cache)
+        mean = (wm @ moved)  # (B, n): sum_p Wm_p X_p
         deviation = moved - mean[:, None, :]
-        covariance = torch.einsum("bpi,p,bpj->bij", deviation, wc, deviation) + process_noise
+        covariance = (deviation.swapaxes(1, 2) * wc) @ deviation + process_noise
         return FilterState(mean, symmetrize(covariance))  # the weighted sum is symmetric only to rounding
 
-    def update(self, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
+    def update(self, state: FilterState, z: Array, measurement_noise: Array) -> tuple[FilterState, Array, Array]:
         return linear_measurement_update(self.model, state, z, measurement_noise)

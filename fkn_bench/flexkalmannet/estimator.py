@@ -18,11 +18,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from fkn_bench.estimators.base import Estimate, Estimates, Estimator, check_batch_inputs, parse_observation
+from fkn_bench.estimators.base import Estimates, Estimator, RecursiveEstimator, check_batch_inputs
 from fkn_bench.estimators.kalman import filter_result_to_estimates
-from fkn_bench.filters import FilterState, make_filter
-from fkn_bench.filters import online_ekf
-from fkn_bench.filters.pose import with_unit_quaternion
+from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet.checkpoint import model_from_checkpoint
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
@@ -47,7 +45,7 @@ class FlexKalmanNetEstimator(TrainedKalmanEstimator):
         return cls(metadata=metadata, **deployed_estimator_config(model, config.variant))
 
 
-class AdaptiveFlexKalmanNetEstimator(Estimator):
+class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
     """FlexKalmanNet's time-varying mode: per-step parameters from the recent measurements."""
 
     name = "flexkalmannet"
@@ -62,9 +60,7 @@ class AdaptiveFlexKalmanNetEstimator(Estimator):
                 raise ValueError(f"history must be >= 1 (got {history})")
             self.model.history = int(history)
         self.filter = make_filter(self.config.variant)
-        self._dt: float | None = None
         self._recent: deque[torch.Tensor] = deque(maxlen=self.model.history)
-        self._state: tuple[float, FilterState, bool] | None = None
 
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)
@@ -77,52 +73,22 @@ class AdaptiveFlexKalmanNetEstimator(Estimator):
         return filter_result_to_estimates(result, self.filter)
 
     def reset(self, *, dt: float) -> None:
-        if not np.isfinite(dt) or dt <= 0:
-            raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
-        self._dt = float(dt)
+        super().reset(dt=dt)
         self._recent.clear()
-        self._state = None
 
     def _current_raw(self) -> torch.Tensor:
         if not self._recent:
             return self.model.deployed_raw()
         return torch.stack(tuple(self._recent)).mean(0)
 
-    def step(self, observation: Any) -> Estimate:
-        if self._dt is None:
-            raise RuntimeError("call reset(dt=...) before step()")
-        pose, time = parse_observation(observation)
-        z = None if pose is None else online_ekf.sanitize_measurement(pose)
+    def _online_observe(self, z: ArrayF | None) -> None:
+        """The step's noise: the network's outputs averaged over the recent measurements, this
+        step's included."""
         with torch.no_grad(), torch_threads():
             if z is not None:
-                self._recent.append(self.model._outputs(torch.from_numpy(z)[None])[0])
+                self._recent.append(self.model._outputs(torch.from_numpy(z))[0])
             noise = self.model.parameter_set.to_noise(self._current_raw()[None])
-            if self._state is None:
-                now = 0.0 if time is None else time
-                prior = self.filter.prior(1, noise.initial[0], torch.float64)
-                state, initialised = prior, False
-            else:
-                previous_time, state, initialised = self._state
-                now = previous_time + self._dt if time is None else time
-                if now <= previous_time:
-                    raise ValueError(f"observation time {now} does not increase (previous {previous_time})")
-                state = self.filter.predict(state, noise.process, now - previous_time)
-            updated = False
-            if z is not None:
-                zt = torch.from_numpy(z)[None]
-                if not initialised:
-                    state, initialised = self.filter.initial_state(zt, noise.initial[0]), True
-                else:
-                    state, _, _ = self.filter.update(state, zt, noise.measurement)  # P+ symmetrised
-                    updated = True
-        self._state = (now, state, initialised)
-        return Estimate(
-            time=now,
-            mean=with_unit_quaternion(state.mean[0].numpy()),
-            native_covariance=state.covariance[0].numpy().copy(),
-            initialised=initialised,
-            updated=updated,
-        )
+        self._online_noise = tuple(m[0].to(torch.float64).numpy() for m in (noise.process, noise.measurement, noise.initial))
 
     def to_config(self) -> dict[str, Any]:
         return {"checkpoint": self.checkpoint, "history": self.model.history}

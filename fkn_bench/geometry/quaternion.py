@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fkn_bench.geometry import quaternion_xp
 from fkn_bench.types import ArrayF
 
 __all__ = [
@@ -190,16 +191,7 @@ def theta_matrix(q: ArrayF) -> ArrayF:
     orthonormal and orthogonal to ``q``, and ``2 Theta(q)^T dq`` maps a small change ``dq`` to
     the world-frame rotation vector it represents.
     """
-    w, x, y, z = np.moveaxis(np.asarray(q, dtype=float), -1, 0)
-    return np.stack(
-        [
-            np.stack([-x, -y, -z], -1),
-            np.stack([w, z, -y], -1),
-            np.stack([-z, w, x], -1),
-            np.stack([y, -x, w], -1),
-        ],
-        axis=-2,
-    )
+    return quaternion_xp.theta_matrix(np.asarray(q, dtype=float))  # one definition, exact
 
 
 def wxyz_to_xyzw(q: ArrayF) -> ArrayF:

@@ -59,11 +59,6 @@ class ConstantVelocity:
             measured[:, t] = x @ self.H.T + rng.normal(size=(batch, 2)) * self.r
         return truth, measured
 
-    def numpy_model(self):  # noqa: ANN201
-        from fkn_bench.baselines.numpy_models import NumpyLinearModel
-
-        return NumpyLinearModel(self.A, self.H)
-
     def torch_model(self):  # noqa: ANN201
         import torch
 

@@ -24,7 +24,7 @@ P0_STD = np.ones(4)
 
 
 def _run(cv, rule, z, *, q_std=None, r_std=None):  # noqa: ANN001, ANN202
-    f = AdaptiveKalmanFilter(rule, model=cv.numpy_model(), q_std=cv.q if q_std is None else q_std, r_std=cv.r if r_std is None else r_std, p0_std=P0_STD)
+    f = AdaptiveKalmanFilter(rule, model=cv.torch_model(), q_std=cv.q if q_std is None else q_std, r_std=cv.r if r_std is None else r_std, p0_std=P0_STD)
     return f.run(z, np.ones(z.shape[:2], dtype=bool), dt=cv.dt)
 
 

@@ -51,24 +51,32 @@ def test_online_update_step(benchmark: Any, name: str) -> None:
     benchmark(lambda: estimator.step(observation))
     benchmark.extra_info.update(steps=1, what=f"{name} step() with a measurement")
 
-def test_online_ekf_predict_update(benchmark: Any) -> None:
-    """One predict + update of the lean numpy EKF (:mod:`fkn_bench.filters.online_ekf`) that the
-    EKF estimators' ``step()`` runs: the filter core's online target is measured on this."""
-    from fkn_bench.filters import online_ekf
+def _first_states() -> tuple[Any, ...]:
+    """``(dt, Q, R, P0, x0 (13,), measurement (7,))`` of ds1 seed 0 for the one-step benchmarks."""
+    from fkn_bench.filters.models import PoseTwistModel
 
     z, m, dt = episodes_for("ds1", 1, STEPS)
     noise = make_estimator("manual-ekf").noise_parameters()
     Q, R, P0 = (t.numpy() for t in (noise.process, noise.measurement, noise.initial))
-    z0 = online_ekf.sanitize_measurement(z[0, 0])
-    x0 = online_ekf.initial_state(z0)
-    measurement = online_ekf.sanitize_measurement(z[0, int(np.flatnonzero(m[0])[1])])
+    model = PoseTwistModel()
+    z0 = model.sanitize(z[0, :1], np.ones(1, dtype=bool))[0]
+    measurement = model.sanitize(z[0, int(np.flatnonzero(m[0])[1])][None], np.ones(1, dtype=bool))[0]
+    return dt, Q, R, P0, model.initial_state(z0)[0], measurement[0]
+
+
+def test_online_ekf_predict_update(benchmark: Any) -> None:
+    """One predict + update of the EKF step on numpy arrays (batch 1) that the EKF estimators'
+    ``step()`` runs: the filter core's online target is measured on this."""
+    from fkn_bench.filters import ExtendedKalmanFilter, FilterState
+
+    dt, Q, R, P0, x0, measurement = _first_states()
+    ekf, state, z = ExtendedKalmanFilter(), FilterState(x0[None], P0[None]), measurement[None]
 
     def predict_update() -> Any:
-        x, P = online_ekf.predict(x0, P0, Q, dt)
-        return online_ekf.update(x, P, measurement, R)
+        return ekf.update(ekf.predict(state, Q, dt), z, R)
 
     benchmark(predict_update)
-    benchmark.extra_info.update(steps=1, what="online_ekf.predict + update (numpy), one step")
+    benchmark.extra_info.update(steps=1, what="ExtendedKalmanFilter predict + update (numpy, batch 1), one step")
 
 
 def test_filterpy_ekf_predict_update(benchmark: Any) -> None:
@@ -76,13 +84,7 @@ def test_filterpy_ekf_predict_update(benchmark: Any) -> None:
     with the paper's model written out as filterpy expects it (f, F, H = [I7 0], standard form)."""
     from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 
-    from fkn_bench.filters import online_ekf
-
-    z, m, dt = episodes_for("ds1", 1, STEPS)
-    noise = make_estimator("manual-ekf").noise_parameters()
-    Q, R, P0 = (t.numpy() for t in (noise.process, noise.measurement, noise.initial))
-    x0 = online_ekf.initial_state(online_ekf.sanitize_measurement(z[0, 0]))
-    measurement = online_ekf.sanitize_measurement(z[0, int(np.flatnonzero(m[0])[1])])
+    dt, Q, R, P0, x0, measurement = _first_states()
     H = np.eye(7, 13)
 
     def theta(q: np.ndarray) -> np.ndarray:

@@ -70,7 +70,7 @@ def test_joseph_update_with_dense_H_equals_sliced_H() -> None:
         for a, b in zip(sliced, dense):
             torch.testing.assert_close(a, b, rtol=0, atol=1e-12)
     # without normalisation the Joseph form equals the textbook (I - KH) P for the optimal gain
-    x_post, P_post, S = joseph_update(x, P, nu, R, H=H)
+    x_post, P_post, S, _ = joseph_update(x, P, nu, R, H=H)
     K = P @ H.T @ torch.linalg.inv(S)
     torch.testing.assert_close(P_post, (torch.eye(n, dtype=torch.float64) - K @ H) @ P, rtol=0, atol=1e-10)
     torch.testing.assert_close(x_post, x + (K @ nu[..., None])[..., 0], rtol=0, atol=1e-12)

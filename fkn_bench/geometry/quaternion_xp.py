@@ -1,0 +1,148 @@
+"""Quaternion algebra for the filters (Hamilton, scalar first ``[w, x, y, z]``), written once for
+numpy arrays and torch tensors (differentiable); functions broadcast over leading axes.
+
+The filters' twin of :mod:`fkn_bench.geometry.quaternion`. Where a formula has a removable
+singularity (zero rotation), both branches are finite so that gradients through ``where`` stay
+finite.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from fkn_bench.linalg import constant, namespace, stack
+
+__all__ = [
+    "multiply",
+    "conjugate",
+    "theta_matrix",
+    "omega_matrix",
+    "from_rotation_vector",
+    "to_rotation_vector",
+    "rotation_matrix",
+    "skew",
+    "align_sign",
+]
+
+Array = Any
+
+
+def _rows(xp: Any, rows: tuple[tuple[Array, ...], ...]) -> Array:
+    """A ``(..., r, c)`` matrix from ``r`` rows of ``c`` entries ``(...)``."""
+    return stack([stack(row, axis=-1) for row in rows], axis=-2)
+
+
+def _linear(make: Any, inputs: int) -> np.ndarray:
+    """``C (inputs, outputs)``: a map linear in its input (an array of ``(..., inputs)``) written
+    as one product ``v @ C`` (products with 0 and +-1 are exact: the same numbers as the formula)."""
+    return np.stack([np.asarray(make(np.eye(inputs)[i])).reshape(-1) for i in range(inputs)])
+
+
+def _theta(q: Array) -> tuple[tuple[Array, ...], ...]:
+    w, x, y, z = (q[..., i] for i in range(4))
+    return ((-x, -y, -z), (w, z, -y), (-z, w, x), (y, -x, w))
+
+
+def _omega(w: Array) -> tuple[tuple[Array, ...], ...]:
+    wx, wy, wz = (w[..., i] for i in range(3))
+    return ((0.0, -wx, -wy, -wz), (wx, 0.0, -wz, wy), (wy, wz, 0.0, -wx), (wz, -wy, wx, 0.0))
+
+
+def _skew(v: Array) -> tuple[tuple[Array, ...], ...]:
+    x, y, z = (v[..., i] for i in range(3))
+    return ((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0))
+
+
+def _hamilton(pq: Array) -> tuple[Array, ...]:
+    """The Hamilton product from the outer product ``pq[i, j] = p_i q_j`` (``(4, 4)``)."""
+    (pw_qw, pw_qx, pw_qy, pw_qz), (px_qw, px_qx, px_qy, px_qz), (py_qw, py_qx, py_qy, py_qz), (pz_qw, pz_qx, pz_qy, pz_qz) = pq
+    return (
+        pw_qw - px_qx - py_qy - pz_qz,
+        pw_qx + px_qw + py_qz - pz_qy,
+        pw_qy - px_qz + py_qw + pz_qx,
+        pw_qz + px_qy - py_qx + pz_qw,
+    )
+
+
+_THETA, _OMEGA, _SKEW = _linear(_theta, 4), _linear(_omega, 3), _linear(_skew, 3)
+_HAMILTON = _linear(lambda e: _hamilton(e.reshape(4, 4)), 16)
+
+
+def _apply(v: Array, key: str, C: np.ndarray, shape: tuple[int, ...]) -> Array:
+    out = v @ constant(v, ("quaternion", key), lambda: C)
+    return namespace(v).reshape(out, tuple(out.shape[:-1]) + shape)
+
+
+def multiply(p: Array, q: Array) -> Array:
+    """Hamilton product ``p (x) q`` of ``(..., 4)`` arrays."""
+    pq = p[..., :, None] * q[..., None, :]
+    return namespace(pq).reshape(pq, tuple(pq.shape[:-2]) + (16,)) @ constant(pq, ("quaternion", "multiply"), lambda: _HAMILTON)
+
+
+def conjugate(q: Array) -> Array:
+    """Conjugate ``q*``."""
+    return namespace(q).concat((q[..., :1], -q[..., 1:]), axis=-1)
+
+
+def theta_matrix(q: Array) -> Array:
+    """The paper's ``Theta(q)`` ``(..., 4, 3)``: ``Theta(q) w = [0, w] (x) q`` (FlexKalmanNet eq. 11)."""
+    return _apply(q, "theta", _THETA, (4, 3))
+
+
+def omega_matrix(w: Array) -> Array:
+    """``Omega(w)`` ``(..., 4, 4)`` with ``Omega(w) q = [0, w] (x) q = Theta(q) w``."""
+    return _apply(w, "omega", _OMEGA, (4, 4))
+
+
+def skew(v: Array) -> Array:
+    """Cross-product matrix ``[v x]`` ``(..., 3, 3)``."""
+    return _apply(v, "skew", _SKEW, (3, 3))
+
+
+def from_rotation_vector(rotvec: Array) -> Array:
+    """``exp(rotvec / 2)`` as a unit quaternion; exact and differentiable at zero."""
+    xp = namespace(rotvec)
+    angle2 = (rotvec * rotvec).sum(-1, keepdims=True)
+    small = angle2 < 1e-12
+    safe2 = xp.where(small, 1.0, angle2)
+    angle = xp.sqrt(safe2)
+    half = 0.5 * angle
+    # sin(a/2)/a; series 1/2 - a^2/48 below 1e-6 rad
+    scale = xp.where(small, 0.5 - angle2 / 48.0, xp.sin(half) / angle)
+    cos = xp.where(small, 1.0 - angle2 / 8.0, xp.cos(half))
+    return xp.concat((cos, scale * rotvec), axis=-1)
+
+
+def to_rotation_vector(q: Array) -> Array:
+    """Rotation vector of the shortest rotation represented by ``q`` or ``-q`` (rad)."""
+    xp = namespace(q)
+    q = xp.where(q[..., :1] < 0, -q, q)
+    w = q[..., :1]
+    vec = q[..., 1:]
+    n2 = (vec * vec).sum(-1, keepdims=True)
+    small = n2 < 1e-18
+    n = xp.sqrt(xp.where(small, 1.0, n2))
+    scale = xp.where(small, 2.0 / w, 2.0 * xp.atan2(n, w) / n)
+    return scale * vec
+
+
+def rotation_matrix(q: Array) -> Array:
+    """Rotation matrix ``(..., 3, 3)`` of unit quaternion ``q``."""
+    w, x, y, z = (q[..., i] for i in range(4))
+    return _rows(
+        namespace(q),
+        (
+            (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
+            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
+            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
+        ),
+    )
+
+
+def align_sign(q: Array, reference: Array) -> Array:
+    """``q`` or ``-q``, whichever has a non-negative dot product with ``reference``."""
+    xp = namespace(q)
+    dot = (q * reference).sum(-1, keepdims=True)
+    return xp.where(dot < 0, -q, q)
