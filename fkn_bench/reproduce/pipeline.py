@@ -41,6 +41,7 @@ from fkn_bench.estimators import Estimator, make_estimator
 from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet import FlexKalmanNetConfig, FlexKalmanNetEstimator, train_flexkalmannet
 from fkn_bench.flexkalmannet.plots import plot_losses, plot_parameters
+from fkn_bench.harness.plots import save_figure, states_figure
 from fkn_bench.harness.reference import PAPER_TITLE
 from fkn_bench.io import read_json, write_json_atomic
 from fkn_bench.reproduce import figures as figs
@@ -245,11 +246,11 @@ def _draw_figures(settings: ReproduceSettings, trained: dict[str, TrainedModel],
                             title=f"Learned standard deviations over epochs, {dataset.upper()}{quick_tag}")
     seed = settings.figure_seed
     title = f"EKF with the parameters learned from DS1, on DS1 (test split, seed {seed}){quick_tag}"
-    figs.save(figs.states_figure_titled(ds1_trace, title), fig_dir / "states_ds1.png")
+    save_figure(states_figure(ds1_trace, title=title), fig_dir / "states_ds1.png", dpi=110)
     title = (f"Angular-rate estimates with 2σ bands, DS1 parameters on DS1, first {settings.uncertainty_steps} "
              f"samples{quick_tag}")
-    figs.save(figs.omega_uncertainty_figure(ds1_trace, steps=settings.uncertainty_steps, title=title),
-              fig_dir / "omega_uncertainty_ds1.png")
+    save_figure(figs.omega_uncertainty_figure(ds1_trace, steps=settings.uncertainty_steps, title=title),
+                fig_dir / "omega_uncertainty_ds1.png", dpi=110)
     for scenario_name, label, stem, title in (
         ("ds1-noise5x", "learned-ds1", "states_ds1_noise5x", "DS1 parameters on DS1 with five times the noise"),
         ("ds1-gap100", "learned-ds1", "states_ds1_gap100", "DS1 parameters on DS1 with a measurement every 100 steps"),
@@ -258,8 +259,8 @@ def _draw_figures(settings: ReproduceSettings, trained: dict[str, TrainedModel],
         ("ds1", "learned-ds2", "states_ds2_params_on_ds1", "DS2 parameters on DS1 (cross-data-set)"),
     ):
         trace = run_trace(constant[label], LABELS[label], get_scenario(scenario_name), seed)
-        figs.save(figs.states_figure_titled(trace, f"EKF, {title} (test split, seed {seed}){quick_tag}"),
-                  fig_dir / f"{stem}.png")
+        save_figure(states_figure(trace, title=f"EKF, {title} (test split, seed {seed}){quick_tag}"),
+                    fig_dir / f"{stem}.png", dpi=110)
 
 
 def run_reproduction(
