@@ -14,18 +14,13 @@ import argparse
 import json
 from pathlib import Path
 
-from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files
 
 __all__ = ["add_parser"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "record",
-        help="record an episode and its estimates as MCAP (ROS 2 + Foxglove)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    parser = add_command(subparsers, "record", "record an episode and its estimates as MCAP (ROS 2 + Foxglove)", __doc__)
     parser.add_argument("--scenario", default="ds1", help="scenario name (default: ds1)")
     parser.add_argument(
         "--estimator",
