@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from fkn_bench.flexkalmannet.config import DEVIATIONS, PAPER_TABLE, FlexKalmanNetConfig
-from fkn_bench.harness.reference import PAPER_LEARNED_STD, PAPER_ROWS, PAPER_TRAINING_RESULTS
+from fkn_bench.harness.reference import PAPER_LEARNED, PAPER_LEARNED_STD, PAPER_MANUAL, PAPER_TRAINING_RESULTS
 from fkn_bench.reproduce.evaluation import Evaluation
 from fkn_bench.reproduce.report import Table
 from fkn_bench.types import STATE_NAMES
@@ -51,17 +51,6 @@ def fmt_std(value: float | None) -> str:
         return DASH
     value = float(value)
     return f"{value:.6f}" if value >= 1e-5 else f"{value:.2e}"
-
-
-def _paper_rmse(label: str) -> Mapping[str, float]:
-    for row in PAPER_ROWS:
-        if row.label == label:
-            return row.rmse
-    raise KeyError(label)
-
-
-PAPER_LEARNED_RMSE = _paper_rmse("paper: FlexKalmanNet (quoted)")
-PAPER_MANUAL_RMSE = _paper_rmse("paper: manual EKF (quoted)")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -169,17 +158,16 @@ def rmse_table(learned: Evaluation, manual: Evaluation, oracle: Evaluation | Non
             name,
             fmt(learned.component_rmse[name]),
             fmt(manual.component_rmse[name]),
-            fmt(PAPER_LEARNED_RMSE[name], 3),
-            fmt(PAPER_MANUAL_RMSE[name], 3),
+            fmt(PAPER_LEARNED.rmse[name], 3),
+            fmt(PAPER_MANUAL.rmse[name], 3),
             fmt(oracle.component_rmse[name]) if oracle else DASH,
         ))
-    paper_state = {row.label: row.state_rmse for row in PAPER_ROWS}
     rows.append((
         "13-state",
         fmt(learned.state_rmse),
         fmt(manual.state_rmse),
-        fmt(paper_state["paper: FlexKalmanNet (quoted)"]) + "*",
-        fmt(paper_state["paper: manual EKF (quoted)"]) + "*",
+        fmt(PAPER_LEARNED.state_rmse) + "*",
+        fmt(PAPER_MANUAL.state_rmse) + "*",
         fmt(oracle.state_rmse) if oracle else DASH,
     ))
     seeds = len(learned.seeds)
