@@ -382,8 +382,10 @@ def _recordings(count: int) -> str:
     return "recording 0" if count == 1 else f"recordings 0-{count - 1}"
 
 
-def _figure(reproduction: Reproduction, stem: str) -> list[Block]:
-    return [f for f in reproduction.figures if f.path == f"figures/{stem}.png"]
+def _figures(reproduction: Reproduction, *stems: str) -> list[Block]:
+    """The drawn figures among ``stems``, in that order."""
+    drawn = {f.path: f for f in reproduction.figures}
+    return [drawn[path] for stem in stems if (path := f"figures/{stem}.png") in drawn]
 
 
 def _blocks(r: Reproduction) -> list[Block]:
@@ -413,25 +415,18 @@ def _blocks(r: Reproduction) -> list[Block]:
         Heading("Training"),
         r.tables["hyperparameters"],
         r.tables["training_results"],
-        *_figure(r, "training_loss_ds2"),
-        *_figure(r, "parameters_ds2"),
-        *_figure(r, "training_loss_ds1"),
-        *_figure(r, "parameters_ds1"),
+        *_figures(r, "training_loss_ds2", "parameters_ds2", "training_loss_ds1", "parameters_ds1"),
         Heading("Learned parameters"),
         r.tables["learned_std"],
         Heading("Evaluation on DS1"),
-        *_figure(r, "states_ds1"),
-        *_figure(r, "omega_uncertainty_ds1"),
+        *_figures(r, "states_ds1", "omega_uncertainty_ds1"),
         r.tables["rmse_learned_vs_manual"],
         Heading("Robustness: 5x noise and 100-step gaps"),
-        *_figure(r, "states_ds1_noise5x"),
-        *_figure(r, "states_ds1_gap100"),
+        *_figures(r, "states_ds1_noise5x", "states_ds1_gap100"),
         r.tables["robustness"],
         Heading("Cross-data-set runs"),
         r.tables["cross_dataset"],
-        *_figure(r, "states_ds2"),
-        *_figure(r, "states_ds1_params_on_ds2"),
-        *_figure(r, "states_ds2_params_on_ds1"),
+        *_figures(r, "states_ds2", "states_ds1_params_on_ds2", "states_ds2_params_on_ds1"),
         Heading("Files"),
         Bullets((
             "`training/ds1/`, `training/ds2/`: checkpoint, `history.csv` and the learned parameters "
