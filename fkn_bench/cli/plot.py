@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files
+from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files
 
 __all__ = ["add_parser", "run"]
 
@@ -52,12 +52,7 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.metrics import MetricSettings
     from fkn_bench.scenarios import get_scenario
 
-    if args.seed < 0:
-        raise UsageError(f"--seed must be a non-negative integer (got {args.seed})")
-    if args.steps is not None and args.steps < 2:
-        raise UsageError(f"--steps must be at least 2 (got {args.steps})")
-    if args.cut < 0:
-        raise UsageError(f"--cut must be a non-negative integer (got {args.cut})")
+    check_minimum(args, seed=0, steps=2, cut=0)
     load_scenario_files(args)
     scenario = get_scenario(args.scenario)
     try:

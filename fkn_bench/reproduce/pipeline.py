@@ -84,7 +84,8 @@ LABELS = {
 Log = Callable[[str], None]
 
 
-def _stderr(message: str) -> None:
+def stderr_log(message: str) -> None:
+    """The default :data:`Log`: the message on stderr, flushed."""
     print(message, file=sys.stderr, flush=True)
 
 
@@ -268,7 +269,7 @@ def run_reproduction(
     settings: ReproduceSettings | None = None,
     *,
     progress: bool = True,
-    log: Log | None = _stderr,
+    log: Log | None = stderr_log,
 ) -> Reproduction:
     """Run the whole pipeline (module docstring) into ``out`` and return what it produced."""
     settings = settings or ReproduceSettings()
