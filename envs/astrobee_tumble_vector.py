@@ -10,6 +10,7 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
 
 from fkn_bench.envs.astrobee_tumble import EPISODE_SEED_BOUND, _check_weights
 from fkn_bench.envs.episodes import EpisodeStream
@@ -69,10 +70,7 @@ class AstrobeeTumbleVectorEnv(VectorEnv):
                 "time": spaces.Box(low=0.0, high=float(n_steps * dt), shape=(num_envs,), dtype=np.float64),
             }
         )
-        single = self.single_action_space
-        self.action_space = spaces.Box(
-            low=np.tile(single.low, (num_envs, 1)), high=np.tile(single.high, (num_envs, 1)), dtype=np.float64
-        )
+        self.action_space = batch_space(self.single_action_space, num_envs)
         self._chunk_size = int(chunk_size)
         self._rngs: list[np.random.Generator] = []
         self._stream: EpisodeStream | None = None

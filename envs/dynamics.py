@@ -25,12 +25,7 @@ import numpy as np
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.types import ArrayF
 
-__all__ = [
-    "ForcedRotation",
-    "FreeTumble",
-    "angular_momentum_world",
-    "kinetic_energy",
-]
+__all__ = ["ForcedRotation", "FreeTumble"]
 
 
 def _rotate(q: ArrayF, v: ArrayF) -> ArrayF:
@@ -176,15 +171,3 @@ class FreeTumble:
             w_out[:, i] = _rotate(y[:, :4], y[:, 4:])
         self._y = y
         return q_out.transpose(0, 2, 1), w_out.transpose(0, 2, 1)
-
-
-def angular_momentum_world(attitude: ArrayF, omega_world: ArrayF, inertia: ArrayF) -> ArrayF:
-    """World-frame angular momentum ``R J R^T omega`` (kg m^2/s) of ``(..., 4)``/``(..., 3)`` inputs."""
-    omega_body = quat.rotate(quat.conjugate(attitude), omega_world)
-    return quat.rotate(attitude, np.asarray(inertia, dtype=float) * omega_body)
-
-
-def kinetic_energy(attitude: ArrayF, omega_world: ArrayF, inertia: ArrayF) -> ArrayF:
-    """Rotational kinetic energy ``1/2 w^T J w`` (J) with ``w`` the body rate."""
-    omega_body = quat.rotate(quat.conjugate(attitude), omega_world)
-    return 0.5 * np.sum(np.asarray(inertia, dtype=float) * omega_body**2, axis=-1)

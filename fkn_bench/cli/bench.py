@@ -110,22 +110,17 @@ def summarize_benchmarks(document: dict[str, Any]) -> list[dict[str, Any]]:
     return rows
 
 
-def _seconds(value: float) -> str:
-    if not math.isfinite(value):
-        return "-"
-    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("us", 1e-6)):
-        if value >= scale:
-            return f"{value / scale:.3g} {unit}"
-    return f"{value / 1e-9:.3g} ns"
-
-
-def _rate(value: float | None) -> str:
+def _scaled(value: float | None, units: tuple[tuple[str, float], ...]) -> str:
+    """Three significant digits in the first of ``units`` (largest first) that ``value`` reaches,
+    else in the last; ``-`` for a missing value."""
     if value is None or not math.isfinite(value):
         return "-"
-    for suffix, scale in (("G", 1e9), ("M", 1e6), ("k", 1e3)):
-        if value >= scale:
-            return f"{value / scale:.3g} {suffix}"
-    return f"{value:.3g}"
+    unit, scale = next(((u, s) for u, s in units if value >= s), units[-1])
+    return f"{value / scale:.3g} {unit}".rstrip()
+
+
+_SECONDS = (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9))
+_RATE = (("G", 1e9), ("M", 1e6), ("k", 1e3), ("", 1.0))
 
 
 def _machine(document: dict[str, Any]) -> str:
@@ -153,8 +148,9 @@ def format_summary(document: dict[str, Any], *, source: str = "") -> str:
     body = []
     for row in rows:
         spread = f"{100 * row['stddev_s'] / row['mean_s']:.0f}%" if row["mean_s"] and math.isfinite(row["stddev_s"]) else "-"
-        body.append((row["name"], str(row["rounds"]), _seconds(row["median_s"]), _seconds(row["mean_s"]), spread,
-                     "-" if row["steps"] is None else str(row["steps"]), _rate(row["steps_per_s"]), row["what"]))
+        body.append((row["name"], str(row["rounds"]), _scaled(row["median_s"], _SECONDS), _scaled(row["mean_s"], _SECONDS),
+                     spread, "-" if row["steps"] is None else str(row["steps"]), _scaled(row["steps_per_s"], _RATE),
+                     row["what"]))
     title = f"fkn-bench speed suite{': ' + source if source else ''} (pytest-benchmark {document.get('version', '?')}"
     title += f", {document.get('datetime', '?')})"
     lines = [title, _machine(document), "", text_table(header, body, right=range(1, 7))]

@@ -6,7 +6,9 @@ import argparse
 
 from typing import Any
 
-__all__ = ["add_command", "add_scenario_file_option", "load_scenario_files", "parse_value", "parse_key_values"]
+__all__ = [
+    "add_command", "add_scenario_file_option", "load_scenario_files", "check_minimum", "parse_value", "parse_key_values",
+]
 
 
 def add_command(subparsers: argparse._SubParsersAction, name: str, help: str, doc: str | None) -> argparse.ArgumentParser:
@@ -30,6 +32,18 @@ def load_scenario_files(args: argparse.Namespace) -> None:
 
     for path in getattr(args, "scenario_file", []) or []:
         load_scenarios(path)
+
+
+def check_minimum(args: argparse.Namespace, **minimum: int) -> None:
+    """Usage error for the first integer option ``--NAME`` (``args.NAME``; None: not given) below
+    its minimum, in the order given (0: "a non-negative integer", 1: "a positive integer")."""
+    from fkn_bench.cli import UsageError
+
+    for name, low in minimum.items():
+        value = getattr(args, name)
+        if value is not None and value < low:
+            kind = {0: "a non-negative integer", 1: "a positive integer"}.get(low, f"at least {low}")
+            raise UsageError(f"--{name.replace('_', '-')} must be {kind} (got {value})")
 
 
 def parse_value(text: str) -> Any:

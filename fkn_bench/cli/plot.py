@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files
+from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files
 
 __all__ = ["add_parser", "run"]
 
@@ -43,22 +43,16 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.harness.estimators import SelectionError, select_estimators
     from fkn_bench.harness.grid import safe_name
-    from fkn_bench.harness.leaderboard import rank, scenario_order
+    from fkn_bench.harness.leaderboard import ranked_summaries, scenario_order
     from fkn_bench.harness.plots import comparison_figure, errors_figure, save_figure, states_figure, uncertainty_figure
     from fkn_bench.harness.reference import quoted_rows
     from fkn_bench.harness.sources import SimulatedSource
     from fkn_bench.harness.store import ResultStore, StoreError
-    from fkn_bench.harness.summary import summarize_pair
     from fkn_bench.harness.trace import trace
     from fkn_bench.metrics import MetricSettings
     from fkn_bench.scenarios import get_scenario
 
-    if args.seed < 0:
-        raise UsageError(f"--seed must be a non-negative integer (got {args.seed})")
-    if args.steps is not None and args.steps < 2:
-        raise UsageError(f"--steps must be at least 2 (got {args.steps})")
-    if args.cut < 0:
-        raise UsageError(f"--cut must be a non-negative integer (got {args.cut})")
+    check_minimum(args, seed=0, steps=2, cut=0)
     load_scenario_files(args)
     scenario = get_scenario(args.scenario)
     try:
@@ -83,9 +77,7 @@ def run(args: argparse.Namespace) -> int:
     ]
     if results is not None:
         for name in scenario_order(results.scenarios()):
-            estimators = sorted({r.estimator for r in results.records if r.scenario == name})
-            summaries = rank([summarize_pair(results, e, name) for e in estimators])
-            figure = comparison_figure(name, summaries, quoted_rows(name))
+            figure = comparison_figure(name, ranked_summaries(results, name), quoted_rows(name))
             written.append(save_figure(figure, out / f"comparison-{safe_name(name)}.png"))
     for path in written:
         print(path)

@@ -14,18 +14,13 @@ import argparse
 import json
 from pathlib import Path
 
-from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files
 
 __all__ = ["add_parser"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "record",
-        help="record an episode and its estimates as MCAP (ROS 2 + Foxglove)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    parser = add_command(subparsers, "record", "record an episode and its estimates as MCAP (ROS 2 + Foxglove)", __doc__)
     parser.add_argument("--scenario", default="ds1", help="scenario name (default: ds1)")
     parser.add_argument(
         "--estimator",
@@ -51,10 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.harness.recording import record
     from fkn_bench.scenarios import get_scenario
 
-    if args.seed < 0:
-        raise UsageError(f"--seed must be a non-negative integer (got {args.seed})")
-    if args.steps is not None and args.steps < 1:
-        raise UsageError(f"--steps must be a positive integer (got {args.steps})")
+    check_minimum(args, seed=0, steps=1)
     load_scenario_files(args)
     scenario = get_scenario(args.scenario)  # unknown names exit with code 2 and the list
     if args.out.exists() and args.out.is_dir():

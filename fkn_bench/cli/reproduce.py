@@ -20,7 +20,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from fkn_bench.cli.options import add_command
+from fkn_bench.cli.options import add_command, check_minimum
 
 __all__ = ["add_parser", "run"]
 
@@ -45,11 +45,9 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.cli import UsageError
     from fkn_bench.flexkalmannet import FlexKalmanNetConfig
     from fkn_bench.reproduce import ReproduceSettings, run_reproduction
+    from fkn_bench.reproduce.pipeline import stderr_log
 
-    if args.seed < 0:
-        raise UsageError(f"--seed must be a non-negative integer (got {args.seed})")
-    if args.seeds is not None and args.seeds < 1:
-        raise UsageError(f"--seeds must be a positive integer (got {args.seeds})")
+    check_minimum(args, seed=0, seeds=1)
     config = None
     if args.config is not None:
         try:
@@ -65,13 +63,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from None
     out = args.out if args.out is not None else Path("runs") / ("reproduce-quick" if args.quick else "reproduce")
     reproduction = run_reproduction(out, settings, progress=not args.no_progress,
-                                    log=None if args.no_progress else _log)
+                                    log=None if args.no_progress else stderr_log)
     print(reproduction.out / "index.md")
     print(reproduction.out / "index.html")
     return 0
-
-
-def _log(message: str) -> None:
-    import sys
-
-    print(message, file=sys.stderr, flush=True)

@@ -27,7 +27,8 @@ import json
 import sys
 from typing import Any
 
-from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files, parse_key_values
+from fkn_bench.cli.options import (add_command, add_scenario_file_option, check_minimum, load_scenario_files,
+                                   parse_key_values)
 
 __all__ = ["add_parser", "run", "DEFAULT_SCENARIO", "DEFAULT_SEEDS"]
 
@@ -79,12 +80,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def _check_arguments(args: argparse.Namespace) -> None:
     from fkn_bench.cli import UsageError
 
-    if args.seeds < 1:
-        raise UsageError(f"--seeds must be a positive integer (got {args.seeds})")
-    if args.workers < 1:
-        raise UsageError(f"--workers must be a positive integer (got {args.workers})")
-    if args.cut < 0:
-        raise UsageError(f"--cut must be a non-negative integer (got {args.cut})")
+    check_minimum(args, seeds=1, workers=1, cut=0)
     if args.scheduler is not None and args.backend != "dask":
         raise UsageError("--scheduler needs --backend dask")
     if args.rerun and not args.out:

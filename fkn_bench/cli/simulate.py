@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+from fkn_bench.cli.options import add_scenario_file_option, check_minimum, load_scenario_files
 
 __all__ = ["add_parser", "episode_summary"]
 
@@ -62,11 +62,9 @@ def episode_summary(scenario_name: str, seed: int, split: str) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fkn_bench.cli import UsageError
     from fkn_bench.scenarios import get_scenario
 
-    if args.seed < 0:
-        raise UsageError(f"--seed must be a non-negative integer (got {args.seed})")
+    check_minimum(args, seed=0)
     load_scenario_files(args)
     get_scenario(args.scenario)  # unknown names exit with code 2 and the list
     summary = episode_summary(args.scenario, args.seed, args.split)

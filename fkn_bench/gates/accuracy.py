@@ -188,10 +188,6 @@ class AccuracyReport:
     excluded: dict[str, str] = field(default_factory=dict)
     compared_values: int = 0
 
-    def estimators(self) -> list[str]:
-        names = {e for e, _, _ in self.compared} | {p.estimator for p in self.problems}
-        return sorted(names)
-
     def differences_of(self, estimator: str | None = None) -> list[Difference]:
         return [d for d in self.differences if estimator is None or d.estimator == estimator]
 

@@ -88,9 +88,7 @@ class DaskBackend:
                 dashboard_address=":0",
                 silence_logs=logging.ERROR,
             )
-            client = Client(cluster)
-        else:
-            client = Client(self.scheduler)
+        client = Client(cluster if cluster is not None else self.scheduler)
         try:
             futures = [client.submit(run_cell, cell, pure=False) for cell in cells]
             try:

@@ -8,8 +8,6 @@ same on every backend.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -95,9 +93,6 @@ class CellSpec:
             "seeds": list(self.seeds),
             "settings": self.settings.to_dict(),
         }
-
-    def key_hash(self) -> str:
-        return hashlib.sha256(json.dumps(self.key(), sort_keys=True).encode()).hexdigest()[:16]
 
 
 def build_grid(

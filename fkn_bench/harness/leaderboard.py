@@ -45,6 +45,7 @@ __all__ = [
     "LEADERBOARD_COMMAND",
     "CSV_FLOAT_FORMAT",
     "rank",
+    "ranked_summaries",
     "scenario_order",
     "build_leaderboards",
     "write_leaderboards",
@@ -203,7 +204,8 @@ def _scenario_intro(results: Results, scenario: str, runs: int) -> list[str]:
     ]
 
 
-def _ranked(results: Results, scenario: str) -> list[dict[str, Any]]:
+def ranked_summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
+    """The summaries of every estimator stored for ``scenario``, ranked (:func:`rank`)."""
     estimators = sorted({r.estimator for r in results.records if r.scenario == scenario})
     return rank([summarize_pair(results, e, scenario) for e in estimators])
 
@@ -364,7 +366,7 @@ def build_leaderboards(results: Results) -> dict[str, str]:
         raise ValueError("no results to build leaderboards from")
     scenarios = scenario_order(results.scenarios())
     files: dict[str, str] = {}
-    ranked = {scenario: _ranked(results, scenario) for scenario in scenarios}
+    ranked = {scenario: ranked_summaries(results, scenario) for scenario in scenarios}
     for scenario in scenarios:
         files.update(_scenario_files(results, scenario, ranked[scenario]))
     files["README.md"] = _index(results, scenarios, ranked)

@@ -41,7 +41,7 @@ _GROUP_TITLES = {
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red")
 
 
-def _figure(width: float, height: float) -> Figure:
+def new_figure(width: float, height: float) -> Figure:
     figure = Figure(figsize=(width, height), layout="constrained")
     FigureCanvasAgg(figure)
     return figure
@@ -63,10 +63,11 @@ def _title(trace: Trace) -> str:
     return f"{trace.estimator} on {trace.scenario}, seed {trace.seed}"
 
 
-def states_figure(trace: Trace, *, steps: int | None = None) -> Figure:
-    """Estimate (solid), measurement (dots) and truth (dashed) of the four state groups."""
+def states_figure(trace: Trace, *, steps: int | None = None, title: str = "") -> Figure:
+    """Estimate (solid), measurement (dots) and truth (dashed) of the four state groups; ``title``
+    replaces the default one (estimator, scenario and seed)."""
     times, truth, means, measured, ok = _aligned(trace, steps)
-    figure = _figure(10, 10)
+    figure = new_figure(10, 10)
     axes = figure.subplots(4, 1, sharex=True)
     for ax, (group, index) in zip(axes, STATE_GROUPS.items()):
         for k, component in enumerate(range(index.start, index.stop)):
@@ -81,7 +82,7 @@ def states_figure(trace: Trace, *, steps: int | None = None) -> Figure:
         ax.legend(ncol=4, fontsize=7, loc="upper right")
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
-    figure.suptitle(_title(trace) + ": estimate, measurement and truth")
+    figure.suptitle(title or _title(trace) + ": estimate, measurement and truth")
     return figure
 
 
@@ -92,7 +93,7 @@ def uncertainty_figure(trace: Trace, *, steps: int | None = None) -> Figure:
     sigma = None
     if covariances is not None:
         sigma = np.sqrt(np.clip(np.diagonal(covariances[0, : len(times)], axis1=-2, axis2=-1), 0.0, None))
-    figure = _figure(14, 10)
+    figure = new_figure(14, 10)
     axes = figure.subplots(4, 4, sharex=True)
     for row, (group, index) in enumerate(STATE_GROUPS.items()):
         for column in range(4):
@@ -121,7 +122,7 @@ def errors_figure(trace: Trace, *, settings: MetricSettings | None = None, steps
     settings = settings or MetricSettings()
     errors = group_errors(trace.truth[None], trace.estimates.means)
     n = len(trace.times) if steps is None else min(int(steps), len(trace.times))
-    figure = _figure(10, 10)
+    figure = new_figure(10, 10)
     axes = figure.subplots(4, 1, sharex=True)
     for ax, group in zip(axes, GROUPS):
         result = settling_time(errors[group], trace.dt, tolerance=settings.settling_tolerances[group],
@@ -149,7 +150,7 @@ def comparison_figure(scenario: str, summaries: Sequence[dict[str, Any]], quoted
     spans the interquartile range; diverged shares annotated)."""
     labels = [s["estimator"] for s in summaries] + [q.label for q in quoted]
     values = [s["state_rmse"] for s in summaries] + [q.state_rmse for q in quoted]
-    figure = _figure(max(6.0, 1.2 * len(labels) + 2), 5)
+    figure = new_figure(max(6.0, 1.2 * len(labels) + 2), 5)
     ax = figure.subplots()
     x = np.arange(len(labels))
     bars = ax.bar(x, np.nan_to_num(np.asarray(values, dtype=float), nan=0.0), color="tab:blue")

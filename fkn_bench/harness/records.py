@@ -10,6 +10,8 @@ in seed order (a fixed order, so pooled values are identical whatever order cell
 
 from __future__ import annotations
 
+import functools
+import operator
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -66,12 +68,7 @@ class CellRecord:
 
 def _pool(parts: Sequence[StatisticSums | None]) -> StatisticSums | None:
     present = [p for p in parts if p is not None]
-    if not present:
-        return None
-    total = present[0]
-    for part in present[1:]:
-        total = total + part
-    return total
+    return functools.reduce(operator.add, present) if present else None
 
 
 class Results:

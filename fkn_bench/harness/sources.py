@@ -128,11 +128,9 @@ class RecordingSource:
     def key(self) -> str:
         import hashlib
 
-        digest = hashlib.sha256()
         with open(self.path, "rb") as fh:
-            for block in iter(lambda: fh.read(1 << 20), b""):
-                digest.update(block)
-        return f"recording:{digest.hexdigest()[:16]}:{self.options!r}"
+            digest = hashlib.file_digest(fh, "sha256").hexdigest()
+        return f"recording:{digest[:16]}:{self.options!r}"
 
     def describe(self) -> dict[str, Any]:
         report = self.trajectory().report

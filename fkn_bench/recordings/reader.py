@@ -128,8 +128,23 @@ class TopicInfo:
         return f"{self.topic}  {self.schema_name or '(no schema)'} ({self.message_encoding}, {count} messages)"
 
 
-@dataclass(frozen=True, eq=False)
-class PoseSeries:
+@dataclass(frozen=True, eq=False, kw_only=True)
+class _Series:
+    """What every validated series of one topic has (see :class:`PoseSeries`)."""
+
+    topic: str
+    type_name: str
+    encoding: str
+    stamps_ns: np.ndarray
+    frame_id: str
+    indices: np.ndarray
+    time_source: str
+    repairs: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class PoseSeries(_Series):
     """Validated poses of one topic, sorted by stamp.
 
     Attributes:
@@ -143,35 +158,17 @@ class PoseSeries:
         repairs, notes: what was repaired, and other remarks.
     """
 
-    topic: str
-    type_name: str
-    encoding: str
-    stamps_ns: np.ndarray
     poses: np.ndarray
-    frame_id: str
     child_frame_id: str
     twists: np.ndarray | None
-    indices: np.ndarray
-    time_source: str
-    repairs: tuple[str, ...] = ()
-    notes: tuple[str, ...] = ()
 
 
-@dataclass(frozen=True, eq=False)
-class TwistSeries:
+@dataclass(frozen=True, eq=False, kw_only=True)
+class TwistSeries(_Series):
     """Validated twists of one topic: ``twists (N, 6)`` = ``[angular(3), linear(3)]`` in
     ``frame_id``; other attributes as :class:`PoseSeries`."""
 
-    topic: str
-    type_name: str
-    encoding: str
-    stamps_ns: np.ndarray
     twists: np.ndarray
-    frame_id: str
-    indices: np.ndarray
-    time_source: str
-    repairs: tuple[str, ...] = ()
-    notes: tuple[str, ...] = ()
 
 
 @dataclass
@@ -644,9 +641,9 @@ class McapRecording:
         return order
 
     def _rows(self, topic: str, role: str, d: _Decoded, time_source: str, poses: np.ndarray | None,
-              twists: np.ndarray | None, quaternion_tolerance: float = 1e-6) -> tuple[np.ndarray, np.ndarray, str, list[str]]:
-        """The usable rows of ``d`` in stamp order, its stamps, the time source and notes: drops (or
-        refuses) non-finite values and zero quaternions, renormalises ``poses`` in place."""
+              twists: np.ndarray | None, quaternion_tolerance: float = 1e-6) -> tuple[np.ndarray, dict[str, Any]]:
+        """The usable rows of ``d`` in stamp order and the :class:`_Series` fields they make: drops
+        (or refuses) non-finite values and zero quaternions, renormalises ``poses`` in place."""
         notes: list[str] = []
         stamps, keep, source = self._stamps(topic, role, d, time_source, notes)
         ok = np.ones(len(d.indices), dtype=bool)
@@ -686,7 +683,8 @@ class McapRecording:
         order = rows[self._order(topic, role, stamps[rows], d.indices[rows], d.repairs)]
         if len(order) == 0:
             raise self._error(f"{role} topic {topic!r} has no usable messages", topic=topic)
-        return order, stamps[order], source, notes
+        return order, dict(topic=topic, type_name=d.type_name, encoding=d.encoding, stamps_ns=stamps[order],
+                           indices=d.indices[order], time_source=source, repairs=tuple(d.repairs), notes=tuple(notes))
 
     def read_poses(
         self,
@@ -704,40 +702,18 @@ class McapRecording:
         twists = None
         if d.type_name == "nav_msgs/Odometry":
             twists = np.concatenate([values[:, 46:49], values[:, 43:46]], axis=1)
-        order, stamps, source, notes = self._rows(topic, role, d, time_source, poses, twists, quaternion_tolerance)
-        return PoseSeries(
-            topic=topic,
-            type_name=d.type_name,
-            encoding=d.encoding,
-            stamps_ns=stamps,
-            poses=poses[order],
-            frame_id=d.frame_id,
-            child_frame_id=d.child_frame_id,
-            twists=None if twists is None else twists[order],
-            indices=d.indices[order],
-            time_source=source,
-            repairs=tuple(d.repairs),
-            notes=tuple(notes),
-        )
+        order, common = self._rows(topic, role, d, time_source, poses, twists, quaternion_tolerance)
+        return PoseSeries(**common, poses=poses[order], frame_id=d.frame_id, child_frame_id=d.child_frame_id,
+                          twists=None if twists is None else twists[order])
 
     def read_twists(self, topic: str, *, role: str = "twist", time_source: str = "auto") -> TwistSeries:
         """Validated twists of ``topic`` (``TwistStamped``, or the twist part of ``Odometry``)."""
         d = self._decode(topic, role, TWIST_TYPES)
         values = d.values[:, 43:49] if d.type_name == "nav_msgs/Odometry" else d.values
         twists = np.concatenate([values[:, 3:6], values[:, 0:3]], axis=1)  # angular, linear
-        order, stamps, source, notes = self._rows(topic, role, d, time_source, None, twists)
-        return TwistSeries(
-            topic=topic,
-            type_name=d.type_name,
-            encoding=d.encoding,
-            stamps_ns=stamps,
-            twists=twists[order],
-            frame_id=d.child_frame_id if d.type_name == "nav_msgs/Odometry" else d.frame_id,
-            indices=d.indices[order],
-            time_source=source,
-            repairs=tuple(d.repairs),
-            notes=tuple(notes),
-        )
+        order, common = self._rows(topic, role, d, time_source, None, twists)
+        frame_id = d.child_frame_id if d.type_name == "nav_msgs/Odometry" else d.frame_id
+        return TwistSeries(**common, twists=twists[order], frame_id=frame_id)
 
 
 def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:

@@ -59,7 +59,7 @@ import json
 import sys
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
@@ -137,9 +137,6 @@ class RecordingTopics:
         if not isinstance(namespace, str) or any(c.isspace() for c in namespace):
             raise ValueError(f"namespace must be a string without spaces (got {namespace!r})")
         return cls(**{f.name: _join(namespace, f.default) for f in fields(cls)})  # type: ignore[arg-type]
-
-    def as_dict(self) -> dict[str, str]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 @dataclass(frozen=True)
@@ -336,7 +333,7 @@ def write_recording(
         "frame_id": frame_id,
         "start_epoch_ns": str(int(start_epoch_ns)),
         "n_steps": str(n),
-        "topics": json.dumps({k: v for k, v in topics.as_dict().items() if foxglove or not k.startswith("foxglove")}),
+        "topics": json.dumps({k: v for k, v in asdict(topics).items() if foxglove or not k.startswith("foxglove")}),
         "time_convention": "header.stamp = log_time = publish_time = start_epoch_ns + round(t * 1e9) ns",
         "quaternion_convention": "ROS x, y, z, w; body to world",
         "twist_frame": f"world-frame linear and angular velocity, expressed in '{frame_id}'",

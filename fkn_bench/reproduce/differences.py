@@ -16,7 +16,13 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from fkn_bench.harness.reference import PAPER_CLAIMS, PAPER_LEARNED_STD, PAPER_ROWS, PAPER_TRAINING_RESULTS
+from fkn_bench.harness.reference import (
+    PAPER_CLAIMS,
+    PAPER_LEARNED,
+    PAPER_LEARNED_STD,
+    PAPER_MANUAL,
+    PAPER_TRAINING_RESULTS,
+)
 from fkn_bench.reproduce.evaluation import Evaluation
 from fkn_bench.types import STATE_NAMES
 
@@ -28,9 +34,6 @@ __all__ = ["Context", "differences", "TIE"]
 TIE = 0.01
 """Relative difference below which two RMSEs count as equal (1%)."""
 
-_PAPER = {row.label: row for row in PAPER_ROWS}
-_PAPER_LEARNED = _PAPER["paper: FlexKalmanNet (quoted)"]
-_PAPER_MANUAL = _PAPER["paper: manual EKF (quoted)"]
 _Q_NAMES = [f"sigma_Q_{n}" for n in STATE_NAMES]
 _R_NAMES = [f"sigma_R_{n}" for n in STATE_NAMES[:7]]
 
@@ -88,7 +91,7 @@ def _learned_vs_manual(ctx: Context) -> list[str]:
     better = [n for n in STATE_NAMES if learned.component_rmse[n] < manual.component_rmse[n] * (1 - TIE)]
     worse = [n for n in STATE_NAMES if learned.component_rmse[n] > manual.component_rmse[n] * (1 + TIE)]
     ties = len(STATE_NAMES) - len(better) - len(worse)
-    paper_better = [n for n in STATE_NAMES if _PAPER_LEARNED.rmse[n] < _PAPER_MANUAL.rmse[n]]
+    paper_better = [n for n in STATE_NAMES if PAPER_LEARNED.rmse[n] < PAPER_MANUAL.rmse[n]]
     if worse:
         verdict = "This does not reproduce the paper's claim."
     elif better:
@@ -106,13 +109,13 @@ def _learned_vs_manual(ctx: Context) -> list[str]:
     w_l = sum(learned.component_rmse[n] for n in ("wx", "wy", "wz")) / 3
     w_m = sum(manual.component_rmse[n] for n in ("wx", "wy", "wz")) / 3
     rates = ("wx", "wy", "wz")
-    paper_ratio = sum(_PAPER_MANUAL.rmse[n] for n in rates) / sum(_PAPER_LEARNED.rmse[n] for n in rates)
+    paper_ratio = sum(PAPER_MANUAL.rmse[n] for n in rates) / sum(PAPER_LEARNED.rmse[n] for n in rates)
     ratio = w_m / w_l if w_l > 0 else math.inf
-    paper_w_manual = sum(_PAPER_MANUAL.rmse[n] for n in ("wx", "wy", "wz")) / 3
+    paper_w_manual = sum(PAPER_MANUAL.rmse[n] for n in ("wx", "wy", "wz")) / 3
     manual_match = abs(w_m / paper_w_manual - 1) <= 0.25
     out.append(
-        f"**Angular rate.** The paper's largest gain is the angular rate: RMSE {_PAPER_LEARNED.rmse['wx']:.3f} learned "
-        f"vs {_PAPER_MANUAL.rmse['wx']:.3f} manual ({paper_ratio:.0f}x lower). Here {w_l:.4f} learned vs {w_m:.4f} "
+        f"**Angular rate.** The paper's largest gain is the angular rate: RMSE {PAPER_LEARNED.rmse['wx']:.3f} learned "
+        f"vs {PAPER_MANUAL.rmse['wx']:.3f} manual ({paper_ratio:.0f}x lower). Here {w_l:.4f} learned vs {w_m:.4f} "
         f"manual rad/s (mean of the three axes, {ratio:.1f}x). Our manual EKF's rate RMSE "
         + (f"matches the paper's manual one ({w_m:.4f} vs {paper_w_manual:.3f}, within 25%), so the baseline is "
            "the same filter; the difference is in what the network learned." if manual_match else
@@ -123,18 +126,18 @@ def _learned_vs_manual(ctx: Context) -> list[str]:
 
 def _manual_vs_paper(ctx: Context) -> list[str]:
     manual, oracle = ctx.evaluations[("manual", "ds1")], ctx.evaluations.get(("oracle", "ds1"))
-    beats = [n for n in STATE_NAMES if manual.component_rmse[n] < _PAPER_LEARNED.rmse[n] * (1 - TIE)]
+    beats = [n for n in STATE_NAMES if manual.component_rmse[n] < PAPER_LEARNED.rmse[n] * (1 - TIE)]
     if not beats:
         return [f"**Our manual EKF vs the paper's learned one.** Our manual EKF does not beat the paper's learned "
-                f"EKF on any variable (13-state {manual.state_rmse:.4f} vs {_PAPER_LEARNED.state_rmse:.4f})."]
+                f"EKF on any variable (13-state {manual.state_rmse:.4f} vs {PAPER_LEARNED.state_rmse:.4f})."]
     text = (
         f"**Our manual EKF already beats the paper's learned one** on {len(beats)} of 13 variables ({_names(beats)}); "
-        f"13-state RMSE {manual.state_rmse:.4f} vs the paper's {_PAPER_LEARNED.state_rmse:.4f} "
-        f"({_pct(manual.state_rmse, _PAPER_LEARNED.state_rmse)}). Why:"
+        f"13-state RMSE {manual.state_rmse:.4f} vs the paper's {PAPER_LEARNED.state_rmse:.4f} "
+        f"({_pct(manual.state_rmse, PAPER_LEARNED.state_rmse)}). Why:"
     )
     reasons = []
     ours_r = [manual.component_rmse[n] for n in ("rx", "ry", "rz")]
-    paper_r = [_PAPER_LEARNED.rmse[n] for n in ("rx", "ry", "rz")]
+    paper_r = [PAPER_LEARNED.rmse[n] for n in ("rx", "ry", "rz")]
     if max(ours_r) < 0.5 * min(paper_r):
         reasons.append(
             f"the paper's position RMSEs ({min(paper_r):.3f}-{max(paper_r):.3f} m, learned and manual alike) equal "

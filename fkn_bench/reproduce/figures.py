@@ -1,25 +1,23 @@
 """The figures of the paper's results section, drawn headless into the report directory.
 
-Reuses the project's figure functions where they exist: the two training figures of
-:mod:`fkn_bench.training.plots` (loss curves, the 20 learned standard deviations over
-epochs) and the state figure of :mod:`fkn_bench.harness.plots` (estimate, measurement and truth of
-the four state groups). :func:`omega_uncertainty_figure` is the paper's uncertainty figure: the
-three angular-rate components with the estimate's 2-sigma band over the first samples of a run.
+The pipeline draws the other figures with the project's figure functions: the two training
+figures of :mod:`fkn_bench.training.plots` (loss curves, the 20 learned standard deviations
+over epochs) and the state figure of :mod:`fkn_bench.harness.plots` (estimate, measurement and
+truth of the four state groups). :func:`omega_uncertainty_figure` is the paper's uncertainty
+figure: the three angular-rate components with the estimate's 2-sigma band over the first samples
+of a run.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from fkn_bench.harness.plots import save_figure, states_figure
+from fkn_bench.harness.plots import new_figure
 from fkn_bench.harness.trace import Trace
 from fkn_bench.types import OMEGA, STATE_NAMES
 
-__all__ = ["omega_sigma", "omega_uncertainty_figure", "states_figure_titled", "save_figure"]
+__all__ = ["omega_sigma", "omega_uncertainty_figure"]
 
 
 def omega_sigma(trace: Trace, steps: int | None = None) -> np.ndarray:
@@ -44,8 +42,7 @@ def omega_uncertainty_figure(trace: Trace, *, steps: int = 500, title: str = "")
     means = trace.estimates.means[0, :n, OMEGA]
     truth = trace.truth[:n, OMEGA]
     sigma = omega_sigma(trace, n)
-    figure = Figure(figsize=(8, 7.5), layout="constrained")
-    FigureCanvasAgg(figure)
+    figure = new_figure(8, 7.5)
     axes = figure.subplots(3, 1, sharex=True)
     # one half-width for the three axes, around each axis' true rate: the band starts wide (P0)
     half = max(0.1, 2.0 * float(np.nanmax(np.abs(truth)))) if n else 0.1
@@ -63,14 +60,3 @@ def omega_uncertainty_figure(trace: Trace, *, steps: int = 500, title: str = "")
     figure.suptitle(title or f"{trace.estimator} on {trace.scenario}, seed {trace.seed}: angular-rate uncertainty")
     return figure
 
-
-def states_figure_titled(trace: Trace, title: str, *, steps: int | None = None) -> Figure:
-    """The harness's state figure with a report title."""
-    figure = states_figure(trace, steps=steps)
-    figure.suptitle(title)
-    return figure
-
-
-def save(figure: Figure, path: str | Path) -> Path:
-    """Write ``figure`` as PNG (atomically, :func:`fkn_bench.harness.plots.save_figure`)."""
-    return save_figure(figure, path, dpi=110)

@@ -41,6 +41,7 @@ from fkn_bench.estimators import Estimator, make_estimator
 from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet import FlexKalmanNetConfig, FlexKalmanNetEstimator, train_flexkalmannet
 from fkn_bench.training.plots import plot_losses, plot_parameters
+from fkn_bench.harness.plots import save_figure, states_figure
 from fkn_bench.harness.reference import PAPER_TITLE
 from fkn_bench.io import read_json, write_json_atomic
 from fkn_bench.reproduce import figures as figs
@@ -83,7 +84,8 @@ LABELS = {
 Log = Callable[[str], None]
 
 
-def _stderr(message: str) -> None:
+def stderr_log(message: str) -> None:
+    """The default :data:`Log`: the message on stderr, flushed."""
     print(message, file=sys.stderr, flush=True)
 
 
@@ -245,11 +247,11 @@ def _draw_figures(settings: ReproduceSettings, trained: dict[str, TrainedModel],
                             title=f"Learned standard deviations over epochs, {dataset.upper()}{quick_tag}")
     seed = settings.figure_seed
     title = f"EKF with the parameters learned from DS1, on DS1 (test split, seed {seed}){quick_tag}"
-    figs.save(figs.states_figure_titled(ds1_trace, title), fig_dir / "states_ds1.png")
+    save_figure(states_figure(ds1_trace, title=title), fig_dir / "states_ds1.png", dpi=110)
     title = (f"Angular-rate estimates with 2σ bands, DS1 parameters on DS1, first {settings.uncertainty_steps} "
              f"samples{quick_tag}")
-    figs.save(figs.omega_uncertainty_figure(ds1_trace, steps=settings.uncertainty_steps, title=title),
-              fig_dir / "omega_uncertainty_ds1.png")
+    save_figure(figs.omega_uncertainty_figure(ds1_trace, steps=settings.uncertainty_steps, title=title),
+                fig_dir / "omega_uncertainty_ds1.png", dpi=110)
     for scenario_name, label, stem, title in (
         ("ds1-noise5x", "learned-ds1", "states_ds1_noise5x", "DS1 parameters on DS1 with five times the noise"),
         ("ds1-gap100", "learned-ds1", "states_ds1_gap100", "DS1 parameters on DS1 with a measurement every 100 steps"),
@@ -258,8 +260,8 @@ def _draw_figures(settings: ReproduceSettings, trained: dict[str, TrainedModel],
         ("ds1", "learned-ds2", "states_ds2_params_on_ds1", "DS2 parameters on DS1 (cross-data-set)"),
     ):
         trace = run_trace(constant[label], LABELS[label], get_scenario(scenario_name), seed)
-        figs.save(figs.states_figure_titled(trace, f"EKF, {title} (test split, seed {seed}){quick_tag}"),
-                  fig_dir / f"{stem}.png")
+        save_figure(states_figure(trace, title=f"EKF, {title} (test split, seed {seed}){quick_tag}"),
+                    fig_dir / f"{stem}.png", dpi=110)
 
 
 def run_reproduction(
@@ -267,7 +269,7 @@ def run_reproduction(
     settings: ReproduceSettings | None = None,
     *,
     progress: bool = True,
-    log: Log | None = _stderr,
+    log: Log | None = stderr_log,
 ) -> Reproduction:
     """Run the whole pipeline (module docstring) into ``out`` and return what it produced."""
     settings = settings or ReproduceSettings()
@@ -381,8 +383,10 @@ def _recordings(count: int) -> str:
     return "recording 0" if count == 1 else f"recordings 0-{count - 1}"
 
 
-def _figure(reproduction: Reproduction, stem: str) -> list[Block]:
-    return [f for f in reproduction.figures if f.path == f"figures/{stem}.png"]
+def _figures(reproduction: Reproduction, *stems: str) -> list[Block]:
+    """The drawn figures among ``stems``, in that order."""
+    drawn = {f.path: f for f in reproduction.figures}
+    return [drawn[path] for stem in stems if (path := f"figures/{stem}.png") in drawn]
 
 
 def _blocks(r: Reproduction) -> list[Block]:
@@ -412,25 +416,18 @@ def _blocks(r: Reproduction) -> list[Block]:
         Heading("Training"),
         r.tables["hyperparameters"],
         r.tables["training_results"],
-        *_figure(r, "training_loss_ds2"),
-        *_figure(r, "parameters_ds2"),
-        *_figure(r, "training_loss_ds1"),
-        *_figure(r, "parameters_ds1"),
+        *_figures(r, "training_loss_ds2", "parameters_ds2", "training_loss_ds1", "parameters_ds1"),
         Heading("Learned parameters"),
         r.tables["learned_std"],
         Heading("Evaluation on DS1"),
-        *_figure(r, "states_ds1"),
-        *_figure(r, "omega_uncertainty_ds1"),
+        *_figures(r, "states_ds1", "omega_uncertainty_ds1"),
         r.tables["rmse_learned_vs_manual"],
         Heading("Robustness: 5x noise and 100-step gaps"),
-        *_figure(r, "states_ds1_noise5x"),
-        *_figure(r, "states_ds1_gap100"),
+        *_figures(r, "states_ds1_noise5x", "states_ds1_gap100"),
         r.tables["robustness"],
         Heading("Cross-data-set runs"),
         r.tables["cross_dataset"],
-        *_figure(r, "states_ds2"),
-        *_figure(r, "states_ds1_params_on_ds2"),
-        *_figure(r, "states_ds2_params_on_ds1"),
+        *_figures(r, "states_ds2", "states_ds1_params_on_ds2", "states_ds2_params_on_ds1"),
         Heading("Files"),
         Bullets((
             "`training/ds1/`, `training/ds2/`: checkpoint, `history.csv` and the learned parameters "

@@ -2,20 +2,20 @@
 (``index.html``) from the same blocks, plus one CSV per table (``tables/<name>.csv``).
 
 Blocks: :class:`Heading`, :class:`Paragraph` (plain text; ``**bold**`` and backticks are kept in
-Markdown and rendered in HTML), :class:`Bullets`, :class:`Table` and :class:`FigureRef` (a PNG in
-the report directory). Every file is written atomically.
+Markdown and rendered in HTML), :class:`Bullets`, :class:`~fkn_bench.harness.tables.Table` (the
+leaderboards' table; its ``name`` is the CSV file stem) and :class:`FigureRef` (a PNG in the report
+directory). Every file is written atomically.
 """
 
 from __future__ import annotations
 
-import csv
 import html
-import io
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
+from fkn_bench.harness.tables import Table, markdown_grid
 from fkn_bench.io import write_text_atomic
 
 __all__ = ["Heading", "Paragraph", "Bullets", "Table", "FigureRef", "Block", "render_markdown", "render_html", "write_report"]
@@ -38,35 +38,6 @@ class Bullets:
 
 
 @dataclass(frozen=True)
-class Table:
-    """A table of formatted cells. ``name`` is the CSV file stem; ``notes`` print below it;
-    ``align`` per column: ``l`` or ``r``."""
-
-    name: str
-    title: str
-    columns: tuple[str, ...]
-    rows: tuple[tuple[str, ...], ...]
-    notes: tuple[str, ...] = ()
-    align: tuple[str, ...] = field(default_factory=tuple)
-
-    def __post_init__(self) -> None:
-        for row in self.rows:
-            if len(row) != len(self.columns):
-                raise ValueError(f"table {self.name}: row {row} has {len(row)} cells for {len(self.columns)} columns")
-
-    def to_csv(self) -> str:
-        buffer = io.StringIO()
-        writer = csv.writer(buffer, lineterminator="\n")
-        writer.writerow(self.columns)
-        writer.writerows(self.rows)
-        return buffer.getvalue()
-
-    def column(self, name: str) -> list[str]:
-        index = self.columns.index(name)
-        return [row[index] for row in self.rows]
-
-
-@dataclass(frozen=True)
 class FigureRef:
     """A figure file (relative to the report directory) with its caption."""
 
@@ -75,10 +46,6 @@ class FigureRef:
 
 
 Block = Heading | Paragraph | Bullets | Table | FigureRef
-
-
-def _md_cell(text: str) -> str:
-    return text.replace("|", "\\|").replace("\n", " ")
 
 
 def render_markdown(blocks: Sequence[Block]) -> str:
@@ -92,11 +59,7 @@ def render_markdown(blocks: Sequence[Block]) -> str:
         elif isinstance(block, Bullets):
             out.append("\n".join(f"- {item}" for item in block.items) + "\n")
         elif isinstance(block, Table):
-            align = block.align or tuple("l" if i == 0 else "r" for i in range(len(block.columns)))
-            lines = [f"**{block.title}**", ""]
-            lines.append("| " + " | ".join(_md_cell(c) for c in block.columns) + " |")
-            lines.append("|" + "|".join(":---" if a == "l" else "---:" for a in align) + "|")
-            lines.extend("| " + " | ".join(_md_cell(c) for c in row) + " |" for row in block.rows)
+            lines = [f"**{block.title}**", "", *markdown_grid(block)]
             for note in block.notes:  # plain paragraphs: notes may hold '*' of their own
                 lines += ["", note]
             lines.append(f"\n(CSV: [`tables/{block.name}.csv`](tables/{block.name}.csv))")
@@ -147,10 +110,9 @@ def render_html(blocks: Sequence[Block], *, title: str) -> str:
         elif isinstance(block, Bullets):
             body.append("<ul>" + "".join(f"<li>{_inline(item)}</li>" for item in block.items) + "</ul>")
         elif isinstance(block, Table):
-            align = block.align or tuple("l" if i == 0 else "r" for i in range(len(block.columns)))
-            head = "".join(f"<th>{_inline(c)}</th>" for c in block.columns)
+            head = "".join(f"<th>{_inline(c)}</th>" for c in block.header)
             rows = "".join(
-                "<tr>" + "".join(f'<td class="{a}">{_inline(c)}</td>' for c, a in zip(row, align)) + "</tr>"
+                "<tr>" + "".join(f'<td class="{a}">{_inline(c)}</td>' for c, a in zip(row, block.alignment())) + "</tr>"
                 for row in block.rows
             )
             notes = "".join(f'<p class="note">{_inline(n)}</p>' for n in block.notes)

@@ -1,4 +1,4 @@
-"""The paper's result tables, ours beside the quoted ones, as :class:`~fkn_bench.reproduce.report.Table`.
+"""The paper's result tables, ours beside the quoted ones, as :class:`~fkn_bench.harness.tables.Table`.
 
 Quoted values come from :mod:`fkn_bench.harness.reference` (per-variable RMSE, training results,
 learned standard deviations) and :data:`fkn_bench.flexkalmannet.config.PAPER_TABLE` (the
@@ -9,11 +9,11 @@ have (cross-data-set runs, robustness runs in numbers) say so in their title.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from fkn_bench.flexkalmannet.config import DEVIATIONS, PAPER_TABLE, FlexKalmanNetConfig
-from fkn_bench.harness.reference import PAPER_LEARNED_STD, PAPER_ROWS, PAPER_TRAINING_RESULTS
+from fkn_bench.harness.reference import PAPER_LEARNED, PAPER_LEARNED_STD, PAPER_MANUAL, PAPER_TRAINING_RESULTS
 from fkn_bench.reproduce.evaluation import Evaluation
 from fkn_bench.reproduce.report import Table
 from fkn_bench.types import STATE_NAMES
@@ -51,17 +51,6 @@ def fmt_std(value: float | None) -> str:
         return DASH
     value = float(value)
     return f"{value:.6f}" if value >= 1e-5 else f"{value:.2e}"
-
-
-def _paper_rmse(label: str) -> Mapping[str, float]:
-    for row in PAPER_ROWS:
-        if row.label == label:
-            return row.rmse
-    raise KeyError(label)
-
-
-PAPER_LEARNED_RMSE = _paper_rmse("paper: FlexKalmanNet (quoted)")
-PAPER_MANUAL_RMSE = _paper_rmse("paper: manual EKF (quoted)")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -106,8 +95,9 @@ def hyperparameter_table(config: FlexKalmanNetConfig, output_size: int, *, quick
     notes += [f"Deviation `{key}`: {why}" for key, why in DEVIATIONS.items()]
     if quick:
         notes.append("QUICK run: a much smaller network and fewer epochs than the default (`fkn-bench reproduce --quick`).")
-    return Table("hyperparameters", "Table I: best hyperparameter set (paper) and the configuration used here",
-                 ("hyperparameter", "paper (quoted)", "ours (used)"), tuple(rows), tuple(notes), ("l", "l", "l"))
+    return Table("Table I: best hyperparameter set (paper) and the configuration used here",
+                 ("hyperparameter", "paper (quoted)", "ours (used)"), tuple(rows), tuple(notes), ("l", "l", "l"),
+                 name="hyperparameters")
 
 
 def training_table(trained: Mapping[str, TrainedModel]) -> Table:
@@ -129,9 +119,9 @@ def training_table(trained: Mapping[str, TrainedModel]) -> Table:
         "s/epoch: measured on this machine (the paper: 4 virtual cores of an AMD EPYC 7452, no GPU); the only "
         "column that differs between two runs with the same seed.",
     )
-    return Table("training_results", "Table III: training results (best validation epoch, losses, computation time)",
+    return Table("Table III: training results (best validation epoch, losses, computation time)",
                  ("data set", "source", "best val. epoch", "best val. RMSE", "test RMSE", "s/epoch", "epochs run"),
-                 tuple(rows), notes)
+                 tuple(rows), notes, name="training_results")
 
 
 def learned_std_table(trained: Mapping[str, TrainedModel], manual: Mapping[str, float], oracle: Mapping[str, float]) -> Table:
@@ -155,9 +145,9 @@ def learned_std_table(trained: Mapping[str, TrainedModel], manual: Mapping[str, 
         "measurement error and of the model residual along the true trajectory, fkn_bench.estimators.oracle); "
         "the simulated quaternion noise of a 0.1 rad error rotation is ~0.04 per component.",
     )
-    return Table("learned_std", "Table II: learned standard deviations for DS1 and DS2",
+    return Table("Table II: learned standard deviations for DS1 and DS2",
                  ("parameter", "ours DS1", "paper DS1 (quoted)", "ours DS2", "paper DS2 (quoted)", "manual tuning",
-                  "true noise (ds1)"), tuple(rows), notes)
+                  "true noise (ds1)"), tuple(rows), notes, name="learned_std")
 
 
 def rmse_table(learned: Evaluation, manual: Evaluation, oracle: Evaluation | None) -> Table:
@@ -168,17 +158,16 @@ def rmse_table(learned: Evaluation, manual: Evaluation, oracle: Evaluation | Non
             name,
             fmt(learned.component_rmse[name]),
             fmt(manual.component_rmse[name]),
-            fmt(PAPER_LEARNED_RMSE[name], 3),
-            fmt(PAPER_MANUAL_RMSE[name], 3),
+            fmt(PAPER_LEARNED.rmse[name], 3),
+            fmt(PAPER_MANUAL.rmse[name], 3),
             fmt(oracle.component_rmse[name]) if oracle else DASH,
         ))
-    paper_state = {row.label: row.state_rmse for row in PAPER_ROWS}
     rows.append((
         "13-state",
         fmt(learned.state_rmse),
         fmt(manual.state_rmse),
-        fmt(paper_state["paper: FlexKalmanNet (quoted)"]) + "*",
-        fmt(paper_state["paper: manual EKF (quoted)"]) + "*",
+        fmt(PAPER_LEARNED.state_rmse) + "*",
+        fmt(PAPER_MANUAL.state_rmse) + "*",
         fmt(oracle.state_rmse) if oracle else DASH,
     ))
     seeds = len(learned.seeds)
@@ -190,9 +179,9 @@ def rmse_table(learned: Evaluation, manual: Evaluation, oracle: Evaluation | Non
         "Oracle EKF: the EKF with the simulation's true noise (not in the paper): what the best constant tuning "
         "can roughly reach.",
     )
-    return Table("rmse_learned_vs_manual", "Table IV: RMSE per state variable on DS1, learned vs manual tuning",
+    return Table("Table IV: RMSE per state variable on DS1, learned vs manual tuning",
                  ("variable", "ours learned (DS1)", "ours manual", "paper learned (quoted)", "paper manual (quoted)",
-                  "ours oracle EKF"), tuple(rows), notes)
+                  "ours oracle EKF"), tuple(rows), notes, name="rmse_learned_vs_manual")
 
 
 def _run_row(label: str, evaluation: Evaluation) -> tuple[str, ...]:
@@ -243,8 +232,8 @@ def cross_dataset_table(evaluations: Mapping[tuple[str, str], Evaluation], label
         f"Mean over {seeds} seeds of the test split.",
         _RUN_NOTE,
     )
-    return Table("cross_dataset", "Cross-data-set runs (not in the paper): learned parameters applied to the other data set",
-                 _RUN_COLUMNS, rows, notes)
+    return Table("Cross-data-set runs (not in the paper): learned parameters applied to the other data set",
+                 _RUN_COLUMNS, rows, notes, name="cross_dataset")
 
 
 def robustness_table(evaluations: Mapping[tuple[str, str], Evaluation], labels: Mapping[str, str]) -> Table:
@@ -256,11 +245,6 @@ def robustness_table(evaluations: Mapping[tuple[str, str], Evaluation], labels: 
         "ds1-gap100: a measurement every 100 steps instead of 10. The oracle uses each scenario's true noise.",
         _RUN_NOTE,
     )
-    return Table("robustness", "Robustness runs in numbers (the paper shows figures): 5x noise and 100-step gaps",
-                 _RUN_COLUMNS, rows, notes)
+    return Table("Robustness runs in numbers (the paper shows figures): 5x noise and 100-step gaps",
+                 _RUN_COLUMNS, rows, notes, name="robustness")
 
-
-def table_values(table: Table, drop: Sequence[str] = TIMING_COLUMNS) -> list[list[str]]:
-    """The table's cells without the timing columns (what must be identical between runs)."""
-    keep = [i for i, c in enumerate(table.columns) if c not in drop]
-    return [[table.columns[i] for i in keep]] + [[row[i] for i in keep] for row in table.rows]

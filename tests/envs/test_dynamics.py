@@ -8,10 +8,22 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from fkn_bench.envs import generate_episodes
-from fkn_bench.envs.dynamics import ForcedRotation, FreeTumble, angular_momentum_world, kinetic_energy
+from fkn_bench.envs.dynamics import ForcedRotation, FreeTumble
 from fkn_bench.envs.measurements import stream
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.scenarios import ASTROBEE_INERTIA, get_scenario
+
+def angular_momentum_world(attitude: np.ndarray, omega_world: np.ndarray, inertia: np.ndarray) -> np.ndarray:
+    """World-frame angular momentum ``R J R^T omega`` (kg m^2/s) of ``(..., 4)``/``(..., 3)`` inputs."""
+    omega_body = quat.rotate(quat.conjugate(attitude), omega_world)
+    return quat.rotate(attitude, np.asarray(inertia, dtype=float) * omega_body)
+
+
+def kinetic_energy(attitude: np.ndarray, omega_world: np.ndarray, inertia: np.ndarray) -> np.ndarray:
+    """Rotational kinetic energy ``1/2 w^T J w`` (J) with ``w`` the body rate."""
+    omega_body = quat.rotate(quat.conjugate(attitude), omega_world)
+    return 0.5 * np.sum(np.asarray(inertia, dtype=float) * omega_body**2, axis=-1)
+
 
 DS1_RATE = (0.02, 0.04, 0.06)
 DS2_RATE = (0.10, 0.20, 0.30)

@@ -134,7 +134,7 @@ def test_usage_errors_exit_with_code_2(tmp_path: Path, capsys: pytest.CaptureFix
 
 
 def test_markdown_and_html_render_the_same_blocks() -> None:
-    table = Table("t", "A <table>", ("name", "value"), (("a|b", "1.0"), ("**x**", "2")), ("note with `code`",))
+    table = Table("A <table>", ("name", "value"), (("a|b", "1.0"), ("**x**", "2")), ("note with `code`",), name="t")
     blocks = [Heading("Title", 1), Paragraph("Text with **bold** & `code`."), Bullets(("one", "two")), table,
               FigureRef("figures/f.png", "A figure")]
     markdown = render_markdown(blocks)
@@ -144,4 +144,4 @@ def test_markdown_and_html_render_the_same_blocks() -> None:
     assert "A &lt;table&gt;" in html and '<img src="figures/f.png"' in html
     assert table.to_csv().splitlines() == ["name,value", "a|b,1.0", "**x**,2"]
     with pytest.raises(ValueError, match="cells"):
-        Table("bad", "bad", ("a", "b"), (("only one",),))
+        Table("bad", ("a", "b"), (("only one",),), name="bad")
