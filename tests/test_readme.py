@@ -54,3 +54,21 @@ def test_ci_runs_the_readme_test_command() -> None:
     assert awk, ".ci/run no longer extracts the command with awk"
     extracted = subprocess.run(["awk", awk.group(1), str(README)], capture_output=True, text=True, check=True).stdout
     assert extracted.strip() == 'python -m pip install torch==2.13.0 -e ".[dev]" && python -m pytest'
+
+
+def test_add_your_estimator_example_registers_a_conforming_estimator(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The code block of "Add your estimator" runs as shown: the estimator it registers is built
+    by the registry and passes the input-rule check."""
+    from fkn_bench.estimators import make_estimator, registry
+    from fkn_bench.estimators.conformance import check_input_rules
+
+    text = README.read_text()
+    section = text[text.index("### Add your estimator"):]
+    code = re.search(r"```python\n(.*?)```", section, flags=re.S)
+    assert code is not None, "no python block in README's 'Add your estimator'"
+    registry.estimator_names()  # built-ins loaded first; the example's entry is removed afterwards
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    exec(compile(code.group(1), "README.md", "exec"), {})
+    estimator = make_estimator("my-filter")
+    assert estimator.name == "my-filter"
+    check_input_rules(estimator)
