@@ -69,6 +69,7 @@ __all__ = [
     "SAMPLERS",
     "PRUNERS",
     "MAX_ENUMERATED",
+    "check_sweep_options",
     "parse_space",
     "load_space",
     "packaged_spaces",
@@ -350,10 +351,24 @@ def _parse_knob(name: str, table: Any, source: str) -> Knob:
     return knob
 
 
-def _positive_int(value: Any, name: str, source: str, low: int = 1) -> int:
+def _integer(value: Any, name: str, low: int = 1) -> int:
     if not isinstance(value, int) or isinstance(value, bool) or value < low:
-        raise SpaceError(f"{source}: [sweep] {name} must be an integer >= {low} (got {value!r})")
+        raise ValueError(f"{name} must be an integer >= {low} (got {value!r})")
     return value
+
+
+_SWEEP_INTEGERS = {"trials": 1, "grid_trials": 1, "top_k": 1, "workers": 1, "seed": 0}
+
+
+def check_sweep_options(values: Mapping[str, Any]) -> None:
+    """Raise ValueError for an invalid sweep option (``sampler``, ``trials``, ``grid_trials``,
+    ``top_k``, ``workers``, ``seed``; None values are left to the defaults): the one check of the
+    space's ``[sweep]`` table and of :class:`~fkn_bench.sweep.SweepSettings`."""
+    if values.get("sampler", SAMPLERS[0]) not in SAMPLERS:
+        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)} (got {values['sampler']!r})")
+    for key, low in _SWEEP_INTEGERS.items():
+        if values.get(key) is not None:
+            _integer(values[key], key, low)
 
 
 def _parse_pruner(table: Any, source: str) -> PrunerSpec:
@@ -368,12 +383,12 @@ def _parse_pruner(table: Any, source: str) -> PrunerSpec:
     if kind not in PRUNERS:
         raise SpaceError(f"{source}: [sweep.pruner] kind must be one of {', '.join(PRUNERS)} (got {kind!r})")
     values: dict[str, Any] = {"kind": kind}
-    for key in ("n_startup_trials", "n_warmup_steps"):
+    for key, low in (("n_startup_trials", 0), ("n_warmup_steps", 0), ("min_resource", 1), ("reduction_factor", 2)):
         if key in table:
-            values[key] = _positive_int(table[key], f"pruner.{key}", source, low=0)
-    for key in ("min_resource", "reduction_factor"):
-        if key in table:
-            values[key] = _positive_int(table[key], f"pruner.{key}", source, low=1 if key == "min_resource" else 2)
+            try:
+                values[key] = _integer(table[key], f"pruner.{key}", low)
+            except ValueError as exc:
+                raise SpaceError(f"{source}: [sweep] {exc}") from None
     if "percentile" in table:
         p = table["percentile"]
         if not _is_number(p) or not 0 < p < 100:
@@ -404,13 +419,10 @@ def parse_space(document: Mapping[str, Any], source: str = "<space>") -> SearchS
     if unknown:
         raise SpaceError(f"{source}: [sweep]: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(_SWEEP_KEYS))}")
     defaults = {k: v for k, v in sweep.items() if k != "pruner"}
-    if "sampler" in defaults and defaults["sampler"] not in SAMPLERS:
-        raise SpaceError(f"{source}: [sweep] sampler must be one of {', '.join(SAMPLERS)} (got {defaults['sampler']!r})")
-    for key in ("trials", "grid_trials", "top_k"):
-        if key in defaults:
-            _positive_int(defaults[key], key, source)
-    if "seed" in defaults:
-        _positive_int(defaults["seed"], "seed", source, low=0)
+    try:
+        check_sweep_options(defaults)
+    except ValueError as exc:
+        raise SpaceError(f"{source}: [sweep] {exc}") from None
     for key in ("estimator", "scenario"):
         if key in defaults and not isinstance(defaults[key], str):
             raise SpaceError(f"{source}: [sweep] {key} must be a string (got {defaults[key]!r})")
