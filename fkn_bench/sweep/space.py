@@ -52,7 +52,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -97,6 +96,13 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
+def _of_kind(value: Any, kind: str) -> int | float | None:
+    """``value`` as a number of ``kind`` (int or float); None when it is not one."""
+    if not _is_number(value) or (kind == "int" and not float(value).is_integer()):
+        return None
+    return int(value) if kind == "int" else float(value)
+
+
 @dataclass(frozen=True)
 class Knob:
     """One searched hyperparameter.
@@ -133,14 +139,12 @@ class Knob:
         return FloatDistribution(float(low), float(high), log=self.log, step=self.step)
 
     def suggest(self, trial: optuna.Trial) -> Any:
-        """Ask ``trial`` for a value (the sampler decides which)."""
-        if self.kind == "categorical":
-            return trial.suggest_categorical(self.name, list(self.values))
-        low, high = self.low, self.high
-        assert low is not None and high is not None
-        if self.kind == "int":
-            return trial.suggest_int(self.name, int(low), int(high), log=self.log, step=int(self.step or 1))
-        return trial.suggest_float(self.name, float(low), float(high), log=self.log, step=self.step)
+        """Ask ``trial`` for a value of :meth:`distribution` (the sampler decides which)."""
+        d = self.distribution()
+        if isinstance(d, CategoricalDistribution):
+            return trial.suggest_categorical(self.name, list(d.choices))
+        suggest = trial.suggest_int if isinstance(d, IntDistribution) else trial.suggest_float
+        return suggest(self.name, d.low, d.high, log=d.log, step=d.step)  # type: ignore[operator]
 
     def contains(self, value: Any) -> bool:
         distribution = self.distribution()
@@ -307,13 +311,10 @@ def _parse_knob(name: str, table: Any, source: str) -> Knob:
     kind = table.get("type", "int" if isinstance(low, int) and isinstance(high, int) else "float")
     if kind not in ("int", "float"):
         raise SpaceError(f"{where}: `type` must be \"int\" or \"float\" (got {kind!r})")
-    if kind == "int" and not (float(low).is_integer() and float(high).is_integer()):
+    if _of_kind(low, kind) is None or _of_kind(high, kind) is None:
         raise SpaceError(f"{where}: an integer range needs integer bounds (got {low!r}, {high!r})")
-    if kind == "int":
-        low, high = int(low), int(high)
-    else:
-        low, high = float(low), float(high)
-    if not low < high:
+    low, high = _of_kind(low, kind), _of_kind(high, kind)
+    if not low < high:  # type: ignore[operator]
         raise SpaceError(f"{where}: need low < high (got {low!r}, {high!r})")
     log = table.get("log", False)
     if not isinstance(log, bool):
@@ -324,9 +325,9 @@ def _parse_knob(name: str, table: Any, source: str) -> Knob:
     if step is not None:
         if log:
             raise SpaceError(f"{where}: `step` cannot be combined with `log = true`")
-        if not _is_number(step) or step <= 0 or (kind == "int" and not float(step).is_integer()):
-            raise SpaceError(f"{where}: `step` must be a positive {'integer' if kind == 'int' else 'number'} (got {step!r})")
-        step = int(step) if kind == "int" else float(step)
+        step = _of_kind(table["step"], kind)
+        if step is None or step <= 0:
+            raise SpaceError(f"{where}: `step` must be a positive {'integer' if kind == 'int' else 'number'} (got {table['step']!r})")
     grid_points = table.get("grid_points")
     if grid_points is not None and (not isinstance(grid_points, int) or isinstance(grid_points, bool) or grid_points < 2):
         raise SpaceError(f"{where}: `grid_points` must be an integer >= 2 (got {grid_points!r})")
@@ -339,9 +340,9 @@ def _parse_knob(name: str, table: Any, source: str) -> Knob:
     if grid:
         values = []
         for v in grid:
-            if not _is_number(v) or (kind == "int" and not float(v).is_integer()):
+            if _of_kind(v, kind) is None:
                 raise SpaceError(f"{where}: grid value {v!r} is not {'an integer' if kind == 'int' else 'a number'}")
-            v = int(v) if kind == "int" else float(v)
+            v = _of_kind(v, kind)
             if not knob.contains(v):
                 raise SpaceError(f"{where}: grid value {v!r} lies outside [{low}, {high}]" + (f" step {step}" if step else ""))
             values.append(v)
@@ -431,15 +432,9 @@ def parse_space(document: Mapping[str, Any], source: str = "<space>") -> SearchS
 
 def load_space(path: str | Path) -> SearchSpace:
     """Read a search-space TOML file."""
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            document = tomllib.load(fh)
-    except FileNotFoundError:
-        raise SpaceError(f"search-space file not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SpaceError(f"search-space file {path} is not valid TOML: {exc}") from None
-    return parse_space(document, str(path))
+    from fkn_bench.training.pipeline import read_toml
+
+    return parse_space(read_toml(path, "search-space file", SpaceError), str(path))
 
 
 def packaged_spaces() -> dict[str, Path]:

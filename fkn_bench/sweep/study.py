@@ -55,12 +55,11 @@ STAGE_SUFFIX = {"random": ".random", "grid": ".grid"}
 def storage_label(spec: str | Path) -> str:
     """How a storage is named in outputs (an RDB URL without its password)."""
     text = str(spec)
-    if "://" in text and "@" in text:
-        scheme, _, rest = text.partition("://")
-        credentials, _, host = rest.rpartition("@")
-        user = credentials.split(":", 1)[0]
-        return f"{scheme}://{user}:***@{host}"
-    return text
+    if "://" not in text:
+        return text
+    from sqlalchemy.engine import make_url  # optuna's RDBStorage runs on SQLAlchemy
+
+    return make_url(text).render_as_string(hide_password=True)
 
 
 def open_storage(spec: str | Path) -> BaseStorage:

@@ -29,7 +29,7 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from fkn_bench.filters import KalmanFilter, ParameterSet
+from fkn_bench.filters import VARIANTS, KalmanFilter, ParameterSet
 from fkn_bench.runtime import torch_threads
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
@@ -130,6 +130,10 @@ class TrainConfig:
     threads: int = 1
 
     def __post_init__(self) -> None:
+        if self.variant not in VARIANTS:
+            raise ValueError(f"variant must be one of {list(VARIANTS)} (got {self.variant!r})")
+        if self.window < 2 or self.loss_cut >= self.window:
+            raise ValueError(f"need window >= 2 and loss_cut < window (got {self.window}, {self.loss_cut})")
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES} (got {self.objective!r})")
         if self.optimizer not in ("adam", "lbfgs"):
