@@ -18,6 +18,7 @@ goes on.
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -65,9 +66,9 @@ def trial_config(estimator: str, space: SearchSpace, params: Mapping[str, Any]) 
     return trainable(estimator).config({**space.fixed, **params})
 
 
-def _value(row: Mapping[str, float]) -> float:
-    """The validation RMSE of a history row (the validation loss where no RMSE is logged)."""
-    return row["val_rmse"] if math.isfinite(row["val_rmse"]) else row["val_loss"]
+def _value(val_rmse: float, val_loss: float) -> float:
+    """The validation RMSE of an epoch (the validation loss where no RMSE is logged)."""
+    return val_rmse if math.isfinite(val_rmse) else val_loss
 
 
 def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
@@ -77,6 +78,7 @@ def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
     trainable(task.estimator)  # raises ValueError when it is not trainable
 
     def objective(trial: optuna.Trial) -> float:
+        trial.set_user_attr("process", os.getpid())
         params = task.space.suggest(trial)
         try:
             config = trial_config(task.estimator, task.space, params)
@@ -86,7 +88,7 @@ def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
         began = time.perf_counter()
 
         def on_epoch(epoch: int, history: list[Any]) -> None:
-            value = _value({"val_rmse": history[-1].val_rmse, "val_loss": history[-1].val_loss})
+            value = _value(history[-1].val_rmse, history[-1].val_loss)
             trial.report(float(value), epoch)
             if trial.should_prune():
                 trial.set_user_attr("epochs_run", epoch)
@@ -109,6 +111,6 @@ def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
         trial.set_user_attr("seconds_per_epoch", seconds / max(epochs, 1))
         if outcome.config.train_config().objective != "supervised":
             trial.set_user_attr("best_val_loss", float(outcome.best_loss))
-        return float(_value(best))
+        return float(_value(best["val_rmse"], best["val_loss"]))
 
     return objective

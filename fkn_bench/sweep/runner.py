@@ -26,7 +26,6 @@ from __future__ import annotations
 import json
 import math
 import multiprocessing
-import os
 import sys
 import time
 import warnings
@@ -164,13 +163,7 @@ def _worker_main(job: _WorkerJob) -> None:
         print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {_describe(trial)}",
               file=sys.stderr, flush=True)
 
-    inner = make_objective(job.task)
-
-    def objective(trial: optuna.Trial) -> float:
-        trial.set_user_attr("process", os.getpid())
-        return inner(trial)
-
-    study.optimize(objective, n_trials=job.n_trials, catch=CATCH, callbacks=[report], gc_after_trial=False,
+    study.optimize(make_objective(job.task), n_trials=job.n_trials, catch=CATCH, callbacks=[report], gc_after_trial=False,
                    show_progress_bar=False)
 
 

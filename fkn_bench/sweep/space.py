@@ -49,6 +49,7 @@ Errors (:class:`SpaceError`) name the file, the knob and what is wrong.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -221,8 +222,7 @@ class PrunerSpec:
         return optuna.pruners.NopPruner()
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "n_startup_trials": self.n_startup_trials, "n_warmup_steps": self.n_warmup_steps,
-                "percentile": self.percentile, "min_resource": self.min_resource, "reduction_factor": self.reduction_factor}
+        return dataclasses.asdict(self)
 
 
 @dataclass(frozen=True)

@@ -45,12 +45,7 @@ __all__ = [
     "stage_names",
     "reduced_grid",
     "completed",
-    "STAGE_SUFFIX",
 ]
-
-STAGE_SUFFIX = {"random": ".random", "grid": ".grid"}
-"""Study-name suffixes of the two stages of ``random-grid``."""
-
 
 def storage_label(spec: str | Path) -> str:
     """How a storage is named in outputs (an RDB URL without its password)."""
@@ -75,7 +70,7 @@ def open_storage(spec: str | Path) -> BaseStorage:
 def stage_names(study_name: str, sampler: str) -> list[tuple[str, str]]:
     """``(stage, study name)`` pairs: two for ``random-grid``, one otherwise."""
     if sampler == "random-grid":
-        return [(stage, study_name + STAGE_SUFFIX[stage]) for stage in ("random", "grid")]
+        return [(stage, f"{study_name}.{stage}") for stage in ("random", "grid")]
     return [(sampler, study_name)]
 
 
