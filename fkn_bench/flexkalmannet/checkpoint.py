@@ -31,9 +31,8 @@ REFERENCE_SAMPLES = 2048
 def _model_skeleton(config: FlexKalmanNetConfig, reference: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> FlexKalmanNet:
     variant = make_filter(config.variant)
     parameter_set = ParameterSet(variant.layout, learn=config.learn, positivity=config.positivity)  # type: ignore[arg-type]
-    generator_state = torch.random.get_rng_state()
-    torch.manual_seed(config.seed)
-    try:
+    with torch.random.fork_rng(devices=[]):  # seeded weights, the global generator left as it was
+        torch.manual_seed(config.seed)
         network = FlexKalmanNetwork(
             parameter_set.size,
             initial_output=parameter_set.initial_values(),
@@ -46,8 +45,6 @@ def _model_skeleton(config: FlexKalmanNetConfig, reference: torch.Tensor, mean: 
             dtype=config.torch_network_dtype,
             output_scale=config.output_scale,
         )
-    finally:
-        torch.random.set_rng_state(generator_state)
     return FlexKalmanNet(
         parameter_set,
         network,

@@ -103,12 +103,10 @@ def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
         best = outcome.best()
         if not best:
             raise TrialError(f"trial {trial.number}: no epoch completed")
-        seconds = time.perf_counter() - began
-        epochs = len(outcome.history)
-        trial.set_user_attr("best_epoch", int(outcome.best_epoch))
-        trial.set_user_attr("epochs_run", epochs)
-        trial.set_user_attr("seconds", seconds)
-        trial.set_user_attr("seconds_per_epoch", seconds / max(epochs, 1))
+        seconds, epochs = time.perf_counter() - began, len(outcome.history)
+        for key, value in {"best_epoch": int(outcome.best_epoch), "epochs_run": epochs, "seconds": seconds,
+                           "seconds_per_epoch": seconds / max(epochs, 1)}.items():
+            trial.set_user_attr(key, value)
         if outcome.config.train_config().objective != "supervised":
             trial.set_user_attr("best_val_loss", float(outcome.best_loss))
         return float(_value(best["val_rmse"], best["val_loss"]))
