@@ -243,9 +243,8 @@ def fit(
     history = pd.DataFrame([record.flat() for record in trainer.history])
     outcome = TrainingOutcome(
         estimator, model, config, scenario, history, trainer.best_epoch, trainer.best_loss, directory, {},
-        0.0, deployed_estimator_config(model, settings.variant),
+        time.perf_counter() - began, deployed_estimator_config(model, settings.variant),
     )
-    outcome.seconds = time.perf_counter() - began
     if directory is not None:
         _write_outputs(outcome, declared, trainer, data, plots, began)
     return outcome
