@@ -22,7 +22,6 @@ import os
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import optuna
@@ -49,13 +48,11 @@ class SweepTask:
         estimator: trainable estimator name.
         scenario: training scenario (its train and val splits are used).
         space: the search space.
-        out: sweep output directory.
     """
 
     estimator: str
     scenario: Scenario
     space: SearchSpace
-    out: Path
 
 
 def trial_config(estimator: str, space: SearchSpace, params: Mapping[str, Any]) -> Any:

@@ -240,7 +240,7 @@ def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     out = Path(settings.out)
     out.mkdir(parents=True, exist_ok=True)
-    task = SweepTask(settings.estimator, settings.scenario, settings.space, out)
+    task = SweepTask(settings.estimator, settings.scenario, settings.space)
     stages = stage_names(settings.name, settings.sampler)
     grid: dict[str, list[Any]] | None = None
     spawn = multiprocessing.get_context("spawn")
