@@ -9,9 +9,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from fkn_bench.baselines.tuned import tuned_factory, tuned_trainable
+from fkn_bench.baselines.tuned import DESCRIPTIONS, TUNED_OBJECTIVES, TunedEKFEstimator, tuned_trainable
 from fkn_bench.estimators.registry import register_estimator
 from fkn_bench.scenarios import Scenario
+from fkn_bench.training.artifacts import artifact_factory
 
 __all__: list[str] = []
 
@@ -40,15 +41,10 @@ register_estimator(
     _adaptive("fkn_bench.baselines.vbakf", "VBAKFEstimator"),
     description="Variational Bayesian adaptive EKF of Huang et al. 2018 (TAC 63(2)): inverse-Wishart P- and R, 10 iterations",
 )
-register_estimator(
-    "nll-tuned-ekf",
-    tuned_factory("nll-tuned-ekf"),
-    description="EKF with its 20 noise standard deviations fitted by innovation maximum likelihood (no ground truth)",
-    trainable=tuned_trainable("nll-tuned-ekf"),
-)
-register_estimator(
-    "direct-tuned-ekf",
-    tuned_factory("direct-tuned-ekf"),
-    description="EKF with its 20 noise standard deviations fitted to the truth through the filter (EKFNet-style)",
-    trainable=tuned_trainable("direct-tuned-ekf"),
-)
+for _name in TUNED_OBJECTIVES:
+    register_estimator(
+        _name,
+        artifact_factory(_name, TunedEKFEstimator),
+        description=DESCRIPTIONS[_name],
+        trainable=tuned_trainable(_name),
+    )

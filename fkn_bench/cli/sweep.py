@@ -26,6 +26,7 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
 from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
 
@@ -77,10 +78,15 @@ def run(args: argparse.Namespace) -> int:
         space: SearchSpace = load_space(resolve_space(args.space))
     except SpaceError as exc:
         raise UsageError(str(exc)) from None
-    defaults = space.defaults
-    estimator = args.estimator or defaults.get("estimator", "flexkalmannet")
-    scenario = get_scenario(args.scenario or defaults.get("scenario", "ds1"))
-    sampler = args.sampler or defaults.get("sampler", "random-grid")
+
+    def option(name: str, fallback: object = None) -> Any:
+        """The command line's value of option ``name``, else the space's ``[sweep]`` default."""
+        value = getattr(args, name)
+        return value if value is not None else space.defaults.get(name, fallback)
+
+    estimator = option("estimator", "flexkalmannet")
+    scenario = get_scenario(option("scenario", "ds1"))
+    sampler = option("sampler", "random-grid")
     try:
         space.check_fields(trainable(estimator).config({}).to_dict(), f"{estimator} training config")
         trial_config(estimator, space, {})  # the fixed values on their own must be valid
@@ -88,23 +94,21 @@ def run(args: argparse.Namespace) -> int:
             space.grid()
     except (UnknownEstimatorError, SpaceError, ValueError, TypeError) as exc:
         raise UsageError(str(exc)) from None
-    trials = args.trials if args.trials is not None else defaults.get("trials", 20)
     study_name = args.study_name or f"{estimator}-{scenario.name}"
-    out = args.out if args.out is not None else Path("runs") / f"sweep-{study_name}"
     try:
         settings = SweepSettings(
             space=space,
             scenario=scenario,
-            out=out,
+            out=args.out if args.out is not None else Path("runs") / f"sweep-{study_name}",
             estimator=estimator,
             sampler=sampler,
-            trials=trials,
-            grid_trials=args.grid_trials if args.grid_trials is not None else defaults.get("grid_trials"),
-            top_k=args.top_k if args.top_k is not None else defaults.get("top_k", 3),
+            trials=option("trials", 20),
+            grid_trials=option("grid_trials"),
+            top_k=option("top_k", 3),
             workers=args.workers,
             storage=args.storage,
             study_name=study_name,
-            seed=args.seed if args.seed is not None else defaults.get("seed", 0),
+            seed=option("seed", 0),
         )
     except ValueError as exc:
         raise UsageError(str(exc)) from None

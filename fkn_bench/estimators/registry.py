@@ -129,7 +129,8 @@ def estimator_names() -> list[str]:
     return [spec.name for spec in estimator_specs()]
 
 
-def _spec(name: str) -> EstimatorSpec:
+def estimator_spec(name: str) -> EstimatorSpec:
+    """The registered spec of ``name`` (raises :class:`UnknownEstimatorError`)."""
     _ensure_loaded()
     try:
         return _REGISTRY[name]
@@ -137,15 +138,10 @@ def _spec(name: str) -> EstimatorSpec:
         raise UnknownEstimatorError(f"unknown estimator {name!r}; valid estimators: {', '.join(_REGISTRY)}") from None
 
 
-def estimator_spec(name: str) -> EstimatorSpec:
-    """The registered spec of ``name`` (raises :class:`UnknownEstimatorError`)."""
-    return _spec(name)
-
-
 def make_estimator(name: str, /, *, scenario: Scenario | None = None, **options: Any) -> Estimator:
     """Build the estimator registered as ``name`` for ``scenario`` (options go to its factory,
     ``name=`` included: the registry name is positional-only so that it can be renamed)."""
-    estimator = _spec(name).factory(scenario=scenario, **options)
+    estimator = estimator_spec(name).factory(scenario=scenario, **options)
     if not isinstance(estimator, Estimator):
         raise TypeError(f"factory of estimator {name!r} returned {type(estimator).__name__}, not an Estimator")
     return estimator

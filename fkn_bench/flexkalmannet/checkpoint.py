@@ -2,6 +2,10 @@
 checkpoint (:mod:`fkn_bench.training.checkpoint`, whose ``state_dict`` holds the network weights,
 normalisation statistics and reference measurements). A state dict that does not fit the
 checkpoint's config is refused with a message that names the file.
+
+Training is the shared pipeline (:func:`fkn_bench.training.fit`) with FlexKalmanNet's declaration
+(:data:`TRAINABLE`: its config and :func:`build_model`), writing checkpoint, history, figures and
+the learned-parameter artefact (see :mod:`fkn_bench.training.pipeline`).
 """
 
 from __future__ import annotations
@@ -15,10 +19,10 @@ from fkn_bench.filters import ParameterSet, make_filter
 from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
 from fkn_bench.flexkalmannet.network import FlexKalmanNet, FlexKalmanNetwork
 from fkn_bench.scenarios import Scenario
-from fkn_bench.training import TrainingData
+from fkn_bench.training import Trainable, TrainingData, TrainingOutcome, fit
 from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint
 
-__all__ = ["build_model", "model_from_checkpoint", "REFERENCE_SAMPLES"]
+__all__ = ["build_model", "model_from_checkpoint", "REFERENCE_SAMPLES", "TRAINABLE", "train_flexkalmannet"]
 
 REFERENCE_SAMPLES = 2048
 """Training measurements (a fixed random subset) over which deployed parameters are averaged."""
@@ -27,9 +31,8 @@ REFERENCE_SAMPLES = 2048
 def _model_skeleton(config: FlexKalmanNetConfig, reference: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> FlexKalmanNet:
     variant = make_filter(config.variant)
     parameter_set = ParameterSet(variant.layout, learn=config.learn, positivity=config.positivity)  # type: ignore[arg-type]
-    generator_state = torch.random.get_rng_state()
-    torch.manual_seed(config.seed)
-    try:
+    with torch.random.fork_rng(devices=[]):  # seeded weights, the global generator left as it was
+        torch.manual_seed(config.seed)
         network = FlexKalmanNetwork(
             parameter_set.size,
             initial_output=parameter_set.initial_values(),
@@ -42,8 +45,6 @@ def _model_skeleton(config: FlexKalmanNetConfig, reference: torch.Tensor, mean: 
             dtype=config.torch_network_dtype,
             output_scale=config.output_scale,
         )
-    finally:
-        torch.random.set_rng_state(generator_state)
     return FlexKalmanNet(
         parameter_set,
         network,
@@ -88,3 +89,15 @@ def model_from_checkpoint(path: str | Path) -> tuple[FlexKalmanNet, FlexKalmanNe
         raise CheckpointError(f"{path}: weights do not match the checkpoint's config: {exc}") from None
     model.eval()
     return model, config, scenario, document
+
+
+TRAINABLE = Trainable(config=FlexKalmanNetConfig.from_options, build=build_model)
+"""FlexKalmanNet's training declaration (its registry entry's ``trainable``)."""
+
+
+def train_flexkalmannet(
+    scenario: str | Scenario = "ds1", config: FlexKalmanNetConfig | None = None, *, out: str | Path, **options: Any
+) -> TrainingOutcome:
+    """:func:`~fkn_bench.training.fit` of ``flexkalmannet`` (``options``: ``resume``, ``progress``,
+    ``plots``, ``on_epoch``)."""
+    return fit("flexkalmannet", scenario, config, out=out, **options)

@@ -17,7 +17,6 @@ from typing import Any
 
 import torch
 
-from fkn_bench.filters import VARIANTS
 from fkn_bench.filters.parameters import LEARNABLE_ENTRIES
 from fkn_bench.training import TrainConfig
 from fkn_bench.training.pipeline import options_with_file
@@ -79,8 +78,13 @@ commands are in the project's notes: ``fkn-bench train`` with ``--set`` override
 ``fkn-bench run --estimator flexkalmannet --estimator-option parameters=...``)."""
 
 
+_MODEL_FIELDS = ("learn", "positivity", "hidden", "layers", "activation", "dropout", "network_dtype", "output_scale",
+                 "mode", "samples_per_window", "history")
+_NOT_OPTIONS = ("optimizer", "lbfgs_iterations", "lbfgs_history")  # FlexKalmanNet trains with Adam
+
+
 @dataclass
-class FlexKalmanNetConfig:
+class FlexKalmanNetConfig(TrainConfig):
     """Everything that defines a FlexKalmanNet training run (flat, for TOML files and sweeps).
 
     Model: ``variant`` (ekf, ukf, mekf), ``learn`` (entries of the parameter set, default the
@@ -92,11 +96,12 @@ class FlexKalmanNetConfig:
     Optimisation: ``objective``, ``epochs``, ``patience``, ``lr``, ``weight_decay``,
     ``windows_per_batch``, ``loss_cut``, ``seed``, ``scheduler_factor``,
     ``scheduler_patience``, ``max_grad_norm``, ``threads``.
-    The data protocol's defaults are :class:`~fkn_bench.training.TrainConfig`'s (the benchmark's,
-    shared with the tuned baselines).
+    The data and optimisation fields are :class:`~fkn_bench.training.TrainConfig`'s (the
+    benchmark's protocol, shared with the tuned baselines) with FlexKalmanNet's ``lr`` and
+    ``scheduler_patience``; it trains with Adam (``optimizer`` and the L-BFGS settings are not
+    among its options: :meth:`to_dict` lists the options).
     """
 
-    variant: str = "ekf"
     learn: tuple[str, ...] = ("q_std", "r_std")
     positivity: str = "log"
     hidden: int = 512
@@ -108,30 +113,13 @@ class FlexKalmanNetConfig:
     mode: str = "constant"
     samples_per_window: int | None = 16
     history: int = 50
-    window: int = TrainConfig.window
-    stride: int | None = None
-    train_measurement_every: int | None = TrainConfig.train_measurement_every
-    episodes: int = TrainConfig.episodes
-    objective: str = "supervised"
-    epochs: int = 100
-    patience: int = 20
-    min_improvement: float = 1e-4
     lr: float = 5e-4
-    weight_decay: float = 0.0
-    windows_per_batch: int = TrainConfig.windows_per_batch
-    loss_cut: int = TrainConfig.loss_cut
-    seed: int = 0
-    scheduler_factor: float = 0.5
     scheduler_patience: int = 8
-    max_grad_norm: float | None = None
-    threads: int = 1
 
     def __post_init__(self) -> None:
         if isinstance(self.learn, str):  # "q_std,r_std" (a sweep's categorical value)
             self.learn = tuple(part.strip() for part in self.learn.split(",") if part.strip())
         self.learn = tuple(self.learn)
-        if self.variant not in VARIANTS:
-            raise ValueError(f"variant must be one of {list(VARIANTS)} (got {self.variant!r})")
         bad = [e for e in self.learn if e not in LEARNABLE_ENTRIES]
         if bad:
             raise ValueError(f"learn: unknown entries {bad}; valid: {list(LEARNABLE_ENTRIES)}")
@@ -141,26 +129,21 @@ class FlexKalmanNetConfig:
             raise ValueError(f"network_dtype must be 'float32' or 'float64' (got {self.network_dtype!r})")
         if self.samples_per_window is not None and self.samples_per_window < 1:
             raise ValueError(f"samples_per_window must be >= 1 or None (got {self.samples_per_window})")
-        if self.window < 2 or self.loss_cut >= self.window:
-            raise ValueError(f"need window >= 2 and loss_cut < window (got {self.window}, {self.loss_cut})")
-        self.train_config()  # validates the optimisation fields
+        super().__post_init__()  # the variant, data protocol and optimisation fields
 
     @property
     def torch_network_dtype(self) -> torch.dtype:
         return torch.float32 if self.network_dtype == "float32" else torch.float64
 
-    def train_config(self) -> TrainConfig:
-        names = {f.name for f in dataclasses.fields(TrainConfig)}
-        return TrainConfig(**{k: v for k, v in self.to_dict().items() if k in names})
-
     def to_dict(self) -> dict[str, Any]:
-        out = dataclasses.asdict(self)
-        out["learn"] = list(self.learn)
-        return out
+        """The options: the variant, the model fields, then the data and optimisation fields."""
+        values = {k: v for k, v in super().to_dict().items() if k not in _NOT_OPTIONS}
+        values["learn"] = list(self.learn)
+        return {**{k: values.pop(k) for k in ("variant", *_MODEL_FIELDS)}, **values}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> FlexKalmanNetConfig:
-        known = {f.name for f in dataclasses.fields(cls)}
+        known = {f.name for f in dataclasses.fields(cls)} - set(_NOT_OPTIONS)
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"unknown FlexKalmanNet config keys {unknown}; valid: {sorted(known)}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from fkn_bench.estimators.registry import register_estimator
-from fkn_bench.flexkalmannet.train import TRAINABLE
+from fkn_bench.flexkalmannet.checkpoint import TRAINABLE
 from fkn_bench.scenarios import Scenario
 
 __all__: list[str] = []

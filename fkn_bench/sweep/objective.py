@@ -18,10 +18,10 @@ goes on.
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import optuna
@@ -48,13 +48,11 @@ class SweepTask:
         estimator: trainable estimator name.
         scenario: training scenario (its train and val splits are used).
         space: the search space.
-        out: sweep output directory.
     """
 
     estimator: str
     scenario: Scenario
     space: SearchSpace
-    out: Path
 
 
 def trial_config(estimator: str, space: SearchSpace, params: Mapping[str, Any]) -> Any:
@@ -65,9 +63,9 @@ def trial_config(estimator: str, space: SearchSpace, params: Mapping[str, Any]) 
     return trainable(estimator).config({**space.fixed, **params})
 
 
-def _value(row: Mapping[str, float]) -> float:
-    """The validation RMSE of a history row (the validation loss where no RMSE is logged)."""
-    return row["val_rmse"] if math.isfinite(row["val_rmse"]) else row["val_loss"]
+def _value(val_rmse: float, val_loss: float) -> float:
+    """The validation RMSE of an epoch (the validation loss where no RMSE is logged)."""
+    return val_rmse if math.isfinite(val_rmse) else val_loss
 
 
 def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
@@ -77,6 +75,7 @@ def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
     trainable(task.estimator)  # raises ValueError when it is not trainable
 
     def objective(trial: optuna.Trial) -> float:
+        trial.set_user_attr("process", os.getpid())
         params = task.space.suggest(trial)
         try:
             config = trial_config(task.estimator, task.space, params)
@@ -86,7 +85,7 @@ def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
         began = time.perf_counter()
 
         def on_epoch(epoch: int, history: list[Any]) -> None:
-            value = _value({"val_rmse": history[-1].val_rmse, "val_loss": history[-1].val_loss})
+            value = _value(history[-1].val_rmse, history[-1].val_loss)
             trial.report(float(value), epoch)
             if trial.should_prune():
                 trial.set_user_attr("epochs_run", epoch)
@@ -101,14 +100,12 @@ def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
         best = outcome.best()
         if not best:
             raise TrialError(f"trial {trial.number}: no epoch completed")
-        seconds = time.perf_counter() - began
-        epochs = len(outcome.history)
-        trial.set_user_attr("best_epoch", int(outcome.best_epoch))
-        trial.set_user_attr("epochs_run", epochs)
-        trial.set_user_attr("seconds", seconds)
-        trial.set_user_attr("seconds_per_epoch", seconds / max(epochs, 1))
+        seconds, epochs = time.perf_counter() - began, len(outcome.history)
+        for key, value in {"best_epoch": int(outcome.best_epoch), "epochs_run": epochs, "seconds": seconds,
+                           "seconds_per_epoch": seconds / max(epochs, 1)}.items():
+            trial.set_user_attr(key, value)
         if outcome.config.train_config().objective != "supervised":
             trial.set_user_attr("best_val_loss", float(outcome.best_loss))
-        return float(_value(best))
+        return float(_value(best["val_rmse"], best["val_loss"]))
 
     return objective

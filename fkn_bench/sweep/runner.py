@@ -26,11 +26,11 @@ from __future__ import annotations
 import json
 import math
 import multiprocessing
-import os
 import sys
 import time
 import warnings
 from collections.abc import Callable
+from contextlib import nullcontext
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
@@ -43,7 +43,7 @@ from optuna.trial import FrozenTrial, TrialState
 from fkn_bench.io import atomic_path, write_json_atomic, write_text_atomic
 from fkn_bench.scenarios import Scenario
 from fkn_bench.sweep.objective import CATCH, SweepTask, make_objective, trial_config
-from fkn_bench.sweep.space import SAMPLERS, SearchSpace
+from fkn_bench.sweep.space import SearchSpace, check_sweep_options
 from fkn_bench.sweep.study import completed, make_sampler, open_storage, reduced_grid, stage_names, storage_label
 
 __all__ = ["SweepError", "SweepSettings", "SweepResult", "run_sweep", "write_toml", "shares"]
@@ -88,15 +88,7 @@ class SweepSettings:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.sampler not in SAMPLERS:
-            raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)} (got {self.sampler!r})")
-        for name in ("trials", "top_k", "workers"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"{name} must be >= 1 (got {getattr(self, name)!r})")
-        if self.grid_trials is not None and self.grid_trials < 1:
-            raise ValueError(f"grid_trials must be >= 1 (got {self.grid_trials!r})")
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0 (got {self.seed!r})")
+        check_sweep_options(vars(self))
 
     @property
     def storage_spec(self) -> str:
@@ -171,49 +163,27 @@ def _worker_main(job: _WorkerJob) -> None:
         print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {_describe(trial)}",
               file=sys.stderr, flush=True)
 
-    inner = make_objective(job.task)
-
-    def objective(trial: optuna.Trial) -> float:
-        trial.set_user_attr("process", os.getpid())
-        return inner(trial)
-
-    study.optimize(objective, n_trials=job.n_trials, catch=CATCH, callbacks=[report], gc_after_trial=False,
+    study.optimize(make_objective(job.task), n_trials=job.n_trials, catch=CATCH, callbacks=[report], gc_after_trial=False,
                    show_progress_bar=False)
 
 
-class _Workers:
-    """The worker processes of a sweep: a pool of ``spawn``ed processes created on first use and
-    kept for every stage (importing torch once per process, not once per stage)."""
-
-    def __init__(self, count: int) -> None:
-        self.count = count
-        self._pool: ProcessPoolExecutor | None = None
-
-    def run(self, jobs: list[_WorkerJob]) -> None:
-        if not jobs:
-            return
-        if self.count == 1 or len(jobs) == 1 and self._pool is None:
-            for job in jobs:
-                _worker_main(job)
-            return
-        if self._pool is None:
-            self._pool = ProcessPoolExecutor(max_workers=self.count, mp_context=multiprocessing.get_context("spawn"))
-        futures = [self._pool.submit(_worker_main, job) for job in jobs]
-        errors = []
-        for job, future in zip(jobs, futures):
-            try:
-                future.result()
-            except BrokenProcessPool as exc:
-                errors.append(f"worker {job.worker}: its process died ({exc})")
-            except Exception as exc:  # noqa: BLE001 - reported together below
-                errors.append(f"worker {job.worker}: {type(exc).__name__}: {exc}")
-        if errors:
-            raise SweepError("; ".join(errors))
-
-    def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
+def _run_jobs(jobs: list[_WorkerJob], pool: ProcessPoolExecutor | None) -> None:
+    """Run the jobs of a stage: in this process without a pool or with one job, else in ``pool``
+    (``spawn``ed processes kept for every stage, importing torch once per process)."""
+    if pool is None or len(jobs) <= 1:
+        for job in jobs:
+            _worker_main(job)
+        return
+    errors = []
+    for job, future in [(job, pool.submit(_worker_main, job)) for job in jobs]:
+        try:
+            future.result()
+        except BrokenProcessPool as exc:
+            errors.append(f"worker {job.worker}: its process died ({exc})")
+        except Exception as exc:  # noqa: BLE001 - reported together below
+            errors.append(f"worker {job.worker}: {type(exc).__name__}: {exc}")
+    if errors:
+        raise SweepError("; ".join(errors))
 
 
 def _prepare_study(storage: Any, name: str, settings: SweepSettings, stage: str) -> optuna.Study:
@@ -244,7 +214,7 @@ def _started(study: optuna.Study) -> int:
 
 
 def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, target: int,
-           grid: dict[str, list[Any]] | None, verbose: bool, log: Log, workers: _Workers) -> None:
+           grid: dict[str, list[Any]] | None, verbose: bool, log: Log, workers: ProcessPoolExecutor | None) -> None:
     storage = open_storage(settings.storage_spec)
     study = _prepare_study(storage, name, settings, stage)
     if grid is not None:
@@ -260,7 +230,7 @@ def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, targ
         _WorkerJob(task, settings.storage_spec, name, stage, settings.seed, i, n, grid, verbose)
         for i, n in enumerate(split)
     ]
-    workers.run(jobs)
+    _run_jobs(jobs, workers)
 
 
 def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None = None) -> SweepResult:
@@ -270,12 +240,13 @@ def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     out = Path(settings.out)
     out.mkdir(parents=True, exist_ok=True)
-    task = SweepTask(settings.estimator, settings.scenario, settings.space, out)
+    task = SweepTask(settings.estimator, settings.scenario, settings.space)
     stages = stage_names(settings.name, settings.sampler)
     grid: dict[str, list[Any]] | None = None
-    workers = _Workers(settings.workers)
-    try:
+    spawn = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(settings.workers, mp_context=spawn) if settings.workers > 1 else nullcontext() as workers:
         for stage, name in stages:
+            target = settings.trials
             if stage == "grid" and settings.sampler == "random-grid":
                 storage = open_storage(settings.storage_spec)
                 grid_study = _prepare_study(storage, name, settings, stage)
@@ -288,15 +259,11 @@ def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None
                     except ValueError as exc:
                         raise SweepError(f"cannot derive the grid stage: {exc}") from None
                 say(f"[sweep] reduced grid from the best {settings.top_k} random trials: {json.dumps(grid)}")
-                _stage(settings, task, stage, name, math.prod(len(v) for v in grid.values()), grid, progress, say, workers)
+                target = math.prod(len(v) for v in grid.values())
             elif stage == "grid":
                 grid = settings.space.grid()
-                size = math.prod(len(v) for v in grid.values())
-                _stage(settings, task, stage, name, min(settings.trials, size), grid, progress, say, workers)
-            else:
-                _stage(settings, task, stage, name, settings.trials, None, progress, say, workers)
-    finally:
-        workers.close()
+                target = min(settings.trials, math.prod(len(v) for v in grid.values()))
+            _stage(settings, task, stage, name, target, grid, progress, say, workers)
     result = write_outputs(settings, stages, grid)
     result.seconds = time.perf_counter() - began
     say(f"[sweep] best validation RMSE {result.best_value:.5g} ({result.best_stage} trial {result.best_number}); "
@@ -435,12 +402,7 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         "estimator": settings.estimator,
         "scenario": settings.scenario.name,
         "scenario_config_hash": settings.scenario.config_hash(),
-        "sampler": settings.sampler,
-        "trials": settings.trials,
-        "grid_trials": settings.grid_trials,
-        "top_k": settings.top_k,
-        "workers": settings.workers,
-        "seed": settings.seed,
+        **{key: getattr(settings, key) for key in ("sampler", "trials", "grid_trials", "top_k", "workers", "seed")},
         "space_source": settings.space.source,
         "space": settings.space.to_dict(),
         "grid": grid,

@@ -49,10 +49,10 @@ Errors (:class:`SpaceError`) name the file, the knob and what is wrong.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
-import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -69,6 +69,7 @@ __all__ = [
     "SAMPLERS",
     "PRUNERS",
     "MAX_ENUMERATED",
+    "check_sweep_options",
     "parse_space",
     "load_space",
     "packaged_spaces",
@@ -94,6 +95,13 @@ class SpaceError(ValueError):
 
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _of_kind(value: Any, kind: str) -> int | float | None:
+    """``value`` as a number of ``kind`` (int or float); None when it is not one."""
+    if not _is_number(value) or (kind == "int" and not float(value).is_integer()):
+        return None
+    return int(value) if kind == "int" else float(value)
 
 
 @dataclass(frozen=True)
@@ -132,14 +140,12 @@ class Knob:
         return FloatDistribution(float(low), float(high), log=self.log, step=self.step)
 
     def suggest(self, trial: optuna.Trial) -> Any:
-        """Ask ``trial`` for a value (the sampler decides which)."""
-        if self.kind == "categorical":
-            return trial.suggest_categorical(self.name, list(self.values))
-        low, high = self.low, self.high
-        assert low is not None and high is not None
-        if self.kind == "int":
-            return trial.suggest_int(self.name, int(low), int(high), log=self.log, step=int(self.step or 1))
-        return trial.suggest_float(self.name, float(low), float(high), log=self.log, step=self.step)
+        """Ask ``trial`` for a value of :meth:`distribution` (the sampler decides which)."""
+        d = self.distribution()
+        if isinstance(d, CategoricalDistribution):
+            return trial.suggest_categorical(self.name, list(d.choices))
+        suggest = trial.suggest_int if isinstance(d, IntDistribution) else trial.suggest_float
+        return suggest(self.name, d.low, d.high, log=d.log, step=d.step)  # type: ignore[operator]
 
     def contains(self, value: Any) -> bool:
         distribution = self.distribution()
@@ -216,8 +222,7 @@ class PrunerSpec:
         return optuna.pruners.NopPruner()
 
     def to_dict(self) -> dict[str, Any]:
-        return {"kind": self.kind, "n_startup_trials": self.n_startup_trials, "n_warmup_steps": self.n_warmup_steps,
-                "percentile": self.percentile, "min_resource": self.min_resource, "reduction_factor": self.reduction_factor}
+        return dataclasses.asdict(self)
 
 
 @dataclass(frozen=True)
@@ -306,13 +311,10 @@ def _parse_knob(name: str, table: Any, source: str) -> Knob:
     kind = table.get("type", "int" if isinstance(low, int) and isinstance(high, int) else "float")
     if kind not in ("int", "float"):
         raise SpaceError(f"{where}: `type` must be \"int\" or \"float\" (got {kind!r})")
-    if kind == "int" and not (float(low).is_integer() and float(high).is_integer()):
+    if _of_kind(low, kind) is None or _of_kind(high, kind) is None:
         raise SpaceError(f"{where}: an integer range needs integer bounds (got {low!r}, {high!r})")
-    if kind == "int":
-        low, high = int(low), int(high)
-    else:
-        low, high = float(low), float(high)
-    if not low < high:
+    low, high = _of_kind(low, kind), _of_kind(high, kind)
+    if not low < high:  # type: ignore[operator]
         raise SpaceError(f"{where}: need low < high (got {low!r}, {high!r})")
     log = table.get("log", False)
     if not isinstance(log, bool):
@@ -323,9 +325,9 @@ def _parse_knob(name: str, table: Any, source: str) -> Knob:
     if step is not None:
         if log:
             raise SpaceError(f"{where}: `step` cannot be combined with `log = true`")
-        if not _is_number(step) or step <= 0 or (kind == "int" and not float(step).is_integer()):
-            raise SpaceError(f"{where}: `step` must be a positive {'integer' if kind == 'int' else 'number'} (got {step!r})")
-        step = int(step) if kind == "int" else float(step)
+        step = _of_kind(table["step"], kind)
+        if step is None or step <= 0:
+            raise SpaceError(f"{where}: `step` must be a positive {'integer' if kind == 'int' else 'number'} (got {table['step']!r})")
     grid_points = table.get("grid_points")
     if grid_points is not None and (not isinstance(grid_points, int) or isinstance(grid_points, bool) or grid_points < 2):
         raise SpaceError(f"{where}: `grid_points` must be an integer >= 2 (got {grid_points!r})")
@@ -338,9 +340,9 @@ def _parse_knob(name: str, table: Any, source: str) -> Knob:
     if grid:
         values = []
         for v in grid:
-            if not _is_number(v) or (kind == "int" and not float(v).is_integer()):
+            if _of_kind(v, kind) is None:
                 raise SpaceError(f"{where}: grid value {v!r} is not {'an integer' if kind == 'int' else 'a number'}")
-            v = int(v) if kind == "int" else float(v)
+            v = _of_kind(v, kind)
             if not knob.contains(v):
                 raise SpaceError(f"{where}: grid value {v!r} lies outside [{low}, {high}]" + (f" step {step}" if step else ""))
             values.append(v)
@@ -350,10 +352,24 @@ def _parse_knob(name: str, table: Any, source: str) -> Knob:
     return knob
 
 
-def _positive_int(value: Any, name: str, source: str, low: int = 1) -> int:
+def _integer(value: Any, name: str, low: int = 1) -> int:
     if not isinstance(value, int) or isinstance(value, bool) or value < low:
-        raise SpaceError(f"{source}: [sweep] {name} must be an integer >= {low} (got {value!r})")
+        raise ValueError(f"{name} must be an integer >= {low} (got {value!r})")
     return value
+
+
+_SWEEP_INTEGERS = {"trials": 1, "grid_trials": 1, "top_k": 1, "workers": 1, "seed": 0}
+
+
+def check_sweep_options(values: Mapping[str, Any]) -> None:
+    """Raise ValueError for an invalid sweep option (``sampler``, ``trials``, ``grid_trials``,
+    ``top_k``, ``workers``, ``seed``; None values are left to the defaults): the one check of the
+    space's ``[sweep]`` table and of :class:`~fkn_bench.sweep.SweepSettings`."""
+    if values.get("sampler", SAMPLERS[0]) not in SAMPLERS:
+        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)} (got {values['sampler']!r})")
+    for key, low in _SWEEP_INTEGERS.items():
+        if values.get(key) is not None:
+            _integer(values[key], key, low)
 
 
 def _parse_pruner(table: Any, source: str) -> PrunerSpec:
@@ -368,12 +384,12 @@ def _parse_pruner(table: Any, source: str) -> PrunerSpec:
     if kind not in PRUNERS:
         raise SpaceError(f"{source}: [sweep.pruner] kind must be one of {', '.join(PRUNERS)} (got {kind!r})")
     values: dict[str, Any] = {"kind": kind}
-    for key in ("n_startup_trials", "n_warmup_steps"):
+    for key, low in (("n_startup_trials", 0), ("n_warmup_steps", 0), ("min_resource", 1), ("reduction_factor", 2)):
         if key in table:
-            values[key] = _positive_int(table[key], f"pruner.{key}", source, low=0)
-    for key in ("min_resource", "reduction_factor"):
-        if key in table:
-            values[key] = _positive_int(table[key], f"pruner.{key}", source, low=1 if key == "min_resource" else 2)
+            try:
+                values[key] = _integer(table[key], f"pruner.{key}", low)
+            except ValueError as exc:
+                raise SpaceError(f"{source}: [sweep] {exc}") from None
     if "percentile" in table:
         p = table["percentile"]
         if not _is_number(p) or not 0 < p < 100:
@@ -404,13 +420,10 @@ def parse_space(document: Mapping[str, Any], source: str = "<space>") -> SearchS
     if unknown:
         raise SpaceError(f"{source}: [sweep]: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(_SWEEP_KEYS))}")
     defaults = {k: v for k, v in sweep.items() if k != "pruner"}
-    if "sampler" in defaults and defaults["sampler"] not in SAMPLERS:
-        raise SpaceError(f"{source}: [sweep] sampler must be one of {', '.join(SAMPLERS)} (got {defaults['sampler']!r})")
-    for key in ("trials", "grid_trials", "top_k"):
-        if key in defaults:
-            _positive_int(defaults[key], key, source)
-    if "seed" in defaults:
-        _positive_int(defaults["seed"], "seed", source, low=0)
+    try:
+        check_sweep_options(defaults)
+    except ValueError as exc:
+        raise SpaceError(f"{source}: [sweep] {exc}") from None
     for key in ("estimator", "scenario"):
         if key in defaults and not isinstance(defaults[key], str):
             raise SpaceError(f"{source}: [sweep] {key} must be a string (got {defaults[key]!r})")
@@ -419,15 +432,9 @@ def parse_space(document: Mapping[str, Any], source: str = "<space>") -> SearchS
 
 def load_space(path: str | Path) -> SearchSpace:
     """Read a search-space TOML file."""
-    path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            document = tomllib.load(fh)
-    except FileNotFoundError:
-        raise SpaceError(f"search-space file not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise SpaceError(f"search-space file {path} is not valid TOML: {exc}") from None
-    return parse_space(document, str(path))
+    from fkn_bench.training.pipeline import read_toml
+
+    return parse_space(read_toml(path, "search-space file", SpaceError), str(path))
 
 
 def packaged_spaces() -> dict[str, Path]:

@@ -45,22 +45,16 @@ __all__ = [
     "stage_names",
     "reduced_grid",
     "completed",
-    "STAGE_SUFFIX",
 ]
-
-STAGE_SUFFIX = {"random": ".random", "grid": ".grid"}
-"""Study-name suffixes of the two stages of ``random-grid``."""
-
 
 def storage_label(spec: str | Path) -> str:
     """How a storage is named in outputs (an RDB URL without its password)."""
     text = str(spec)
-    if "://" in text and "@" in text:
-        scheme, _, rest = text.partition("://")
-        credentials, _, host = rest.rpartition("@")
-        user = credentials.split(":", 1)[0]
-        return f"{scheme}://{user}:***@{host}"
-    return text
+    if "://" not in text:
+        return text
+    from sqlalchemy.engine import make_url  # optuna's RDBStorage runs on SQLAlchemy
+
+    return make_url(text).render_as_string(hide_password=True)
 
 
 def open_storage(spec: str | Path) -> BaseStorage:
@@ -76,7 +70,7 @@ def open_storage(spec: str | Path) -> BaseStorage:
 def stage_names(study_name: str, sampler: str) -> list[tuple[str, str]]:
     """``(stage, study name)`` pairs: two for ``random-grid``, one otherwise."""
     if sampler == "random-grid":
-        return [(stage, study_name + STAGE_SUFFIX[stage]) for stage in ("random", "grid")]
+        return [(stage, f"{study_name}.{stage}") for stage in ("random", "grid")]
     return [(sampler, study_name)]
 
 

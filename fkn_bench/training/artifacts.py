@@ -30,6 +30,7 @@ import torch
 from fkn_bench.estimators.kalman import KalmanEstimator
 from fkn_bench.io import read_json, write_json_atomic
 from fkn_bench.scenarios import Scenario
+from fkn_bench.training.checkpoint import checked_document
 
 __all__ = [
     "ARTIFACT_FORMAT",
@@ -117,17 +118,8 @@ def read_artifact(path: str | Path) -> dict[str, Any]:
         raise ArtifactError(f"learned-parameter file not found: {path}") from None
     except ValueError as exc:
         raise ArtifactError(str(exc)) from None
-    if not isinstance(document, dict) or document.get("format") != ARTIFACT_FORMAT:
-        raise ArtifactError(f"{path} is not a learned-parameter file (format '{ARTIFACT_FORMAT}' expected)")
-    if document.get("format_version") != ARTIFACT_FORMAT_VERSION:
-        raise ArtifactError(
-            f"{path} has format version {document.get('format_version')!r}; this fkn-bench reads "
-            f"version {ARTIFACT_FORMAT_VERSION}"
-        )
-    for key in ("estimator", "family", "estimator_config", "parameters"):
-        if key not in document:
-            raise ArtifactError(f"{path} lacks '{key}'")
-    return document
+    return checked_document(document, path, ARTIFACT_FORMAT, ARTIFACT_FORMAT_VERSION, "a learned-parameter file",
+                            ("estimator", "family", "estimator_config", "parameters"), ArtifactError)
 
 
 def deployed_estimator_config(model: Any, variant: str) -> dict[str, Any]:

@@ -24,7 +24,8 @@ import torch
 
 from fkn_bench.io import atomic_path
 
-__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_FORMAT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint"]
+__all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_FORMAT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint",
+           "checked_document"]
 
 CHECKPOINT_FORMAT = "fkn-bench-checkpoint"
 CHECKPOINT_FORMAT_VERSION = 1
@@ -51,14 +52,20 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         document = torch.load(path, map_location="cpu", weights_only=True)
     except (RuntimeError, EOFError, OSError, pickle.UnpicklingError, zipfile.BadZipFile, ValueError) as exc:
         raise CheckpointError(f"{path} is not a readable checkpoint (truncated or corrupt?): {exc}") from None
-    if not isinstance(document, dict) or document.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"{path} is not an fkn-bench checkpoint (format '{CHECKPOINT_FORMAT}' expected)")
-    version = document.get("format_version")
-    if version != CHECKPOINT_FORMAT_VERSION:
-        raise CheckpointError(
-            f"{path} has checkpoint format version {version!r}; this fkn-bench reads version {CHECKPOINT_FORMAT_VERSION}"
-        )
-    for key in ("estimator", "config", "scenario", "state_dict"):
+    return checked_document(document, path, CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION, "an fkn-bench checkpoint",
+                            ("estimator", "config", "scenario", "state_dict"), CheckpointError)
+
+
+def checked_document(document: Any, path: Path, format: str, version: int, kind: str, required: tuple[str, ...],
+                     error: type[ValueError]) -> dict[str, Any]:
+    """``document`` when it is a dictionary of ``format`` (``kind``, e.g. "a learned-parameter
+    file") at ``version`` with the ``required`` keys; else ``error`` naming the file and problem."""
+    if not isinstance(document, dict) or document.get("format") != format:
+        raise error(f"{path} is not {kind} (format '{format}' expected)")
+    if document.get("format_version") != version:
+        raise error(f"{path} has {kind.split(' ', 1)[1]} format version {document.get('format_version')!r}; "
+                    f"this fkn-bench reads version {version}")
+    for key in required:
         if key not in document:
-            raise CheckpointError(f"{path} lacks '{key}'")
+            raise error(f"{path} lacks '{key}'")
     return document

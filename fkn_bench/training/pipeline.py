@@ -43,7 +43,7 @@ from fkn_bench.training.data import TrainingData, training_data
 from fkn_bench.training.objectives import aligned_state_error, state_mse
 from fkn_bench.training.trainer import NoiseModel, OnEpoch, TrainConfig, Trainer
 
-__all__ = ["Trainable", "TrainingOutcome", "fit", "options_with_file", "split_metrics", "trainable"]
+__all__ = ["Trainable", "TrainingOutcome", "fit", "options_with_file", "read_toml", "split_metrics", "trainable"]
 
 
 @dataclass(frozen=True)
@@ -79,6 +79,17 @@ def trainable(estimator: str) -> Trainable:
     return declared
 
 
+def read_toml(path: str | Path, what: str = "config file", error: type[ValueError] = ValueError) -> dict[str, Any]:
+    """The TOML document in ``path``; ``error`` naming ``what`` and the path when it is missing or invalid."""
+    try:
+        with Path(path).open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise error(f"{what} not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{what} {path} is not valid TOML: {exc}") from None
+
+
 def options_with_file(options: Mapping[str, Any], *tables: str) -> dict[str, Any]:
     """``options`` over the values of the TOML file named by option ``config`` (its first table
     of ``tables`` that exists, else its top level); ``options`` without ``config`` as they are."""
@@ -86,13 +97,7 @@ def options_with_file(options: Mapping[str, Any], *tables: str) -> dict[str, Any
     path = options.pop("config", None)
     if not path:
         return options
-    try:
-        with Path(path).open("rb") as fh:
-            document = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ValueError(f"config file not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ValueError(f"config file {path} is not valid TOML: {exc}") from None
+    document = read_toml(path)
     table = next((document[t] for t in tables if t in document), document)
     return {**table, **options}
 
@@ -238,9 +243,8 @@ def fit(
     history = pd.DataFrame([record.flat() for record in trainer.history])
     outcome = TrainingOutcome(
         estimator, model, config, scenario, history, trainer.best_epoch, trainer.best_loss, directory, {},
-        0.0, deployed_estimator_config(model, settings.variant),
+        time.perf_counter() - began, deployed_estimator_config(model, settings.variant),
     )
-    outcome.seconds = time.perf_counter() - began
     if directory is not None:
         _write_outputs(outcome, declared, trainer, data, plots, began)
     return outcome

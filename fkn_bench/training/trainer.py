@@ -29,7 +29,7 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from fkn_bench.filters import KalmanFilter, ParameterSet
+from fkn_bench.filters import VARIANTS, KalmanFilter, ParameterSet
 from fkn_bench.runtime import torch_threads
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
@@ -130,15 +130,17 @@ class TrainConfig:
     threads: int = 1
 
     def __post_init__(self) -> None:
+        if self.variant not in VARIANTS:
+            raise ValueError(f"variant must be one of {list(VARIANTS)} (got {self.variant!r})")
+        if self.window < 2 or self.loss_cut >= self.window:
+            raise ValueError(f"need window >= 2 and loss_cut < window (got {self.window}, {self.loss_cut})")
         if self.objective not in OBJECTIVES:
             raise ValueError(f"objective must be one of {OBJECTIVES} (got {self.objective!r})")
         if self.optimizer not in ("adam", "lbfgs"):
             raise ValueError(f"optimizer must be one of ['adam', 'lbfgs'] (got {self.optimizer!r})")
-        for name in ("epochs", "windows_per_batch", "threads", "lbfgs_iterations", "lbfgs_history"):
+        for name in ("epochs", "patience", "windows_per_batch", "threads", "lbfgs_iterations", "lbfgs_history"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be >= 1 (got {getattr(self, name)!r})")
-        if self.patience < 1:
-            raise ValueError(f"patience must be >= 1 (got {self.patience!r})")
         if not (self.lr > 0 and math.isfinite(self.lr)):
             raise ValueError(f"lr must be a finite number > 0 (got {self.lr!r})")
         if self.loss_cut < 0:
@@ -220,6 +222,10 @@ class Trainer:
             return innovation_nll(result, self.config.loss_cut), mse
         return mse, mse
 
+    def _reported(self, loss: float) -> float:
+        """A loss as reported: the RMSE for the supervised objective (its loss is the MSE)."""
+        return math.sqrt(loss) if self.config.objective == "supervised" else loss
+
     def validate(self) -> tuple[float, float]:
         """``(validation loss, validation 13-state RMSE)`` with the deployed parameters; the loss
         is the optimised objective (square root of the MSE, or the NLL) and
@@ -227,9 +233,7 @@ class Trainer:
         with torch.no_grad():
             raw = self.model.deployed_raw().expand(self.data.val.batch_size, -1)
             loss, mse = self.loss(self.data.val, raw)
-        rmse = math.sqrt(float(mse)) if mse is not None else math.nan
-        value = float(loss)
-        return (math.sqrt(value) if self.config.objective == "supervised" else value), rmse
+        return self._reported(float(loss)), math.sqrt(float(mse)) if mse is not None else math.nan
 
     # ------------------------------------------------------------------ epochs
     def _checked(self, loss: Tensor) -> Tensor:
@@ -252,8 +256,7 @@ class Trainer:
         self.model.eval()
         with torch.no_grad():  # the loss at the parameters the step ended with
             end, _ = self.loss(batch, self.model.window_raw(batch))
-        value = float(end if torch.isfinite(end) else start)
-        return math.sqrt(value) if self.config.objective == "supervised" else value
+        return self._reported(float(end if torch.isfinite(end) else start))
 
     def run_epoch(self) -> float:
         """One epoch (see module docstring); returns the mean training loss (the 13-state RMSE for
@@ -273,8 +276,7 @@ class Trainer:
             total += float(reported.detach()) * batch.batch_size
             count += batch.batch_size
         self.model.eval()
-        mean = total / count
-        return math.sqrt(mean) if self.config.objective == "supervised" else mean
+        return self._reported(total / count)
 
     def deployed_parameters(self) -> dict[str, float]:
         """The deployed standard deviations by name (e.g. ``sigma_Q_qw``)."""
@@ -333,27 +335,22 @@ class Trainer:
         return self.history
 
     # ------------------------------------------------------------------ resume
+    _MODULES = ("model", "optimizer", "scheduler")
+    _VALUES = ("best_loss", "best_epoch", "best_state", "epochs_without_improvement")
+
     def state_dict(self) -> dict[str, Any]:
         """Everything needed to resume: model, optimiser, scheduler, RNG, history, best."""
         return {
-            "model": self.model.state_dict(),
-            "optimizer": self.optimizer.state_dict(),
-            "scheduler": self.scheduler.state_dict(),
+            **{name: getattr(self, name).state_dict() for name in self._MODULES},
             "generator": self.generator.get_state(),
             "history": [asdict(r) for r in self.history],
-            "best_loss": self.best_loss,
-            "best_epoch": self.best_epoch,
-            "best_state": self.best_state,
-            "epochs_without_improvement": self.epochs_without_improvement,
+            **{name: getattr(self, name) for name in self._VALUES},
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        self.model.load_state_dict(state["model"])
-        self.optimizer.load_state_dict(state["optimizer"])
-        self.scheduler.load_state_dict(state["scheduler"])
+        for name in self._MODULES:
+            getattr(self, name).load_state_dict(state[name])
         self.generator.set_state(state["generator"])
         self.history = [EpochRecord(**r) for r in state["history"]]
-        self.best_loss = float(state["best_loss"])
-        self.best_epoch = int(state["best_epoch"])
-        self.best_state = state["best_state"]
-        self.epochs_without_improvement = int(state["epochs_without_improvement"])
+        for name in self._VALUES:
+            setattr(self, name, state[name])

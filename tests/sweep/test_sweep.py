@@ -133,7 +133,7 @@ def test_rerunning_a_finished_sweep_adds_no_trials(sweep: dict[str, Any]) -> Non
 def test_an_invalid_trial_fails_without_stopping_the_study(tmp_path: Path) -> None:
     text = FIXED.replace("loss_cut = 50\n", "") + "\n[params.loss_cut]\nvalues = [50, 300]\n"
     space = parse_space(tomllib.loads(text), "inline")
-    task = SweepTask("flexkalmannet", get_scenario("ds1", n_steps=3000), space, tmp_path)
+    task = SweepTask("flexkalmannet", get_scenario("ds1", n_steps=3000), space)
     study = optuna.create_study(direction="minimize")
     study.enqueue_trial({"loss_cut": 300})  # loss_cut >= window: refused
     study.enqueue_trial({"loss_cut": 50})
@@ -156,7 +156,7 @@ def test_any_trainable_estimator_is_swept_and_pruned_through_on_epoch(tmp_path: 
     study = optuna.create_study(direction="minimize", pruner=PruneTinySteps())
     for lr in (-1.0, 1.0, 1e-9):
         study.enqueue_trial({"lr": lr})
-    task = SweepTask("direct-tuned-ekf", get_scenario("ds1", n_steps=3000), space, tmp_path)
+    task = SweepTask("direct-tuned-ekf", get_scenario("ds1", n_steps=3000), space)
     study.optimize(make_objective(task), n_trials=3, catch=CATCH)
     failed, done, pruned = study.trials
     assert failed.state == TrialState.FAIL and "lr" in failed.user_attrs["error"]
