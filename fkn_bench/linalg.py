@@ -114,15 +114,27 @@ def divide_spd(M: Matrices, S: Matrices) -> Matrices:
     if S.shape[0] > 64:
         np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
         return M @ np.linalg.inv(S)
-    from scipy.linalg import lapack
-
     rows = []
     for row in range(S.shape[0]):
-        _, solution, info = lapack.dposv(S[row], M[row].T, lower=1)
+        _, solution, info = _lapack().dposv(S[row], M[row].T, lower=1)
         if info != 0:
             raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
-        rows.append(solution.T)
-    return rows[0][None] if len(rows) == 1 else np.stack(rows)
+        rows.append(solution)
+    return rows[0].T[None] if len(rows) == 1 else np.stack(rows).swapaxes(1, 2)
+
+
+_LAPACK: Any = None
+
+
+def _lapack() -> Any:
+    """``scipy.linalg.lapack``, imported on first use (importing scipy is slow; the torch path
+    never needs it)."""
+    global _LAPACK
+    if _LAPACK is None:
+        from scipy.linalg import lapack
+
+        _LAPACK = lapack
+    return _LAPACK
 
 
 def spd_inverse(S: Matrices) -> Matrices:
@@ -135,8 +147,7 @@ def cholesky(S: Matrices) -> tuple[Matrices, Any]:
     factorisation failed (torch: ``cholesky_ex``; numpy: LAPACK per row). Failed rows hold
     garbage."""
     if isinstance(S, np.ndarray):
-        from scipy.linalg import lapack
-
+        lapack = _lapack()
         L = np.empty(S.shape, dtype=S.dtype)
         failed = np.zeros(S.shape[0], dtype=bool)
         for row in range(S.shape[0]):

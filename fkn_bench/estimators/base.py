@@ -28,7 +28,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -182,7 +182,7 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
         pose = np.asarray(pose, dtype=np.float64)
     if pose.shape != (7,):
         raise ValueError(f"a pose observation must have shape (7,) (got {pose.shape})")
-    if not valid or np.isnan(pose).all():
+    if not valid or (math.isnan(pose[0]) and np.isnan(pose).all()):
         return None, time
     return pose, time
 
@@ -257,8 +257,7 @@ TIME_TOLERANCE = 1e-6
 """Online observation intervals within this many seconds of ``dt`` are taken as ``dt``."""
 
 
-@dataclass(frozen=True, eq=False)
-class OnlineState:
+class OnlineState(NamedTuple):
     """An online estimator's state after a step (an immutable value): the time (s), the filter's
     own state (e.g. a batch-1 :class:`~fkn_bench.filters.FilterState`) and whether the sequence
     has initialised."""

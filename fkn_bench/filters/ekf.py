@@ -25,7 +25,7 @@ import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
-from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, symmetrize
+from fkn_bench.linalg import add_matmul, divide_spd, eye, namespace, symmetrize
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
 
@@ -52,7 +52,7 @@ def joseph_update(
     ``(x+, P+, S, K)``, ``P+`` symmetrised, and ``S`` exactly symmetric when ``P`` and ``R`` are.
     """
     xp = namespace(x)
-    batch, n = x.shape
+    numpy, (batch, n) = xp is np, x.shape
     if observed is not None:
         PHt = P[:, :, observed]
         S = P[:, observed, observed] + R  # a block of P plus R: exactly symmetric, as they are
@@ -62,14 +62,14 @@ def joseph_update(
         S = symmetrize(H @ PHt + R)
     # S is symmetric positive definite (R is): K = P H^T S^-1 (torch: one product with the inverse)
     K = divide_spd(PHt, S)  # (B, n, m)
-    x_post = add_matmul(x[:, :, None], K, nu[:, :, None])[:, :, 0]
+    x_post = x + (K @ nu[:, :, None])[:, :, 0] if numpy else add_matmul(x[:, :, None], K, nu[:, :, None])[:, :, 0]
     TK = K
     block = N = None
     if normalize is not None:
         x_post, block, N = normalize(x_post)
-    if isinstance(x, np.ndarray):  # numpy (online): the same product as G blockdiag(P, R) G^T
-        m = K.shape[2]  # with G = [T A | T K], built in place on fresh arrays
-        G = broadcast(constant(x, ("gain-template", n, m), lambda: np.eye(n, n + m)), (batch, n, n + m))
+    if numpy:  # numpy (online): the same product as G blockdiag(P, R) G^T
+        m = K.shape[2]  # with G = [T A | T K], built in place on a fresh array
+        G = _gain_template(x, batch, n, m)
         if observed is not None:
             G[:, :, observed] -= K
         else:
@@ -87,6 +87,17 @@ def joseph_update(
     TA = T - (_pad_columns(TK, observed, n) if observed is not None else TK @ H)
     P_post = add_matmul(TA @ P @ TA.swapaxes(1, 2), TK @ R, TK.swapaxes(1, 2))
     return x_post, symmetrize(P_post), S, K
+
+
+_GAIN_TEMPLATES: dict[tuple, np.ndarray] = {}
+
+
+def _gain_template(like: np.ndarray, batch: int, n: int, m: int) -> np.ndarray:
+    """A fresh ``[I | 0] (B, n, n + m)`` in the dtype of ``like`` (numpy)."""
+    template = _GAIN_TEMPLATES.get((like.dtype, n, m))
+    if template is None:
+        template = _GAIN_TEMPLATES[(like.dtype, n, m)] = np.eye(n, n + m, dtype=like.dtype)[None]
+    return template.copy() if batch == 1 else np.repeat(template, batch, axis=0)
 
 
 def _pad_columns(M: Array, columns: slice, n: int) -> Array:

@@ -21,6 +21,7 @@ Kalman filter; the tests use it to check the EKF and UKF against a plain KF.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -150,6 +151,10 @@ def _pose_row_basis() -> np.ndarray:
 
 
 _POSE_BASIS = _pose_row_basis()
+_FLIP = np.array([-1.0] * 4 + [1.0] * 3)
+_EYE4 = np.eye(4)
+_USABLE = np.ones(1, dtype=bool)
+_USABLE.flags.writeable = False
 
 
 class PoseTwistModel(StateSpaceModel):
@@ -187,22 +192,34 @@ class PoseTwistModel(StateSpaceModel):
         batch = x.shape[0]
         dt = float(dt)
         # [A | A^T | dt/2 B] in one cached constant: A the identity plus r += dt v
-        A, At, basis = _split(constant(x, ("pose", dt), lambda: _pose_constants(dt)))
-        E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
-        increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
-        if isinstance(x, np.ndarray):  # numpy (online): the same sums, in place on fresh arrays
-            mean, F = x @ At, broadcast(A, (batch, 13, 13))
-            mean[:, 0:4] += increment
+        constants = constant(x, ("pose", dt), lambda: _pose_constants(dt))
+        if isinstance(x, np.ndarray):  # numpy (online): A x and E in one product, the sums in place
+            y = x @ constants[:, 13:78]
+            mean, E = y[:, 0:13], y[:, 13:65].reshape(batch, 4, 13)  # E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
+            mean[:, 0:4] += (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
+            F = broadcast(constants[:, 0:13], (batch, 13, 13))
             F[:, 0:4] += E
             return mean, F
+        A, At, basis = constants[:, 0:13], constants[:, 13:26], constants[:, 26:78]
+        E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
+        increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
         mean = add_matmul(xp.concat((increment, _zeros(x, (batch, 9))), axis=1), x, At)
         F = xp.concat((A[0:4] + E, broadcast(A[4:13], (batch, 9, 13))), axis=1)
         return mean, F
 
     def sanitize(self, measurements: Array, mask: Array) -> tuple[Array, Array]:
+        if isinstance(measurements, np.ndarray) and measurements.shape == (1, 7):  # one online measurement: the same rule on scalars
+            z = measurements[0]
+            norm = math.sqrt(z[:4] @ z[:4])  # NaN or inf where the quaternion is not finite or overflows
+            usable = bool(mask[0]) and math.isfinite(np.add.reduce(z * 0.0)) and self.min_quaternion_norm <= norm < math.inf
+            if not usable:
+                return np.zeros((1, 7)), np.zeros(1, dtype=bool)
+            out = measurements.copy()
+            out[0, :4] /= norm
+            return out, _USABLE
         xp = namespace(measurements)
         finite = all_last(xp.isfinite(measurements))
-        if isinstance(measurements, np.ndarray):  # numpy (no gradients): the same rule in place
+        if xp is np:  # numpy (no gradients): the same rule in place
             norm = np.sqrt(np.add.reduce(measurements[..., :4] * measurements[..., :4], axis=-1))
             usable = mask & finite & (norm >= self.min_quaternion_norm) & (norm < float("inf"))
             out = np.where(usable[..., None], measurements, 0.0)
@@ -218,11 +235,19 @@ class PoseTwistModel(StateSpaceModel):
     def align(self, z: Array, x_pred: Array) -> Array:
         # the measured quaternion is flipped where it points away from the prediction: where
         # z_q . q- has its sign bit set (copysign(1, z_q . q-) = -1)
+        if isinstance(z, np.ndarray) and z.shape[0] == 1:  # one numpy row: a scalar test
+            return z * _FLIP if math.copysign(1.0, z[0, 0:4] @ x_pred[0, 0:4]) < 0 else z
         dot = (z[:, None, 0:4] @ x_pred[:, 0:4, None])[:, :, 0]
-        flip = constant(z, "pose-flip", lambda: np.array([-1.0] * 4 + [1.0] * 3))
-        return namespace(z).where(namespace(z).signbit(dot), z * flip, z)
+        return namespace(z).where(namespace(z).signbit(dot), z * constant(z, "pose-flip", lambda: _FLIP), z)
 
     def normalize(self, x: Array) -> tuple[Array, slice | None, Array | None]:
+        if isinstance(x, np.ndarray) and x.shape[0] == 1:  # one numpy row: a scalar norm, in place
+            q = x[0, :4]
+            norm = math.sqrt(q @ q)
+            unit = q / norm
+            x = x.copy()
+            x[0, :4] = unit
+            return x, slice(0, 4), ((_EYE4 - unit[:, None] * unit) / norm)[None]
         xp = namespace(x)
         q = x[:, :4]
         norm = xp.sqrt(sum_last(q * q))
@@ -248,10 +273,6 @@ def _pose_constants(dt: float) -> np.ndarray:
     A = np.eye(13)
     A[4:7, 10:13] = dt * np.eye(3)
     return np.concatenate((A, A.T, (0.5 * dt) * _POSE_BASIS), axis=1)
-
-
-def _split(constants: Array) -> tuple[Array, Array, Array]:
-    return constants[:, 0:13], constants[:, 13:26], constants[:, 26:78]
 
 
 class LinearGaussianModel(StateSpaceModel):
