@@ -25,7 +25,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "stack", "divide_spd", "all_last", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "divide_spd", "all_last", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
 
@@ -82,24 +82,6 @@ def broadcast(x: Matrices, shape: tuple[int, ...]) -> Matrices:
         out[...] = x
         return out
     return x.expand(shape)
-
-
-def stack(arrays: Any, axis: int = -1) -> Any:
-    """``stack`` of equally shaped arrays along a new ``axis`` (-1 or -2); numpy fills one fresh
-    array (``numpy.stack`` costs several microseconds at the sizes of one online step)."""
-    first = arrays[0]
-    if isinstance(first, np.ndarray):
-        k, shape = len(arrays), first.shape
-        out = np.empty(shape + (k,) if axis == -1 else shape[:-1] + (k, shape[-1]), dtype=first.dtype)
-        for i, a in enumerate(arrays):
-            if axis == -1:
-                out[..., i] = a
-            else:
-                out[..., i, :] = a
-        return out
-    import torch
-
-    return torch.stack(tuple(arrays), dim=axis)
 
 
 def divide_spd(M: Matrices, S: Matrices) -> Matrices:

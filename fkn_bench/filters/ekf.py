@@ -145,8 +145,7 @@ def linear_measurement_update(
 def ekf_predict(model: StateSpaceModel, state: FilterState, process_noise: Array, dt: float) -> FilterState:
     """``x- = f(x+)``, ``P- = F P+ F^T + Q`` (symmetrised); ``Q`` is ``(k, k)`` or ``(B, k, k)``."""
     mean, F = model.transition(state.mean, dt)
-    FP = F @ state.covariance
-    return FilterState(mean, symmetrize(add_matmul(process_noise, FP, F.swapaxes(1, 2))))
+    return FilterState(mean, symmetrize(add_matmul(process_noise, F @ state.covariance, F.swapaxes(1, 2))))
 
 
 class ExtendedKalmanFilter(KalmanFilter):

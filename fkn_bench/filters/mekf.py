@@ -21,6 +21,7 @@ and covariance, and the reset ``q <- exp(dtheta / 2) (x) q`` maps the covariance
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -57,6 +58,14 @@ MEKF_MANUAL_LAYOUT = NoiseLayout(
 
 def left_jacobian(phi: Array) -> Array:
     """Left Jacobian of SO(3) ``(..., 3, 3)``: ``I + (1 - cos a)/a^2 [phi x] + (a - sin a)/a^3 [phi x]^2``."""
+    K = qx.skew(phi)
+    if isinstance(phi, np.ndarray) and phi.shape == (1, 3):  # one numpy row: scalar branches
+        a2 = float(phi[0] @ phi[0])
+        a = math.sqrt(a2)
+        small = a2 < 1e-8
+        c1 = 0.5 - a2 / 24.0 if small else (1.0 - math.cos(a)) / a2
+        c2 = 1.0 / 6.0 - a2 / 120.0 if small else (a - math.sin(a)) / (a2 * a)
+        return eye(phi, 3) + c1 * K + c2 * (K @ K)
     xp = namespace(phi)
     a2 = (phi * phi).sum(-1, keepdims=True)[..., None]
     small = a2 < 1e-8
@@ -64,7 +73,6 @@ def left_jacobian(phi: Array) -> Array:
     a = xp.sqrt(safe)
     c1 = xp.where(small, 0.5 - a2 / 24.0, (1.0 - xp.cos(a)) / safe)
     c2 = xp.where(small, 1.0 / 6.0 - a2 / 120.0, (a - xp.sin(a)) / (safe * a))
-    K = qx.skew(phi)
     return eye(phi, 3) + c1 * K + c2 * (K @ K)
 
 

@@ -177,8 +177,12 @@ class PoseTwistModel(StateSpaceModel):
     def __init__(self, *, min_quaternion_norm: float = 1e-6) -> None:
         self.min_quaternion_norm = float(min_quaternion_norm)
 
-    def transition(self, x: Array, dt: float) -> tuple[Array, Array]:
-        """Mean and Jacobian with few batched operations (the filter's hot path).
+    def predict(self, x: Array, dt: float) -> Array:
+        return self.transition(x, dt, jacobian=False)[0]
+
+    def transition(self, x: Array, dt: float, *, jacobian: bool = True) -> tuple[Array, Array]:
+        """Mean and Jacobian with few batched operations (the filter's hot path); numpy skips
+        the Jacobian when ``jacobian`` is False (its second value is then None).
 
         ``E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]`` (the quaternion rows of ``F - A``, with
         ``A`` the identity plus ``r += dt v``) is linear in the state: ``E = x @ B`` for a
@@ -197,6 +201,8 @@ class PoseTwistModel(StateSpaceModel):
             y = x @ constants[:, 13:78]
             mean, E = y[:, 0:13], y[:, 13:65].reshape(batch, 4, 13)  # E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
             mean[:, 0:4] += (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
+            if not jacobian:
+                return mean, None
             F = broadcast(constants[:, 0:13], (batch, 13, 13))
             F[:, 0:4] += E
             return mean, F
@@ -208,15 +214,12 @@ class PoseTwistModel(StateSpaceModel):
         return mean, F
 
     def sanitize(self, measurements: Array, mask: Array) -> tuple[Array, Array]:
-        if isinstance(measurements, np.ndarray) and measurements.shape == (1, 7):  # one online measurement: the same rule on scalars
-            z = measurements[0]
-            norm = math.sqrt(z[:4] @ z[:4])  # NaN or inf where the quaternion is not finite or overflows
-            usable = bool(mask[0]) and math.isfinite(np.add.reduce(z * 0.0)) and self.min_quaternion_norm <= norm < math.inf
-            if not usable:
-                return np.zeros((1, 7)), np.zeros(1, dtype=bool)
-            out = measurements.copy()
-            out[0, :4] /= norm
-            return out, _USABLE
+        if isinstance(measurements, np.ndarray) and measurements.shape == (1, 7):  # one online measurement:
+            w, x, y, z, *r = measurements[0].tolist()  # the same rule on Python floats
+            norm = math.sqrt(w * w + x * x + y * y + z * z)  # NaN or inf where q is not finite or overflows
+            if mask[0] and self.min_quaternion_norm <= norm < math.inf and all(map(math.isfinite, r)):
+                return np.array([[w / norm, x / norm, y / norm, z / norm, *r]], dtype=measurements.dtype), _USABLE
+            return np.zeros((1, 7), dtype=measurements.dtype), np.zeros(1, dtype=bool)
         xp = namespace(measurements)
         finite = all_last(xp.isfinite(measurements))
         if xp is np:  # numpy (no gradients): the same rule in place
@@ -256,6 +259,10 @@ class PoseTwistModel(StateSpaceModel):
         return xp.concat((unit, x[:, 4:]), axis=1), slice(0, 4), N  # N = (I - u u^T) / |q|
 
     def null_direction(self, x: Array) -> Array | None:
+        if isinstance(x, np.ndarray) and x.shape[0] == 1:  # one numpy row: a scalar norm
+            out = np.zeros(x.shape, dtype=x.dtype)
+            out[0, :4] = x[0, :4] / math.sqrt(x[0, :4] @ x[0, :4])
+            return out
         xp = namespace(x)
         q = x[:, :4]
         return xp.concat((q / xp.sqrt(xp.sum(q * q, axis=1, keepdims=True)), xp.zeros_like(x[:, 4:])), axis=1)
