@@ -93,16 +93,15 @@ def divide_spd(M: Matrices, S: Matrices) -> Matrices:
         import torch
 
         return M @ torch.linalg.inv_ex(S)[0]
+    if S.shape[0] == 1:  # one row (online): LAPACK directly
+        _, solution, info = _lapack().dposv(S[0], M[0].T, lower=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
+        return solution.T[None]
     if S.shape[0] > 64:
         np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
         return M @ np.linalg.inv(S)
-    rows = []
-    for row in range(S.shape[0]):
-        _, solution, info = _lapack().dposv(S[row], M[row].T, lower=1)
-        if info != 0:
-            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
-        rows.append(solution)
-    return rows[0].T[None] if len(rows) == 1 else np.stack(rows).swapaxes(1, 2)
+    return np.concatenate([divide_spd(M[row : row + 1], S[row : row + 1]) for row in range(S.shape[0])])
 
 
 _LAPACK: Any = None

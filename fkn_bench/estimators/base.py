@@ -61,7 +61,7 @@ class EstimatorFileError(ValueError):
     """A saved estimator that cannot be read: missing, corrupt, or of an unknown format/version."""
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class Estimate:
     """One online estimate (an immutable value; its arrays are read-only).
 
@@ -82,9 +82,9 @@ class Estimate:
     initialised: bool
     updated: bool
 
-    def __post_init__(self) -> None:
-        for array in (self.mean, self.native_covariance):
-            array.flags.writeable = False
+    def __init__(self, time: float, mean: ArrayF, native_covariance: ArrayF, initialised: bool, updated: bool) -> None:
+        mean.flags.writeable = native_covariance.flags.writeable = False  # one dict update: per step
+        self.__dict__.update(time=time, mean=mean, native_covariance=native_covariance, initialised=initialised, updated=updated)
 
     @functools.cached_property
     def covariance(self) -> ArrayF:

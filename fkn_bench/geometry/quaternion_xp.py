@@ -91,8 +91,8 @@ def multiply(p: Array, q: Array) -> Array:
 
 
 def conjugate(q: Array) -> Array:
-    """Conjugate ``q*``."""
-    return namespace(q).concat((q[..., :1], -q[..., 1:]), axis=-1)
+    """Conjugate ``q*`` (a product with ``[1, -1, -1, -1]``: exact)."""
+    return q * constant(q, ("quaternion", "conjugate"), lambda: np.array([1.0, -1.0, -1.0, -1.0]))
 
 
 def theta_matrix(q: Array) -> Array:
@@ -156,6 +156,13 @@ def rotation_matrix(q: Array) -> Array:
     """Rotation matrix ``(..., 3, 3)`` of unit quaternion ``q``: ``I + C(q q^T)`` with
     ``1 - 2 (y^2 + z^2)``, ``2 (x y - w z)``, ... (the products with +-2 are exact: the same numbers as
     the formula written entry by entry)."""
+    if isinstance(q, np.ndarray) and q.shape == (1, 4):  # one numpy row: the formula on Python floats
+        w, x, y, z = q[0].tolist()
+        return np.array(
+            [[[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+              [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+              [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]]
+        )  # fmt: skip
     qq = q[..., :, None] * q[..., None, :]
     flat = qq.reshape(tuple(qq.shape[:-2]) + (16,)) @ constant(qq, ("quaternion", "rotation"), lambda: _ROTATION)
     return flat.reshape(tuple(flat.shape[:-1]) + (3, 3)) + constant(qq, ("eye", 3), lambda: np.eye(3))
@@ -163,6 +170,8 @@ def rotation_matrix(q: Array) -> Array:
 
 def align_sign(q: Array, reference: Array) -> Array:
     """``q`` or ``-q``, whichever has a non-negative dot product with ``reference``."""
+    if isinstance(q, np.ndarray) and q.shape == (1, 4):  # one numpy row: a scalar test
+        return -q if q[0] @ reference[0] < 0 else q
     xp = namespace(q)
     dot = (q * reference).sum(-1, keepdims=True)
     return xp.where(dot < 0, -q, q)
