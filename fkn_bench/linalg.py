@@ -17,6 +17,7 @@ makes it symmetric bit for bit on any machine.
 
 from __future__ import annotations
 
+import operator
 from types import ModuleType
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -25,7 +26,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "divide_spd", "all_last", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "divide_spd", "all_last", "dot", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
 
@@ -62,6 +63,12 @@ def add_matmul(C: Matrices, A: Matrices, B: Matrices) -> Matrices:
     if A.dim() == 3:
         return torch.baddbmm(C, A, B)
     return C + A @ B
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a @ b`` of two short 1-D numpy vectors, summed in order on Python floats (numpy's
+    dispatch costs more than the sum at 3 or 4 entries)."""
+    return sum(map(operator.mul, a.tolist(), b.tolist()), 0.0)
 
 
 def all_last(a: Any) -> Any:

@@ -35,6 +35,7 @@ import numpy as np
 from fkn_bench.filters.base import check_dt
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 from fkn_bench.io import read_json, write_json_atomic
+from fkn_bench.linalg import dot
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = [
@@ -317,7 +318,7 @@ class RecursiveEstimator(Estimator):
         self._online = OnlineState(now, state, initialised)
         mean, covariance = self._online_report(state)
         mean = mean.copy()
-        mean[0:4] /= math.sqrt(mean[0:4] @ mean[0:4])
+        mean[0:4] /= math.sqrt(dot(mean[0:4], mean[0:4]))
         return Estimate(time=now, mean=mean, native_covariance=covariance, initialised=initialised, updated=updated)
 
     def _online_sanitize(self, z: ArrayF) -> ArrayF | None:

@@ -31,7 +31,7 @@ from fkn_bench.filters.ekf import joseph_update
 from fkn_bench.filters.models import PoseTwistModel
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import add_matmul, broadcast, constant, eye, namespace, symmetrize
+from fkn_bench.linalg import add_matmul, broadcast, constant, dot, eye, namespace, symmetrize
 from fkn_bench.types import ERROR_NAMES
 
 __all__ = ["MultiplicativeEKF", "MEKF_MANUAL_LAYOUT", "left_jacobian"]
@@ -139,7 +139,7 @@ class MultiplicativeEKF(KalmanFilter):
         dx, P_post, S, _ = joseph_update(error, P, nu, measurement_noise, observed=slice(0, 6), normalize=reset)
         q_post = qx.multiply(qx.from_rotation_vector(dx[:, 0:3]), q)
         if xp is np and q_post.shape[0] == 1:  # one numpy row: a scalar norm
-            q_post /= math.sqrt(q_post[0] @ q_post[0])
+            q_post /= math.sqrt(dot(q_post[0], q_post[0]))
         else:
             q_post = q_post / xp.sqrt((q_post * q_post).sum(1, keepdims=True))
         mean = xp.concat((q_post, x[:, 4:] + dx[:, 3:]), axis=1)

@@ -28,7 +28,7 @@ import numpy as np
 
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, eye, namespace, sum_last
+from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, dot, eye, namespace, sum_last
 from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES, STATE_UNITS
 
 __all__ = ["StateSpaceModel", "PoseTwistModel", "LinearGaussianModel", "PAPER_MANUAL_LAYOUT"]
@@ -200,7 +200,7 @@ class PoseTwistModel(StateSpaceModel):
         if isinstance(x, np.ndarray):  # numpy (online): A x and E in one product, the sums in place
             y = x @ constants[:, 13:78]
             mean, E = y[:, 0:13], y[:, 13:65].reshape(batch, 4, 13)  # E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
-            mean[:, 0:4] += (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
+            mean[:, 0:4] += (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0] if batch > 1 else E[0, :, 0:4] @ x[0, 0:4]
             if not jacobian:
                 return mean, None
             F = broadcast(constants[:, 0:13], (batch, 13, 13))
@@ -239,14 +239,14 @@ class PoseTwistModel(StateSpaceModel):
         # the measured quaternion is flipped where it points away from the prediction: where
         # z_q . q- has its sign bit set (copysign(1, z_q . q-) = -1)
         if isinstance(z, np.ndarray) and z.shape[0] == 1:  # one numpy row: a scalar test
-            return z * _FLIP if math.copysign(1.0, z[0, 0:4] @ x_pred[0, 0:4]) < 0 else z
-        dot = (z[:, None, 0:4] @ x_pred[:, 0:4, None])[:, :, 0]
-        return namespace(z).where(namespace(z).signbit(dot), z * constant(z, "pose-flip", lambda: _FLIP), z)
+            return z * _FLIP if math.copysign(1.0, dot(z[0, 0:4], x_pred[0, 0:4])) < 0 else z
+        inner = (z[:, None, 0:4] @ x_pred[:, 0:4, None])[:, :, 0]
+        return namespace(z).where(namespace(z).signbit(inner), z * constant(z, "pose-flip", lambda: _FLIP), z)
 
     def normalize(self, x: Array) -> tuple[Array, slice | None, Array | None]:
         if isinstance(x, np.ndarray) and x.shape[0] == 1:  # one numpy row: a scalar norm, in place
             q = x[0, :4]
-            norm = math.sqrt(q @ q)
+            norm = math.sqrt(dot(q, q))
             unit = q / norm
             x = x.copy()
             x[0, :4] = unit
@@ -261,7 +261,7 @@ class PoseTwistModel(StateSpaceModel):
     def null_direction(self, x: Array) -> Array | None:
         if isinstance(x, np.ndarray) and x.shape[0] == 1:  # one numpy row: a scalar norm
             out = np.zeros(x.shape, dtype=x.dtype)
-            out[0, :4] = x[0, :4] / math.sqrt(x[0, :4] @ x[0, :4])
+            out[0, :4] = x[0, :4] / math.sqrt(dot(x[0, :4], x[0, :4]))
             return out
         xp = namespace(x)
         q = x[:, :4]

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from fkn_bench.linalg import constant, namespace
+from fkn_bench.linalg import constant, dot, namespace
 
 __all__ = [
     "multiply",
@@ -113,7 +113,7 @@ def skew(v: Array) -> Array:
 def from_rotation_vector(rotvec: Array) -> Array:
     """``exp(rotvec / 2)`` as a unit quaternion; exact and differentiable at zero."""
     if isinstance(rotvec, np.ndarray) and rotvec.shape == (1, 3):  # one numpy row: scalar branches
-        angle2 = float(rotvec[0] @ rotvec[0])
+        angle2 = dot(rotvec[0], rotvec[0])
         angle = math.sqrt(angle2)
         small = angle2 < 1e-12
         out = np.empty((1, 4))
@@ -138,7 +138,7 @@ def to_rotation_vector(q: Array) -> Array:
         w, vec = float(q[0, 0]), q[0, 1:]
         if w < 0:
             w, vec = -w, -vec
-        n2 = float(vec @ vec)
+        n2 = dot(vec, vec)
         n = math.sqrt(n2)
         return ((2.0 / w if n2 < 1e-18 else 2.0 * math.atan2(n, w) / n) * vec)[None]
     xp = namespace(q)
@@ -171,7 +171,7 @@ def rotation_matrix(q: Array) -> Array:
 def align_sign(q: Array, reference: Array) -> Array:
     """``q`` or ``-q``, whichever has a non-negative dot product with ``reference``."""
     if isinstance(q, np.ndarray) and q.shape == (1, 4):  # one numpy row: a scalar test
-        return -q if q[0] @ reference[0] < 0 else q
+        return -q if dot(q[0], reference[0]) < 0 else q
     xp = namespace(q)
-    dot = (q * reference).sum(-1, keepdims=True)
-    return xp.where(dot < 0, -q, q)
+    inner = (q * reference).sum(-1, keepdims=True)
+    return xp.where(inner < 0, -q, q)
