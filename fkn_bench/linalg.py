@@ -101,7 +101,7 @@ def divide_spd(M: Matrices, S: Matrices) -> Matrices:
 
         return M @ torch.linalg.inv_ex(S)[0]
     if S.shape[0] == 1:  # one row (online): LAPACK directly
-        _, solution, info = _lapack().dposv(S[0], M[0].T, lower=1)
+        _, solution, info = (_LAPACK or _lapack()).dposv(S[0], M[0].T, lower=1)
         if info != 0:
             raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
         return solution.T[None]

@@ -62,7 +62,10 @@ def joseph_update(
         S = symmetrize(H @ PHt + R)
     # S is symmetric positive definite (R is): K = P H^T S^-1 (torch: one product with the inverse)
     K = divide_spd(PHt, S)  # (B, n, m)
-    x_post = x + (K @ nu[:, :, None])[:, :, 0] if numpy else add_matmul(x[:, :, None], K, nu[:, :, None])[:, :, 0]
+    if numpy:
+        x_post = x + (K[0] @ nu[0] if batch == 1 else (K @ nu[:, :, None])[:, :, 0])
+    else:
+        x_post = add_matmul(x[:, :, None], K, nu[:, :, None])[:, :, 0]
     TK = K
     block = N = None
     if normalize is not None:
@@ -145,7 +148,12 @@ def linear_measurement_update(
 def ekf_predict(model: StateSpaceModel, state: FilterState, process_noise: Array, dt: float) -> FilterState:
     """``x- = f(x+)``, ``P- = F P+ F^T + Q`` (symmetrised); ``Q`` is ``(k, k)`` or ``(B, k, k)``."""
     mean, F = model.transition(state.mean, dt)
-    return FilterState(mean, symmetrize(add_matmul(process_noise, F @ state.covariance, F.swapaxes(1, 2))))
+    if isinstance(F, np.ndarray):  # numpy: Q added in place to the fresh product
+        P = F @ state.covariance @ F.swapaxes(1, 2)
+        P += process_noise
+    else:
+        P = add_matmul(process_noise, F @ state.covariance, F.swapaxes(1, 2))
+    return FilterState(mean, symmetrize(P))
 
 
 class ExtendedKalmanFilter(KalmanFilter):

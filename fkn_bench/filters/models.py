@@ -192,20 +192,21 @@ class PoseTwistModel(StateSpaceModel):
         a (B, 13, 13) product for the mean would cost a (B, 13, 13) outer product in the backward
         pass at every step.
         """
-        xp = namespace(x)
         batch = x.shape[0]
         dt = float(dt)
-        # [A | A^T | dt/2 B] in one cached constant: A the identity plus r += dt v
-        constants = constant(x, ("pose", dt), lambda: _pose_constants(dt))
         if isinstance(x, np.ndarray):  # numpy (online): A x and E in one product, the sums in place
-            y = x @ constants[:, 13:78]
+            y = x @ constant(x, ("pose-AtB", dt), lambda: np.ascontiguousarray(_pose_constants(dt)[:, 13:78]))
             mean, E = y[:, 0:13], y[:, 13:65].reshape(batch, 4, 13)  # E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
             mean[:, 0:4] += (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0] if batch > 1 else E[0, :, 0:4] @ x[0, 0:4]
             if not jacobian:
                 return mean, None
-            F = broadcast(constants[:, 0:13], (batch, 13, 13))
+            A = constant(x, ("pose-A", dt), lambda: np.ascontiguousarray(_pose_constants(dt)[None, :, 0:13]))
+            F = A.copy() if batch == 1 else broadcast(A[0], (batch, 13, 13))
             F[:, 0:4] += E
             return mean, F
+        xp = namespace(x)
+        # [A | A^T | dt/2 B] in one cached constant: A the identity plus r += dt v
+        constants = constant(x, ("pose", dt), lambda: _pose_constants(dt))
         A, At, basis = constants[:, 0:13], constants[:, 13:26], constants[:, 26:78]
         E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
         increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
