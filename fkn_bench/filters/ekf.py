@@ -25,7 +25,7 @@ import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
-from fkn_bench.linalg import add_matmul, divide_spd, eye, namespace, symmetrize
+from fkn_bench.linalg import add_matmul, constant, divide_spd, eye, namespace, symmetrize
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
 
@@ -70,14 +70,10 @@ def joseph_update(
     block = N = None
     if normalize is not None:
         x_post, block, N = normalize(x_post)
-    if numpy:  # numpy (online): the same product as G blockdiag(P, R) G^T
-        m = K.shape[2]  # with G = [T A | T K], built in place on a fresh array
-        G = _gain_template(x, batch, n, m)
-        if observed is not None:
-            G[:, :, observed] -= K
-        else:
-            G[:, :, :n] -= K @ H
-        G[:, :, n:] = K
+    if numpy:  # numpy (online): the same product as G blockdiag(P, R) G^T with G = [T A | T K]:
+        m = K.shape[2]  # [A | K] = [I 0] - K [H | -I] (for H = [I 0], products with 1 and 0: exact)
+        HI = np.concatenate((H, -np.eye(m)), axis=1) if observed is None else constant(x, ("H|-I", n, m, observed.start, observed.stop), lambda: _selection(n, m, observed))
+        G = constant(x, ("I|0", n, m), lambda: np.eye(n, n + m)) - K @ HI
         if block is not None and N is not None:
             G[:, block] = N @ G[:, block]
         D = np.zeros((batch, n + m, n + m))
@@ -92,15 +88,9 @@ def joseph_update(
     return x_post, symmetrize(P_post), S, K
 
 
-_GAIN_TEMPLATES: dict[tuple, np.ndarray] = {}
-
-
-def _gain_template(like: np.ndarray, batch: int, n: int, m: int) -> np.ndarray:
-    """A fresh ``[I | 0] (B, n, n + m)`` in the dtype of ``like`` (numpy)."""
-    template = _GAIN_TEMPLATES.get((like.dtype, n, m))
-    if template is None:
-        template = _GAIN_TEMPLATES[(like.dtype, n, m)] = np.eye(n, n + m, dtype=like.dtype)[None]
-    return template.copy() if batch == 1 else np.repeat(template, batch, axis=0)
+def _selection(n: int, m: int, observed: slice) -> np.ndarray:
+    """``[H | -I] (m, n + m)`` for ``H`` selecting ``observed``."""
+    return np.concatenate((np.eye(n)[observed], -np.eye(m)), axis=1)
 
 
 def _pad_columns(M: Array, columns: slice, n: int) -> Array:
