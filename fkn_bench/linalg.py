@@ -17,6 +17,7 @@ makes it symmetric bit for bit on any machine.
 
 from __future__ import annotations
 
+import operator
 from types import ModuleType
 from typing import TYPE_CHECKING, Any, TypeVar
 
@@ -25,7 +26,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "stack", "divide_spd", "all_last", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "divide_spd", "all_last", "dot", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
 
@@ -64,6 +65,12 @@ def add_matmul(C: Matrices, A: Matrices, B: Matrices) -> Matrices:
     return C + A @ B
 
 
+def dot(a: np.ndarray, b: np.ndarray) -> float:
+    """``a @ b`` of two short 1-D numpy vectors, summed in order on Python floats (numpy's
+    dispatch costs more than the sum at 3 or 4 entries)."""
+    return sum(map(operator.mul, a.tolist(), b.tolist()), 0.0)
+
+
 def all_last(a: Any) -> Any:
     """``a.all(-1)`` (numpy: the ufunc reduction directly, without ``ndarray.all``'s wrapper)."""
     return np.logical_and.reduce(a, axis=-1) if isinstance(a, np.ndarray) else a.all(-1)
@@ -84,24 +91,6 @@ def broadcast(x: Matrices, shape: tuple[int, ...]) -> Matrices:
     return x.expand(shape)
 
 
-def stack(arrays: Any, axis: int = -1) -> Any:
-    """``stack`` of equally shaped arrays along a new ``axis`` (-1 or -2); numpy fills one fresh
-    array (``numpy.stack`` costs several microseconds at the sizes of one online step)."""
-    first = arrays[0]
-    if isinstance(first, np.ndarray):
-        k, shape = len(arrays), first.shape
-        out = np.empty(shape + (k,) if axis == -1 else shape[:-1] + (k, shape[-1]), dtype=first.dtype)
-        for i, a in enumerate(arrays):
-            if axis == -1:
-                out[..., i] = a
-            else:
-                out[..., i, :] = a
-        return out
-    import torch
-
-    return torch.stack(tuple(arrays), dim=axis)
-
-
 def divide_spd(M: Matrices, S: Matrices) -> Matrices:
     """``M S^-1`` for ``M (B, n, m)`` and symmetric positive definite ``S (B, m, m)``. torch:
     one product with ``inv_ex(S)`` (no error check: no synchronisation, a batch keeps running);
@@ -111,18 +100,29 @@ def divide_spd(M: Matrices, S: Matrices) -> Matrices:
         import torch
 
         return M @ torch.linalg.inv_ex(S)[0]
+    if S.shape[0] == 1:  # one row (online): LAPACK directly
+        _, solution, info = (_LAPACK or _lapack()).dposv(S[0], M[0].T, lower=1)
+        if info != 0:
+            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
+        return solution.T[None]
     if S.shape[0] > 64:
         np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
         return M @ np.linalg.inv(S)
-    from scipy.linalg import lapack
+    return np.concatenate([divide_spd(M[row : row + 1], S[row : row + 1]) for row in range(S.shape[0])])
 
-    rows = []
-    for row in range(S.shape[0]):
-        _, solution, info = lapack.dposv(S[row], M[row].T, lower=1)
-        if info != 0:
-            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
-        rows.append(solution.T)
-    return rows[0][None] if len(rows) == 1 else np.stack(rows)
+
+_LAPACK: Any = None
+
+
+def _lapack() -> Any:
+    """``scipy.linalg.lapack``, imported on first use (importing scipy is slow; the torch path
+    never needs it)."""
+    global _LAPACK
+    if _LAPACK is None:
+        from scipy.linalg import lapack
+
+        _LAPACK = lapack
+    return _LAPACK
 
 
 def spd_inverse(S: Matrices) -> Matrices:
@@ -135,8 +135,7 @@ def cholesky(S: Matrices) -> tuple[Matrices, Any]:
     factorisation failed (torch: ``cholesky_ex``; numpy: LAPACK per row). Failed rows hold
     garbage."""
     if isinstance(S, np.ndarray):
-        from scipy.linalg import lapack
-
+        lapack = _lapack()
         L = np.empty(S.shape, dtype=S.dtype)
         failed = np.zeros(S.shape[0], dtype=bool)
         for row in range(S.shape[0]):

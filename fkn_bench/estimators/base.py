@@ -28,13 +28,14 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from fkn_bench.filters.base import check_dt
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 from fkn_bench.io import read_json, write_json_atomic
+from fkn_bench.linalg import dot
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = [
@@ -61,7 +62,7 @@ class EstimatorFileError(ValueError):
     """A saved estimator that cannot be read: missing, corrupt, or of an unknown format/version."""
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class Estimate:
     """One online estimate (an immutable value; its arrays are read-only).
 
@@ -82,9 +83,9 @@ class Estimate:
     initialised: bool
     updated: bool
 
-    def __post_init__(self) -> None:
-        for array in (self.mean, self.native_covariance):
-            array.flags.writeable = False
+    def __init__(self, time: float, mean: ArrayF, native_covariance: ArrayF, initialised: bool, updated: bool) -> None:
+        mean.flags.writeable = native_covariance.flags.writeable = False  # one dict update: per step
+        self.__dict__.update(time=time, mean=mean, native_covariance=native_covariance, initialised=initialised, updated=updated)
 
     @functools.cached_property
     def covariance(self) -> ArrayF:
@@ -182,7 +183,7 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
         pose = np.asarray(pose, dtype=np.float64)
     if pose.shape != (7,):
         raise ValueError(f"a pose observation must have shape (7,) (got {pose.shape})")
-    if not valid or np.isnan(pose).all():
+    if not valid or (math.isnan(pose[0]) and np.isnan(pose).all()):
         return None, time
     return pose, time
 
@@ -257,8 +258,7 @@ TIME_TOLERANCE = 1e-6
 """Online observation intervals within this many seconds of ``dt`` are taken as ``dt``."""
 
 
-@dataclass(frozen=True, eq=False)
-class OnlineState:
+class OnlineState(NamedTuple):
     """An online estimator's state after a step (an immutable value): the time (s), the filter's
     own state (e.g. a batch-1 :class:`~fkn_bench.filters.FilterState`) and whether the sequence
     has initialised."""
@@ -318,7 +318,7 @@ class RecursiveEstimator(Estimator):
         self._online = OnlineState(now, state, initialised)
         mean, covariance = self._online_report(state)
         mean = mean.copy()
-        mean[0:4] /= math.sqrt(mean[0:4] @ mean[0:4])
+        mean[0:4] /= math.sqrt(dot(mean[0:4], mean[0:4]))
         return Estimate(time=now, mean=mean, native_covariance=covariance, initialised=initialised, updated=updated)
 
     def _online_sanitize(self, z: ArrayF) -> ArrayF | None:

@@ -30,7 +30,7 @@ from __future__ import annotations
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import torch
 from torch import Tensor
@@ -42,8 +42,7 @@ from fkn_bench.linalg import namespace
 __all__ = ["KalmanFilter", "FilterResult", "FilterState", "check_dt"]
 
 
-@dataclass(frozen=True)
-class FilterState:
+class FilterState(NamedTuple):
     """A batch of Gaussian filter states at one time.
 
     Attributes:

@@ -25,7 +25,7 @@ import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
-from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, symmetrize
+from fkn_bench.linalg import add_matmul, constant, divide_spd, eye, namespace, symmetrize
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
 
@@ -52,7 +52,7 @@ def joseph_update(
     ``(x+, P+, S, K)``, ``P+`` symmetrised, and ``S`` exactly symmetric when ``P`` and ``R`` are.
     """
     xp = namespace(x)
-    batch, n = x.shape
+    numpy, (batch, n) = xp is np, x.shape
     if observed is not None:
         PHt = P[:, :, observed]
         S = P[:, observed, observed] + R  # a block of P plus R: exactly symmetric, as they are
@@ -62,19 +62,18 @@ def joseph_update(
         S = symmetrize(H @ PHt + R)
     # S is symmetric positive definite (R is): K = P H^T S^-1 (torch: one product with the inverse)
     K = divide_spd(PHt, S)  # (B, n, m)
-    x_post = add_matmul(x[:, :, None], K, nu[:, :, None])[:, :, 0]
+    if numpy:
+        x_post = x + (K[0] @ nu[0] if batch == 1 else (K @ nu[:, :, None])[:, :, 0])
+    else:
+        x_post = add_matmul(x[:, :, None], K, nu[:, :, None])[:, :, 0]
     TK = K
     block = N = None
     if normalize is not None:
         x_post, block, N = normalize(x_post)
-    if isinstance(x, np.ndarray):  # numpy (online): the same product as G blockdiag(P, R) G^T
-        m = K.shape[2]  # with G = [T A | T K], built in place on fresh arrays
-        G = broadcast(constant(x, ("gain-template", n, m), lambda: np.eye(n, n + m)), (batch, n, n + m))
-        if observed is not None:
-            G[:, :, observed] -= K
-        else:
-            G[:, :, :n] -= K @ H
-        G[:, :, n:] = K
+    if numpy:  # numpy (online): the same product as G blockdiag(P, R) G^T with G = [T A | T K]:
+        m = K.shape[2]  # [A | K] = [I 0] - K [H | -I] (for H = [I 0], products with 1 and 0: exact)
+        HI = np.concatenate((H, -np.eye(m)), axis=1) if observed is None else constant(x, ("H|-I", n, m, observed.start, observed.stop), lambda: _selection(n, m, observed))
+        G = constant(x, ("I|0", n, m), lambda: np.eye(n, n + m)) - K @ HI
         if block is not None and N is not None:
             G[:, block] = N @ G[:, block]
         D = np.zeros((batch, n + m, n + m))
@@ -87,6 +86,11 @@ def joseph_update(
     TA = T - (_pad_columns(TK, observed, n) if observed is not None else TK @ H)
     P_post = add_matmul(TA @ P @ TA.swapaxes(1, 2), TK @ R, TK.swapaxes(1, 2))
     return x_post, symmetrize(P_post), S, K
+
+
+def _selection(n: int, m: int, observed: slice) -> np.ndarray:
+    """``[H | -I] (m, n + m)`` for ``H`` selecting ``observed``."""
+    return np.concatenate((np.eye(n)[observed], -np.eye(m)), axis=1)
 
 
 def _pad_columns(M: Array, columns: slice, n: int) -> Array:
@@ -134,8 +138,12 @@ def linear_measurement_update(
 def ekf_predict(model: StateSpaceModel, state: FilterState, process_noise: Array, dt: float) -> FilterState:
     """``x- = f(x+)``, ``P- = F P+ F^T + Q`` (symmetrised); ``Q`` is ``(k, k)`` or ``(B, k, k)``."""
     mean, F = model.transition(state.mean, dt)
-    FP = F @ state.covariance
-    return FilterState(mean, symmetrize(add_matmul(process_noise, FP, F.swapaxes(1, 2))))
+    if isinstance(F, np.ndarray):  # numpy: Q added in place to the fresh product
+        P = F @ state.covariance @ F.swapaxes(1, 2)
+        P += process_noise
+    else:
+        P = add_matmul(process_noise, F @ state.covariance, F.swapaxes(1, 2))
+    return FilterState(mean, symmetrize(P))
 
 
 class ExtendedKalmanFilter(KalmanFilter):

@@ -21,6 +21,7 @@ and covariance, and the reset ``q <- exp(dtheta / 2) (x) q`` maps the covariance
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -30,7 +31,7 @@ from fkn_bench.filters.ekf import joseph_update
 from fkn_bench.filters.models import PoseTwistModel
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import add_matmul, broadcast, constant, eye, namespace, symmetrize
+from fkn_bench.linalg import add_matmul, broadcast, constant, dot, eye, namespace, symmetrize
 from fkn_bench.types import ERROR_NAMES
 
 __all__ = ["MultiplicativeEKF", "MEKF_MANUAL_LAYOUT", "left_jacobian"]
@@ -57,6 +58,20 @@ MEKF_MANUAL_LAYOUT = NoiseLayout(
 
 def left_jacobian(phi: Array) -> Array:
     """Left Jacobian of SO(3) ``(..., 3, 3)``: ``I + (1 - cos a)/a^2 [phi x] + (a - sin a)/a^3 [phi x]^2``."""
+    if isinstance(phi, np.ndarray) and phi.shape == (1, 3):  # one numpy row: on Python floats, with
+        x, y, z = phi[0].tolist()  # [phi x]^2 = phi phi^T - a^2 I written out
+        a2 = x * x + y * y + z * z
+        a = math.sqrt(a2)
+        small = a2 < 1e-8
+        c1 = 0.5 - a2 / 24.0 if small else (1.0 - math.cos(a)) / a2
+        c2 = 1.0 / 6.0 - a2 / 120.0 if small else (a - math.sin(a)) / (a2 * a)
+        xy, xz, yz = c2 * (x * y), c2 * (x * z), c2 * (y * z)
+        return np.array(
+            [[[1.0 - c2 * (y * y + z * z), -c1 * z + xy, c1 * y + xz],
+              [c1 * z + xy, 1.0 - c2 * (x * x + z * z), -c1 * x + yz],
+              [-c1 * y + xz, c1 * x + yz, 1.0 - c2 * (x * x + y * y)]]]
+        )  # fmt: skip
+    K = qx.skew(phi)
     xp = namespace(phi)
     a2 = (phi * phi).sum(-1, keepdims=True)[..., None]
     small = a2 < 1e-8
@@ -64,7 +79,6 @@ def left_jacobian(phi: Array) -> Array:
     a = xp.sqrt(safe)
     c1 = xp.where(small, 0.5 - a2 / 24.0, (1.0 - xp.cos(a)) / safe)
     c2 = xp.where(small, 1.0 / 6.0 - a2 / 120.0, (a - xp.sin(a)) / (safe * a))
-    K = qx.skew(phi)
     return eye(phi, 3) + c1 * K + c2 * (K @ K)
 
 
@@ -90,10 +104,14 @@ class MultiplicativeEKF(KalmanFilter):
         """The error transition ``Phi (B, 12, 12)`` over ``dt``; ``dq = exp(w dt / 2)``."""
         xp = namespace(x)
         batch = x.shape[0]
+        lower = constant(x, ("mekf-lower", float(dt)), lambda: _lower_rows(float(dt)))  # rows 3-11, and zeros
+        if xp is np:  # numpy (online): the two blocks written into a copy of the constant rows
+            Phi = broadcast(lower, (batch, 12, 12))
+            Phi[:, 0:3, 0:3], Phi[:, 0:3, 6:9] = qx.rotation_matrix(dq), dt * left_jacobian(dt * x[:, 7:10])
+            return Phi
         zeros = xp.zeros((batch, 3, 3), dtype=x.dtype)
         top = xp.concat((qx.rotation_matrix(dq), zeros, dt * left_jacobian(dt * x[:, 7:10]), zeros), axis=2)
-        lower = constant(x, ("mekf-lower", float(dt)), lambda: _lower_rows(float(dt)))
-        return xp.concat((top, broadcast(lower, (batch, 9, 12))), axis=1)
+        return xp.concat((top, broadcast(lower[3:], (batch, 9, 12))), axis=1)
 
     def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
         x, P = state.mean, state.covariance
@@ -120,13 +138,18 @@ class MultiplicativeEKF(KalmanFilter):
         # P_post comes back symmetrised (the reset's G P G^T is part of joseph_update's product)
         dx, P_post, S, _ = joseph_update(error, P, nu, measurement_noise, observed=slice(0, 6), normalize=reset)
         q_post = qx.multiply(qx.from_rotation_vector(dx[:, 0:3]), q)
-        q_post = q_post / xp.sqrt((q_post * q_post).sum(1, keepdims=True))
+        if xp is np and q_post.shape[0] == 1:  # one numpy row: a scalar norm
+            q_post /= math.sqrt(dot(q_post[0], q_post[0]))
+        else:
+            q_post = q_post / xp.sqrt((q_post * q_post).sum(1, keepdims=True))
         mean = xp.concat((q_post, x[:, 4:] + dx[:, 3:]), axis=1)
         return FilterState(mean, P_post), nu, S
 
 
 def _lower_rows(dt: float) -> np.ndarray:
-    """Rows 3-11 of the error transition: ``dr' = dr + dt dv``, ``dw' = dw``, ``dv' = dv``."""
-    lower = np.eye(12)[3:].copy()
-    lower[0:3, 9:12] = dt * np.eye(3)
+    """The error transition with zeros in rows 0-2 and its rows 3-11: ``dr' = dr + dt dv``,
+    ``dw' = dw``, ``dv' = dv``."""
+    lower = np.eye(12)
+    lower[0:3] = 0.0
+    lower[3:6, 9:12] = dt * np.eye(3)
     return lower

@@ -21,13 +21,14 @@ Kalman filter; the tests use it to check the EKF and UKF against a plain KF.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, eye, namespace, sum_last
+from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, dot, eye, namespace, sum_last
 from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES, STATE_UNITS
 
 __all__ = ["StateSpaceModel", "PoseTwistModel", "LinearGaussianModel", "PAPER_MANUAL_LAYOUT"]
@@ -150,6 +151,10 @@ def _pose_row_basis() -> np.ndarray:
 
 
 _POSE_BASIS = _pose_row_basis()
+_FLIP = np.array([-1.0] * 4 + [1.0] * 3)
+_EYE4 = np.eye(4)
+_USABLE = np.ones(1, dtype=bool)
+_USABLE.flags.writeable = False
 
 
 class PoseTwistModel(StateSpaceModel):
@@ -172,8 +177,12 @@ class PoseTwistModel(StateSpaceModel):
     def __init__(self, *, min_quaternion_norm: float = 1e-6) -> None:
         self.min_quaternion_norm = float(min_quaternion_norm)
 
-    def transition(self, x: Array, dt: float) -> tuple[Array, Array]:
-        """Mean and Jacobian with few batched operations (the filter's hot path).
+    def predict(self, x: Array, dt: float) -> Array:
+        return self.transition(x, dt, jacobian=False)[0]
+
+    def transition(self, x: Array, dt: float, *, jacobian: bool = True) -> tuple[Array, Array]:
+        """Mean and Jacobian with few batched operations (the filter's hot path); numpy skips
+        the Jacobian when ``jacobian`` is False (its second value is then None).
 
         ``E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]`` (the quaternion rows of ``F - A``, with
         ``A`` the identity plus ``r += dt v``) is linear in the state: ``E = x @ B`` for a
@@ -183,26 +192,38 @@ class PoseTwistModel(StateSpaceModel):
         a (B, 13, 13) product for the mean would cost a (B, 13, 13) outer product in the backward
         pass at every step.
         """
-        xp = namespace(x)
         batch = x.shape[0]
         dt = float(dt)
-        # [A | A^T | dt/2 B] in one cached constant: A the identity plus r += dt v
-        A, At, basis = _split(constant(x, ("pose", dt), lambda: _pose_constants(dt)))
-        E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
-        increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
-        if isinstance(x, np.ndarray):  # numpy (online): the same sums, in place on fresh arrays
-            mean, F = x @ At, broadcast(A, (batch, 13, 13))
-            mean[:, 0:4] += increment
+        if isinstance(x, np.ndarray):  # numpy (online): A x and E in one product, the sums in place
+            y = x @ constant(x, ("pose-AtB", dt), lambda: np.ascontiguousarray(_pose_constants(dt)[:, 13:78]))
+            mean, E = y[:, 0:13], y[:, 13:65].reshape(batch, 4, 13)  # E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
+            mean[:, 0:4] += (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0] if batch > 1 else E[0, :, 0:4] @ x[0, 0:4]
+            if not jacobian:
+                return mean, None
+            A = constant(x, ("pose-A", dt), lambda: np.ascontiguousarray(_pose_constants(dt)[None, :, 0:13]))
+            F = A.copy() if batch == 1 else broadcast(A[0], (batch, 13, 13))
             F[:, 0:4] += E
             return mean, F
+        xp = namespace(x)
+        # [A | A^T | dt/2 B] in one cached constant: A the identity plus r += dt v
+        constants = constant(x, ("pose", dt), lambda: _pose_constants(dt))
+        A, At, basis = constants[:, 0:13], constants[:, 13:26], constants[:, 26:78]
+        E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
+        increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
         mean = add_matmul(xp.concat((increment, _zeros(x, (batch, 9))), axis=1), x, At)
         F = xp.concat((A[0:4] + E, broadcast(A[4:13], (batch, 9, 13))), axis=1)
         return mean, F
 
     def sanitize(self, measurements: Array, mask: Array) -> tuple[Array, Array]:
+        if isinstance(measurements, np.ndarray) and measurements.shape == (1, 7):  # one online measurement:
+            w, x, y, z, *r = measurements[0].tolist()  # the same rule on Python floats
+            norm = math.sqrt(w * w + x * x + y * y + z * z)  # NaN or inf where q is not finite or overflows
+            if mask[0] and self.min_quaternion_norm <= norm < math.inf and all(map(math.isfinite, r)):
+                return np.array([[w / norm, x / norm, y / norm, z / norm, *r]], dtype=measurements.dtype), _USABLE
+            return np.zeros((1, 7), dtype=measurements.dtype), np.zeros(1, dtype=bool)
         xp = namespace(measurements)
         finite = all_last(xp.isfinite(measurements))
-        if isinstance(measurements, np.ndarray):  # numpy (no gradients): the same rule in place
+        if xp is np:  # numpy (no gradients): the same rule in place
             norm = np.sqrt(np.add.reduce(measurements[..., :4] * measurements[..., :4], axis=-1))
             usable = mask & finite & (norm >= self.min_quaternion_norm) & (norm < float("inf"))
             out = np.where(usable[..., None], measurements, 0.0)
@@ -218,11 +239,19 @@ class PoseTwistModel(StateSpaceModel):
     def align(self, z: Array, x_pred: Array) -> Array:
         # the measured quaternion is flipped where it points away from the prediction: where
         # z_q . q- has its sign bit set (copysign(1, z_q . q-) = -1)
-        dot = (z[:, None, 0:4] @ x_pred[:, 0:4, None])[:, :, 0]
-        flip = constant(z, "pose-flip", lambda: np.array([-1.0] * 4 + [1.0] * 3))
-        return namespace(z).where(namespace(z).signbit(dot), z * flip, z)
+        if isinstance(z, np.ndarray) and z.shape[0] == 1:  # one numpy row: a scalar test
+            return z * _FLIP if math.copysign(1.0, dot(z[0, 0:4], x_pred[0, 0:4])) < 0 else z
+        inner = (z[:, None, 0:4] @ x_pred[:, 0:4, None])[:, :, 0]
+        return namespace(z).where(namespace(z).signbit(inner), z * constant(z, "pose-flip", lambda: _FLIP), z)
 
     def normalize(self, x: Array) -> tuple[Array, slice | None, Array | None]:
+        if isinstance(x, np.ndarray) and x.shape[0] == 1:  # one numpy row: a scalar norm, in place
+            q = x[0, :4]
+            norm = math.sqrt(dot(q, q))
+            unit = q / norm
+            x = x.copy()
+            x[0, :4] = unit
+            return x, slice(0, 4), ((_EYE4 - unit[:, None] * unit) / norm)[None]
         xp = namespace(x)
         q = x[:, :4]
         norm = xp.sqrt(sum_last(q * q))
@@ -231,6 +260,10 @@ class PoseTwistModel(StateSpaceModel):
         return xp.concat((unit, x[:, 4:]), axis=1), slice(0, 4), N  # N = (I - u u^T) / |q|
 
     def null_direction(self, x: Array) -> Array | None:
+        if isinstance(x, np.ndarray) and x.shape[0] == 1:  # one numpy row: a scalar norm
+            out = np.zeros(x.shape, dtype=x.dtype)
+            out[0, :4] = x[0, :4] / math.sqrt(dot(x[0, :4], x[0, :4]))
+            return out
         xp = namespace(x)
         q = x[:, :4]
         return xp.concat((q / xp.sqrt(xp.sum(q * q, axis=1, keepdims=True)), xp.zeros_like(x[:, 4:])), axis=1)
@@ -248,10 +281,6 @@ def _pose_constants(dt: float) -> np.ndarray:
     A = np.eye(13)
     A[4:7, 10:13] = dt * np.eye(3)
     return np.concatenate((A, A.T, (0.5 * dt) * _POSE_BASIS), axis=1)
-
-
-def _split(constants: Array) -> tuple[Array, Array, Array]:
-    return constants[:, 0:13], constants[:, 13:26], constants[:, 26:78]
 
 
 class LinearGaussianModel(StateSpaceModel):

@@ -41,9 +41,15 @@ def _diagonal(P: Array) -> Array:
     return namespace(P).diagonal(P, axis1=1, axis2=2) if isinstance(P, np.ndarray) else P.diagonal(dim1=1, dim2=2)
 
 
+_EPS: dict = {}
+
+
 def _eps(P: Array) -> float:
     """Machine epsilon of ``P``'s dtype."""
-    return float(np.finfo(str(P.dtype).removeprefix("torch.")).eps)
+    eps = _EPS.get(P.dtype)
+    if eps is None:
+        eps = _EPS[P.dtype] = float(np.finfo(str(P.dtype).removeprefix("torch.")).eps)
+    return eps
 
 
 def sigma_point_weights(n: int, alpha: float, beta: float, kappa: float) -> tuple[float, np.ndarray, np.ndarray]:
@@ -94,7 +100,7 @@ class UnscentedKalmanFilter(KalmanFilter):
         batch, n = x.shape
         direction = self.model.null_direction(x)
         if direction is not None:
-            eps = max(1e-10, 100.0 * _eps(P)) * xp.amax(_diagonal(P), axis=1)
+            eps = max(1e-10, 100.0 * _eps(P)) * (np.maximum.reduce(_diagonal(P), axis=1) if xp is np else xp.amax(_diagonal(P), axis=1))
             P = P + eps[:, None, None] * (direction[:, :, None] * direction[:, None, :])  # e e^T: exactly symmetric
         L = _safe_cholesky(P) * self._scale
         spread = L.swapaxes(1, 2)  # rows are the columns of L

@@ -8,11 +8,12 @@ finite.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
-from fkn_bench.linalg import constant, namespace, stack
+from fkn_bench.linalg import constant, dot, namespace
 
 __all__ = [
     "multiply",
@@ -27,11 +28,6 @@ __all__ = [
 ]
 
 Array = Any
-
-
-def _rows(xp: Any, rows: tuple[tuple[Array, ...], ...]) -> Array:
-    """A ``(..., r, c)`` matrix from ``r`` rows of ``c`` entries ``(...)``."""
-    return stack([stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def _linear(make: Any, inputs: int) -> np.ndarray:
@@ -70,20 +66,33 @@ _THETA, _OMEGA, _SKEW = _linear(_theta, 4), _linear(_omega, 3), _linear(_skew, 3
 _HAMILTON = _linear(lambda e: _hamilton(e.reshape(4, 4)), 16)
 
 
+def _rotation(qq: np.ndarray) -> tuple[float, ...]:
+    """``R - I`` from the outer product ``qq[i, j] = q_i q_j`` of a unit quaternion."""
+    (ww, wx, wy, wz), (_, xx, xy, xz), (_, _, yy, yz), (_, _, _, zz) = qq
+    return (
+        *(-2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)),
+        *(2 * (xy + wz), -2 * (xx + zz), 2 * (yz - wx)),
+        *(2 * (xz - wy), 2 * (yz + wx), -2 * (xx + yy)),
+    )
+
+
+_ROTATION = _linear(lambda e: _rotation(e.reshape(4, 4)), 16)
+
+
 def _apply(v: Array, key: str, C: np.ndarray, shape: tuple[int, ...]) -> Array:
     out = v @ constant(v, ("quaternion", key), lambda: C)
-    return namespace(v).reshape(out, tuple(out.shape[:-1]) + shape)
+    return out.reshape(tuple(out.shape[:-1]) + shape)
 
 
 def multiply(p: Array, q: Array) -> Array:
     """Hamilton product ``p (x) q`` of ``(..., 4)`` arrays."""
     pq = p[..., :, None] * q[..., None, :]
-    return namespace(pq).reshape(pq, tuple(pq.shape[:-2]) + (16,)) @ constant(pq, ("quaternion", "multiply"), lambda: _HAMILTON)
+    return pq.reshape(tuple(pq.shape[:-2]) + (16,)) @ constant(pq, ("quaternion", "multiply"), lambda: _HAMILTON)
 
 
 def conjugate(q: Array) -> Array:
-    """Conjugate ``q*``."""
-    return namespace(q).concat((q[..., :1], -q[..., 1:]), axis=-1)
+    """Conjugate ``q*`` (a product with ``[1, -1, -1, -1]``: exact)."""
+    return q * constant(q, ("quaternion", "conjugate"), lambda: np.array([1.0, -1.0, -1.0, -1.0]))
 
 
 def theta_matrix(q: Array) -> Array:
@@ -103,6 +112,14 @@ def skew(v: Array) -> Array:
 
 def from_rotation_vector(rotvec: Array) -> Array:
     """``exp(rotvec / 2)`` as a unit quaternion; exact and differentiable at zero."""
+    if isinstance(rotvec, np.ndarray) and rotvec.shape == (1, 3):  # one numpy row: scalar branches
+        angle2 = dot(rotvec[0], rotvec[0])
+        angle = math.sqrt(angle2)
+        small = angle2 < 1e-12
+        out = np.empty((1, 4))
+        out[0, 0] = 1.0 - angle2 / 8.0 if small else math.cos(0.5 * angle)
+        out[0, 1:] = (0.5 - angle2 / 48.0 if small else math.sin(0.5 * angle) / angle) * rotvec[0]
+        return out
     xp = namespace(rotvec)
     angle2 = (rotvec * rotvec).sum(-1, keepdims=True)
     small = angle2 < 1e-12
@@ -117,6 +134,13 @@ def from_rotation_vector(rotvec: Array) -> Array:
 
 def to_rotation_vector(q: Array) -> Array:
     """Rotation vector of the shortest rotation represented by ``q`` or ``-q`` (rad)."""
+    if isinstance(q, np.ndarray) and q.shape == (1, 4):  # one numpy row: scalar branches
+        w, vec = float(q[0, 0]), q[0, 1:]
+        if w < 0:
+            w, vec = -w, -vec
+        n2 = dot(vec, vec)
+        n = math.sqrt(n2)
+        return ((2.0 / w if n2 < 1e-18 else 2.0 * math.atan2(n, w) / n) * vec)[None]
     xp = namespace(q)
     q = xp.where(q[..., :1] < 0, -q, q)
     w = q[..., :1]
@@ -129,20 +153,25 @@ def to_rotation_vector(q: Array) -> Array:
 
 
 def rotation_matrix(q: Array) -> Array:
-    """Rotation matrix ``(..., 3, 3)`` of unit quaternion ``q``."""
-    w, x, y, z = (q[..., i] for i in range(4))
-    return _rows(
-        namespace(q),
-        (
-            (1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)),
-            (2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)),
-            (2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)),
-        ),
-    )
+    """Rotation matrix ``(..., 3, 3)`` of unit quaternion ``q``: ``I + C(q q^T)`` with
+    ``1 - 2 (y^2 + z^2)``, ``2 (x y - w z)``, ... (the products with +-2 are exact: the same numbers as
+    the formula written entry by entry)."""
+    if isinstance(q, np.ndarray) and q.shape == (1, 4):  # one numpy row: the formula on Python floats
+        w, x, y, z = q[0].tolist()
+        return np.array(
+            [[[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+              [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+              [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]]
+        )  # fmt: skip
+    qq = q[..., :, None] * q[..., None, :]
+    flat = qq.reshape(tuple(qq.shape[:-2]) + (16,)) @ constant(qq, ("quaternion", "rotation"), lambda: _ROTATION)
+    return flat.reshape(tuple(flat.shape[:-1]) + (3, 3)) + constant(qq, ("eye", 3), lambda: np.eye(3))
 
 
 def align_sign(q: Array, reference: Array) -> Array:
     """``q`` or ``-q``, whichever has a non-negative dot product with ``reference``."""
+    if isinstance(q, np.ndarray) and q.shape == (1, 4):  # one numpy row: a scalar test
+        return -q if dot(q[0], reference[0]) < 0 else q
     xp = namespace(q)
-    dot = (q * reference).sum(-1, keepdims=True)
-    return xp.where(dot < 0, -q, q)
+    inner = (q * reference).sum(-1, keepdims=True)
+    return xp.where(inner < 0, -q, q)
