@@ -151,7 +151,7 @@ class UpdateContext:
     """What a :class:`NoiseRule` sees at a measurement update of ``b`` rows.
 
     Attributes:
-        model: the numpy model.
+        model: the state-space model (its functions run on these numpy arrays).
         x_pred: ``(b, n)`` predicted means.
         P_pred: ``(b, n, n)`` predicted covariances (with the rule's current ``Q``).
         z: ``(b, m)`` measurements, sanitised and aligned with the prediction.
@@ -297,7 +297,7 @@ class AdaptiveKalmanFilter:
 
     Args:
         rule: the method's :class:`NoiseRule`.
-        model: a :class:`~fkn_bench.filters.models.StateSpaceModel` (or its numpy twin; default
+        model: a :class:`~fkn_bench.filters.models.StateSpaceModel` (run on numpy arrays; default
             the paper's pose-and-twist model).
         q_std, r_std, p0_std: starting standard deviations of ``Q``, ``R`` and ``P0`` (default:
             the model layout's, for the pose model the paper's manual tuning).

@@ -164,10 +164,12 @@ class KalmanEstimator(RecursiveEstimator):
         config.update(name=self.name, description=self.description)
         return config
 
+    CONFIG_KEYS = frozenset({"variant", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "name", "description"})
+    """Keys of :meth:`to_config` (subclasses add theirs)."""
+
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> KalmanEstimator:
-        known = {"variant", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "name", "description"}
-        unknown = sorted(set(config) - known)
+        unknown = sorted(set(config) - cls.CONFIG_KEYS)
         if unknown:
-            raise ValueError(f"unknown KalmanEstimator config keys {unknown}; valid: {sorted(known)}")
+            raise ValueError(f"unknown {cls.__name__} config keys {unknown}; valid: {sorted(cls.CONFIG_KEYS)}")
         return cls(**dict(config))

@@ -93,6 +93,8 @@ def register_estimator(
         raise ValueError(f"estimator name must be a non-empty string without spaces (got {name!r})")
     if not callable(factory):
         raise TypeError(f"factory for estimator {name!r} must be callable")
+    if trainable is not None and not (callable(getattr(trainable, "config", None)) and callable(getattr(trainable, "build", None))):
+        raise TypeError(f"trainable of estimator {name!r} must be a fkn_bench.training.Trainable (callable config and build)")
     if name in _REGISTRY and not overwrite:
         raise ValueError(f"estimator {name!r} is already registered (pass overwrite=True to replace it)")
     spec = EstimatorSpec(name, factory, description, trainable)

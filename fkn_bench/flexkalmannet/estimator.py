@@ -15,7 +15,6 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import torch
 
 from fkn_bench.estimators.base import Estimates, Estimator, RecursiveEstimator, check_batch_inputs

@@ -140,7 +140,7 @@ def to_rotation_vector(q: Array) -> Array:
             w, vec = -w, -vec
         n2 = dot(vec, vec)
         n = math.sqrt(n2)
-        return ((2.0 / w if n2 < 1e-18 else 2.0 * math.atan2(n, w) / n) * vec)[None]
+        return ((2.0 / (w or 1.0) if n2 < 1e-18 else 2.0 * math.atan2(n, w) / n) * vec)[None]  # w = 0: a zero q
     xp = namespace(q)
     q = xp.where(q[..., :1] < 0, -q, q)
     w = q[..., :1]
@@ -148,7 +148,8 @@ def to_rotation_vector(q: Array) -> Array:
     n2 = (vec * vec).sum(-1, keepdims=True)
     small = n2 < 1e-18
     n = xp.sqrt(xp.where(small, 1.0, n2))
-    scale = xp.where(small, 2.0 / w, 2.0 * xp.atan2(n, w) / n)
+    # w = 0 only for a zero quaternion (a masked row): no inf, whose gradient through where is NaN
+    scale = xp.where(small, 2.0 / xp.where(w == 0, 1.0, w), 2.0 * xp.atan2(n, w) / n)
     return scale * vec
 
 

@@ -161,13 +161,7 @@ class TrainedKalmanEstimator(KalmanEstimator):
     def to_config(self) -> dict[str, Any]:
         return {**super().to_config(), "metadata": self.metadata}
 
-    @classmethod
-    def from_config(cls, config: Mapping[str, Any]) -> TrainedKalmanEstimator:
-        config = dict(config)
-        metadata = config.pop("metadata", None)
-        estimator = super().from_config(config)
-        estimator.metadata = dict(metadata or {})
-        return estimator  # type: ignore[return-value]
+    CONFIG_KEYS = KalmanEstimator.CONFIG_KEYS | {"metadata"}  # from_config passes metadata= to __init__
 
 
 def artifact_factory(name: str, cls: type[TrainedKalmanEstimator] = TrainedKalmanEstimator) -> Callable[..., Any]:

@@ -30,6 +30,11 @@ __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_FORMAT_VERSION", "CheckpointError", 
 CHECKPOINT_FORMAT = "fkn-bench-checkpoint"
 CHECKPOINT_FORMAT_VERSION = 1
 
+LEGACY_FORMATS = {"fkn-bench-flexkalmannet": "flexkalmannet"}
+"""Formats (version 1) written before the one training pipeline, by estimator: such a checkpoint
+is read as a checkpoint of that estimator (the same keys but ``estimator``), so that a network
+trained with an older fkn-bench still deploys (``flexkalmannet checkpoint=PATH``)."""
+
 
 class CheckpointError(ValueError):
     """A checkpoint that cannot be used (missing, corrupt, wrong format/version, mismatched)."""
@@ -52,6 +57,8 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         document = torch.load(path, map_location="cpu", weights_only=True)
     except (RuntimeError, EOFError, OSError, pickle.UnpicklingError, zipfile.BadZipFile, ValueError) as exc:
         raise CheckpointError(f"{path} is not a readable checkpoint (truncated or corrupt?): {exc}") from None
+    if isinstance(document, dict) and document.get("format") in LEGACY_FORMATS and "estimator" not in document:
+        document = {**document, "format": CHECKPOINT_FORMAT, "estimator": LEGACY_FORMATS[document["format"]]}
     return checked_document(document, path, CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION, "an fkn-bench checkpoint",
                             ("estimator", "config", "scenario", "state_dict"), CheckpointError)
 

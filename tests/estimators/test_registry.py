@@ -105,6 +105,13 @@ def test_register_a_third_party_estimator() -> None:
     assert make_estimator("constant").level == -1.0  # type: ignore[attr-defined]
 
 
+def test_register_refuses_a_trainable_that_is_not_a_trainable() -> None:
+    """A function passed as ``trainable=`` fails at registration, not at ``fit`` time."""
+    with pytest.raises(TypeError, match="must be a fkn_bench.training.Trainable"):
+        register_estimator("not-trainable", Constant, trainable=lambda options: options)
+    assert "not-trainable" not in estimator_names()
+
+
 def test_register_refuses_bad_names_and_factories() -> None:
     for name in ("", "my filter", "tab\tname", None):
         with pytest.raises(ValueError, match="non-empty string without spaces"):

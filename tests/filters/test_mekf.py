@@ -184,3 +184,20 @@ def test_mekf_is_sign_invariant_and_tracks_ds1() -> None:
     error = angle_between(reference.means[0, 100:, :4].numpy(), episodes.truth[0, 100:, :4])
     assert np.sqrt(np.mean(error**2)) < 0.12
     assert np.linalg.eigvalsh(reference.covariances[0].numpy()).min() > 0
+
+
+def test_gradients_stay_finite_when_some_rows_skip_an_update() -> None:
+    """A row without a usable measurement at a step where others update is filled with zeros
+    before the masked update; its zero error quaternion must not put inf into the rotation vector,
+    whose gradient through the mask would be NaN."""
+    episodes = generate_episodes("ds1", [2, 3], split="train").window(0, 60)
+    variant = make_filter("mekf")
+    z = torch.from_numpy(episodes.measurements).clone()
+    mask = torch.from_numpy(episodes.valid).clone()
+    step = int(np.flatnonzero(mask[0].numpy() & mask[1].numpy())[3])
+    z[1, step] = float("nan")  # row 1 skips this update, row 0 takes it
+    noise = variant.layout.default_noise()
+    R = noise.measurement.clone().requires_grad_(True)
+    result = variant.run(type(noise)(noise.process, R, noise.initial), z, mask, dt=DT)
+    result.means.sum().backward()
+    assert R.grad is not None and torch.isfinite(R.grad).all()
