@@ -165,7 +165,7 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
     """Measurement ``(7,)`` (None when missing) and time (None when absent) of an observation.
 
     Accepts a Gymnasium observation dict (``pose``, ``valid``, ``time``) or a ``(7,)`` array
-    (all NaN when missing). Raises ``ValueError`` for anything else.
+    (all NaN when missing). Raises ``ValueError`` for anything else, a non-finite time included.
     """
     if isinstance(observation, dict):
         try:
@@ -175,6 +175,8 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
         valid = observation.get("valid", True)
         time = observation.get("time")
         time = None if time is None else float(time)
+        if time is not None and not math.isfinite(time):
+            raise ValueError(f"observation time must be a finite number of seconds (got {time})")
     elif isinstance(observation, Mapping):
         return parse_observation(dict(observation))
     else:
@@ -296,11 +298,9 @@ class RecursiveEstimator(Estimator):
             raise RuntimeError("call reset(dt=...) before step()")
         pose, time = parse_observation(observation)
         z = None if pose is None else self._online_sanitize(pose[None])
-        self._online_observe(z)
         previous = self._online
         if previous is None:
             now = 0.0 if time is None else time
-            state, initialised = self._online_prior(), False
         else:
             now = previous.time + self._dt if time is None else time
             interval = now - previous.time
@@ -308,6 +308,10 @@ class RecursiveEstimator(Estimator):
                 raise ValueError(f"observation time {now} does not increase (previous {previous.time})")
             if abs(interval - self._dt) <= TIME_TOLERANCE:
                 interval = self._dt
+        self._online_observe(z)  # after the checks: a refused step leaves the estimator as it was
+        if previous is None:
+            state, initialised = self._online_prior(), False
+        else:
             state, initialised = self._online_predict(previous.state, interval), previous.initialised
         updated = False
         if z is not None:

@@ -216,3 +216,23 @@ def test_class_load_refuses_another_class(tmp_path: Path) -> None:
     del document["class"]
     assert Hold.load(_write(tmp_path / "plain.json", document)).gain == 1.0  # type: ignore[attr-defined]
     assert read_estimator_document(tmp_path / "plain.json")["name"] == "hold"
+
+
+@pytest.mark.parametrize("name", ["manual-ekf", "sage-husa"])
+@pytest.mark.parametrize("bad_time", [0.1, float("nan"), float("inf")])
+def test_a_refused_step_leaves_the_estimator_as_it_was(name: str, bad_time: float) -> None:
+    """A time that does not increase, or is not finite, is refused (ValueError) and changes
+    nothing: the next valid step gives what it gives without the refused one."""
+    from fkn_bench.estimators import make_estimator
+
+    pose = np.array([1.0, 0.0, 0.0, 0.0, 0.1, 0.2, 0.3])
+    clean, refused = make_estimator(name), make_estimator(name)
+    for estimator in (clean, refused):
+        estimator.reset(dt=0.1)
+        estimator.step({"pose": pose, "time": 0.1})
+        estimator.step({"pose": pose, "time": 0.2})
+    with pytest.raises(ValueError, match="does not increase|finite"):
+        refused.step({"pose": pose, "time": bad_time})
+    expected, got = clean.step({"pose": pose, "time": 0.3}), refused.step({"pose": pose, "time": 0.3})
+    np.testing.assert_array_equal(got.mean, expected.mean)  # the same operations on the same inputs
+    np.testing.assert_array_equal(got.native_covariance, expected.native_covariance)
