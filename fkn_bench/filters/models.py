@@ -223,12 +223,6 @@ class PoseTwistModel(StateSpaceModel):
             return np.zeros((1, 7), dtype=measurements.dtype), np.zeros(1, dtype=bool)
         xp = namespace(measurements)
         finite = all_last(xp.isfinite(measurements))
-        if xp is np:  # numpy (no gradients): the same rule in place
-            norm = np.sqrt(np.add.reduce(measurements[..., :4] * measurements[..., :4], axis=-1))
-            usable = mask & finite & (norm >= self.min_quaternion_norm) & (norm < float("inf"))
-            out = np.where(usable[..., None], measurements, 0.0)
-            out[..., :4] /= np.where(usable, norm, 1.0)[..., None]
-            return out, usable
         z = xp.where(finite[..., None], measurements, 0.0)
         norm = xp.sqrt(sum_last(z[..., :4] * z[..., :4]))
         # a norm that overflows (components ~1e155 and up) leaves no usable direction either
