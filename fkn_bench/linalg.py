@@ -26,7 +26,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "divide_spd", "all_last", "dot", "sum_last", "spd_inverse", "cholesky", "eye", "constant"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "divide_spd", "all_last", "dot", "sum_last", "spd_inverse", "solve_spd", "cholesky", "eye", "constant"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
 
@@ -101,14 +101,21 @@ def divide_spd(M: Matrices, S: Matrices) -> Matrices:
 
         return M @ torch.linalg.inv_ex(S)[0]
     if S.shape[0] == 1:  # one row (online): LAPACK directly
-        _, solution, info = (_LAPACK or _lapack()).dposv(S[0], M[0].T, lower=1)
-        if info != 0:
-            raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
-        return solution.T[None]
+        return solve_spd(S[0], M[0].T).T[None]
     if S.shape[0] > 64:
         np.linalg.cholesky(S)  # raises LinAlgError where S is not positive definite
         return M @ np.linalg.inv(S)
     return np.concatenate([divide_spd(M[row : row + 1], S[row : row + 1]) for row in range(S.shape[0])])
+
+
+def solve_spd(S: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``S^-1 B`` for one symmetric positive definite numpy matrix ``S (m, m)`` and ``B (m, k)``
+    (LAPACK's Cholesky solver ``dposv``); ``numpy.linalg.LinAlgError`` when ``S`` is not
+    positive definite."""
+    _, solution, info = (_LAPACK or _lapack()).dposv(S, B, lower=1)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"innovation covariance is not positive definite (dposv info {info})")
+    return solution
 
 
 _LAPACK: Any = None

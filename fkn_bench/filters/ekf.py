@@ -25,7 +25,7 @@ import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
-from fkn_bench.linalg import add_matmul, constant, divide_spd, eye, namespace, symmetrize
+from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, solve_spd, symmetrize
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
 
@@ -53,6 +53,8 @@ def joseph_update(
     """
     xp = namespace(x)
     numpy, (batch, n) = xp is np, x.shape
+    if numpy and batch == 1 and observed is not None:
+        return _joseph_one(x, P, nu, R, observed, normalize)
     if observed is not None:
         PHt = P[:, :, observed]
         S = P[:, observed, observed] + R  # a block of P plus R: exactly symmetric, as they are
@@ -70,10 +72,15 @@ def joseph_update(
     block = N = None
     if normalize is not None:
         x_post, block, N = normalize(x_post)
-    if numpy:  # numpy (online): the same product as G blockdiag(P, R) G^T with G = [T A | T K]:
-        m = K.shape[2]  # [A | K] = [I 0] - K [H | -I] (for H = [I 0], products with 1 and 0: exact)
-        HI = np.concatenate((H, -np.eye(m)), axis=1) if observed is None else constant(x, ("H|-I", n, m, observed.start, observed.stop), lambda: _selection(n, m, observed))
-        G = constant(x, ("I|0", n, m), lambda: np.eye(n, n + m)) - K @ HI
+    if numpy:  # numpy (online): the same product as G blockdiag(P, R) G^T with G = [T A | T K]
+        m = K.shape[2]  # [A | K] = [I 0] - K [H | -I]; for H = [I 0] by slices (exact)
+        G = constant(x, ("I|0", n, m), lambda: np.eye(n, n + m))
+        if observed is None:
+            G = G - K @ np.concatenate((H, -np.eye(m)), axis=1)
+        else:
+            G = broadcast(G, (batch, n, n + m))
+            G[:, :, observed] -= K
+            G[:, :, n:] = K
         if block is not None and N is not None:
             G[:, block] = N @ G[:, block]
         D = np.zeros((batch, n + m, n + m))
@@ -88,9 +95,24 @@ def joseph_update(
     return x_post, symmetrize(P_post), S, K
 
 
-def _selection(n: int, m: int, observed: slice) -> np.ndarray:
-    """``[H | -I] (m, n + m)`` for ``H`` selecting ``observed``."""
-    return np.concatenate((np.eye(n)[observed], -np.eye(m)), axis=1)
+def _joseph_one(x: np.ndarray, P: np.ndarray, nu: np.ndarray, R: np.ndarray, observed: slice, normalize: Any) -> tuple:
+    """:func:`joseph_update` of one numpy row (the online step) for ``H = [I 0]``: the same
+    operations on 2-D arrays, with ``K^T = S^-1 H P`` from LAPACK's Cholesky solver."""
+    n, m = x.shape[1], nu.shape[1]
+    P0, R0 = P[0], (R if R.ndim == 2 else R[0])
+    S = P0[observed, observed] + R0  # a block of P plus R: exactly symmetric, as they are
+    Kt = solve_spd(S, P0[observed])  # (m, n); H P = (P H^T)^T for symmetric P
+    x_post, block, N = x + nu @ Kt, None, None
+    if normalize is not None:
+        x_post, block, N = normalize(x_post)
+    G = constant(x, ("I|0", n, m), lambda: np.eye(n, n + m)).copy()  # [I - K H | K]
+    G[:, observed] -= Kt.T
+    G[:, n:] = Kt.T
+    if block is not None and N is not None:
+        G[block] = N[0] @ G[block]
+    D = np.zeros((n + m, n + m))
+    D[:n, :n], D[n:, n:] = P0, R0
+    return x_post, symmetrize(G @ D @ G.T)[None], S[None], Kt.T[None]
 
 
 def _pad_columns(M: Array, columns: slice, n: int) -> Array:
