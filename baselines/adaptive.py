@@ -39,7 +39,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
@@ -81,18 +81,6 @@ def batched(M: ArrayF, batch: int) -> ArrayF:
     return np.broadcast_to(M, (batch,) + M.shape).copy()
 
 
-_TEMPLATES: dict[int, ArrayF] = {}
-
-
-def _eye(m: int) -> ArrayF:
-    """The cached read-only identity ``I_m``."""
-    value = _TEMPLATES.get(m)
-    if value is None:
-        value = _TEMPLATES[m] = np.eye(m)
-        value.flags.writeable = False
-    return value
-
-
 def clamp_eigenvalues(M: ArrayF, floor: ArrayF) -> ArrayF:
     """Symmetric ``M (B, k, k)`` with its eigenvalues raised to at least ``floor (B,)``: the
     nearest matrix (in the Frobenius norm) whose eigenvalues are all ``>= floor``. Rows whose
@@ -105,8 +93,7 @@ def clamp_eigenvalues(M: ArrayF, floor: ArrayF) -> ArrayF:
     return np.where(low.any(1)[:, None, None], symmetrize(clamped), M)
 
 
-@dataclass(frozen=True, eq=False)
-class KalmanUpdate:
+class KalmanUpdate(NamedTuple):
     """Result of one measurement update of a batch of ``b`` rows.
 
     Attributes:
@@ -129,8 +116,7 @@ def kalman_update(model: StateSpaceModel, x: ArrayF, P: ArrayF, nu: ArrayF, R: A
     model's normalisation in one product; Bucy & Joseph 1968; Simon, Optimal State Estimation,
     2006, eq. 5.19)."""
     H = None if model.observed is not None else model.H
-    x_post, P_post, S, K = joseph_update(x, P, nu, R, H=H, observed=model.observed, normalize=model.normalize)
-    return KalmanUpdate(x_post, P_post, S, K)
+    return KalmanUpdate(*joseph_update(x, P, nu, R, H=H, observed=model.observed, normalize=model.normalize))
 
 
 def projected_covariance(model: StateSpaceModel, P: ArrayF) -> ArrayF:
@@ -335,7 +321,7 @@ class AdaptiveKalmanFilter:
     def step(self, state: AdaptiveState, z: ArrayF, usable: ArrayB, dt: float, *, predict: bool = True) -> tuple[AdaptiveState, StepOutput]:
         """One step of every row: predict over ``dt`` (unless ``predict`` is False, as at
         ``t = 0``), then initialise or update the rows whose measurement ``z (B, m)`` is usable
-        (already sanitised: see :meth:`sanitize`)."""
+        (already sanitised by the model's ``sanitize``)."""
         model, rule = self.model, self.rule
         x, P, since, noise = state.x, state.P, state.since, state.noise
         if predict:
@@ -361,8 +347,7 @@ class AdaptiveKalmanFilter:
                 x, P, noise, nu, S = result.x, result.P, noise_rows, nu_rows, result.S
                 since = np.zeros(batch)
             else:
-                nu, S = np.zeros((batch, m)), np.empty((batch, m, m))
-                S[:] = _eye(m)
+                nu, S = np.zeros((batch, m)), batched(np.eye(m), batch)
                 x, P = x.copy(), P.copy()
                 x[rows], P[rows], nu[rows], S[rows] = result.x, result.P, nu_rows, result.S
                 noise = _put(noise, rows, noise_rows)
@@ -375,10 +360,6 @@ class AdaptiveKalmanFilter:
         new = AdaptiveState(x, P, state.initialised | usable, since, noise)
         return new, StepOutput(prior, nu, S, update_rows)
 
-    def sanitize(self, z: ArrayF, mask: ArrayB) -> tuple[ArrayF, ArrayB]:
-        """Measurements cleaned by the model's rules, and which are usable."""
-        return self.model.sanitize(np.asarray(z, dtype=float), np.asarray(mask, dtype=bool))
-
     def run(self, measurements: ArrayF, mask: ArrayB, *, dt: float) -> AdaptiveResult:
         """Filter a batch of sequences ``measurements (B, T, m)`` with validity ``mask (B, T)``."""
         measurements = np.asarray(measurements, dtype=float)
@@ -389,7 +370,7 @@ class AdaptiveKalmanFilter:
         if mask.shape != measurements.shape[:2]:
             raise ValueError(f"mask must have shape {measurements.shape[:2]} (got {mask.shape})")
         batch, steps, _ = measurements.shape
-        z_all, usable = self.sanitize(measurements, mask)
+        z_all, usable = self.model.sanitize(measurements, mask)
         # time-major buffers: one contiguous block per step
         means = np.empty((steps, batch, n))
         covariances = np.empty((steps, batch, n, n))
@@ -406,7 +387,7 @@ class AdaptiveKalmanFilter:
             means[t], covariances[t] = state.x, state.P
             prior_means[t] = out.prior_mean
             if out.innovation is None or out.innovation_covariance is None:
-                innovations[t], innovation_covs[t] = 0.0, _eye(m)
+                innovations[t], innovation_covs[t] = 0.0, np.eye(m)
             else:
                 innovations[t], innovation_covs[t] = out.innovation, out.innovation_covariance
             updated[t], initialised[t] = out.updated, state.initialised

@@ -15,8 +15,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from fkn_bench.filters.parameters import LEARNABLE_ENTRIES
 from fkn_bench.training import TrainConfig
 from fkn_bench.training.pipeline import options_with_file
@@ -130,10 +128,6 @@ class FlexKalmanNetConfig(TrainConfig):
         if self.samples_per_window is not None and self.samples_per_window < 1:
             raise ValueError(f"samples_per_window must be >= 1 or None (got {self.samples_per_window})")
         super().__post_init__()  # the variant, data protocol and optimisation fields
-
-    @property
-    def torch_network_dtype(self) -> torch.dtype:
-        return torch.float32 if self.network_dtype == "float32" else torch.float64
 
     def to_dict(self) -> dict[str, Any]:
         """The options: the variant, the model fields, then the data and optimisation fields."""
