@@ -1,9 +1,5 @@
-"""Registers the baselines with the estimator registry (imported lazily by the registry).
-
-Online adaptive filters (no training): ``sage-husa``, ``akhlaghi``, ``vbakf``. Offline-tuned
-constant filters (trainable with ``fkn-bench train``; run from the committed artefacts in
-``baselines/params/``): ``nll-tuned-ekf``, ``direct-tuned-ekf``.
-"""
+"""Registers the five baselines of :mod:`fkn_bench.baselines` with the estimator registry
+(imported lazily by the registry)."""
 
 from __future__ import annotations
 

@@ -88,14 +88,8 @@ class FlexKalmanNetConfig(TrainConfig):
     Model: ``variant`` (ekf, ukf, mekf), ``learn`` (entries of the parameter set, default the
     paper's 20 standard deviations), ``positivity``, ``hidden``, ``layers``, ``activation``,
     ``dropout``, ``network_dtype``, ``mode`` (constant or time_varying), ``samples_per_window``,
-    ``history``.
-    Data: ``window`` (consecutive samples per training window; the paper's batch of 512),
-    ``stride``, ``train_measurement_every``, ``episodes`` (recordings in the data set; the paper: 1).
-    Optimisation: ``objective``, ``epochs``, ``patience``, ``lr``, ``weight_decay``,
-    ``windows_per_batch``, ``loss_cut``, ``seed``, ``scheduler_factor``,
-    ``scheduler_patience``, ``max_grad_norm``, ``threads``.
-    The data and optimisation fields are :class:`~fkn_bench.training.TrainConfig`'s (the
-    benchmark's protocol, shared with the tuned baselines) with FlexKalmanNet's ``lr`` and
+    ``history``. The data and optimisation fields are :class:`~fkn_bench.training.TrainConfig`'s
+    (the benchmark's protocol, shared with the tuned baselines) with FlexKalmanNet's ``lr`` and
     ``scheduler_patience``; it trains with Adam (``optimizer`` and the L-BFGS settings are not
     among its options: :meth:`to_dict` lists the options).
     """
