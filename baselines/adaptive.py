@@ -11,21 +11,11 @@ uses and how the noise estimates change after it:
 * :class:`~fkn_bench.baselines.vbakf.VBAKFRule` (Huang, Zhang, Wu & Chambers 2018, IEEE TAC
   63(2)).
 
-Conventions (those of :meth:`fkn_bench.filters.KalmanFilter.run`):
-
-* step ``t`` predicts from ``t - 1`` (not at ``t = 0``), ``x- = f(x+)``, ``P- = F P+ F^T + Q``
-  (symmetrised), and then updates with measurement ``t`` where it is usable; a step without one is
-  predict-only;
-* each sequence initialises at its first usable measurement (state from the model's
-  ``initial_state``, covariance ``P0``) and that measurement is not used again; before it, the
-  sequence reports the model's prior state propagated by the model;
-* measurements are cleaned once by the model's ``sanitize`` rule (non-finite measurements and,
-  for the pose model, quaternions of norm below 1e-6 are skipped; quaternions are renormalised);
-* before every innovation the measurement is aligned with the prediction (the pose model flips
-  the measured quaternion when ``z_q . q- < 0``);
-* the update is the Joseph form followed by the model's normalisation and its covariance
-  projection (the pose model: unit quaternion, ``N = (I - u u^T) / |q|``), in one product
-  ``P+ = G blockdiag(P-, R) G^T`` with ``G = T [I - K H | K]``; ``P+`` is symmetrised.
+Conventions: those of :meth:`fkn_bench.filters.KalmanFilter.run` (predict-only steps without a
+usable measurement, initialisation at the first usable one with ``P0``, measurements cleaned once
+by the model's ``sanitize``), with the update of :func:`kalman_update`. Before every innovation
+the measurement is aligned with the prediction (the pose model flips the measured quaternion when
+``z_q . q- < 0``).
 
 The noise starts from the filter's configured standard deviations (by default the model's
 layout: for the pose model the paper's manual tuning, ``sigma_R = 0.1``, ``sigma_Q = 0.005``
@@ -49,13 +39,13 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
-from fkn_bench.filters.base import FilterState
+from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
 from fkn_bench.linalg import symmetrize
@@ -69,6 +59,7 @@ __all__ = [
     "KalmanUpdate",
     "NoiseRule",
     "UpdateContext",
+    "batched",
     "clamp_eigenvalues",
     "kalman_update",
     "outer",
@@ -85,16 +76,9 @@ def outer(a: ArrayF) -> ArrayF:
     return a[:, :, None] * a[:, None, :]
 
 
-_TEMPLATES: dict[int, ArrayF] = {}
-
-
-def _eye(m: int) -> ArrayF:
-    """The cached read-only identity ``I_m``."""
-    value = _TEMPLATES.get(m)
-    if value is None:
-        value = _TEMPLATES[m] = np.eye(m)
-        value.flags.writeable = False
-    return value
+def batched(M: ArrayF, batch: int) -> ArrayF:
+    """``batch`` writable copies of ``M`` along a new leading axis."""
+    return np.broadcast_to(M, (batch,) + M.shape).copy()
 
 
 def clamp_eigenvalues(M: ArrayF, floor: ArrayF) -> ArrayF:
@@ -109,8 +93,7 @@ def clamp_eigenvalues(M: ArrayF, floor: ArrayF) -> ArrayF:
     return np.where(low.any(1)[:, None, None], symmetrize(clamped), M)
 
 
-@dataclass(frozen=True, eq=False)
-class KalmanUpdate:
+class KalmanUpdate(NamedTuple):
     """Result of one measurement update of a batch of ``b`` rows.
 
     Attributes:
@@ -133,8 +116,7 @@ def kalman_update(model: StateSpaceModel, x: ArrayF, P: ArrayF, nu: ArrayF, R: A
     model's normalisation in one product; Bucy & Joseph 1968; Simon, Optimal State Estimation,
     2006, eq. 5.19)."""
     H = None if model.observed is not None else model.H
-    x_post, P_post, S, K = joseph_update(x, P, nu, R, H=H, observed=model.observed, normalize=model.normalize)
-    return KalmanUpdate(x_post, P_post, S, K)
+    return KalmanUpdate(*joseph_update(x, P, nu, R, H=H, observed=model.observed, normalize=model.normalize))
 
 
 def projected_covariance(model: StateSpaceModel, P: ArrayF) -> ArrayF:
@@ -168,31 +150,33 @@ class UpdateContext:
 
 
 class NoiseRule(ABC):
-    """How a method adapts the noise (see module docstring)."""
+    """How a method adapts the noise (see module docstring). Subclasses set ``knobs``, the names
+    of their keyword arguments, each stored as the attribute of that name."""
 
     name: ClassVar[str] = "rule"
+    knobs: ClassVar[tuple[str, ...]] = ()
     adapts_q: bool = False
 
-    @abstractmethod
     def initial(self, batch: int, Q0: ArrayF, R0: ArrayF) -> Noise:
         """The rule's quantities for ``batch`` fresh sequences from the starting ``Q0 (n, n)``,
-        ``R0 (m, m)``."""
+        ``R0 (m, m)`` (by default ``Q`` and ``R``, adapted in place of the starting values)."""
+        return {"R": batched(R0, batch), "Q": batched(Q0, batch)}
 
-    @abstractmethod
     def process_noise(self, noise: Noise) -> ArrayF:
         """``Q (B, n, n)`` the prediction uses."""
+        return noise["Q"]
 
-    @abstractmethod
     def measurement_noise(self, noise: Noise) -> ArrayF:
         """The current estimate of ``R (B, m, m)`` (reported in the estimates' extras)."""
+        return noise["R"]
 
     @abstractmethod
     def update(self, ctx: UpdateContext, noise: Noise) -> tuple[KalmanUpdate, Noise]:
         """The measurement update of ``ctx``'s rows and their new noise quantities."""
 
-    @abstractmethod
     def config(self) -> dict[str, Any]:
         """The rule's knobs (JSON-compatible)."""
+        return {key: getattr(self, key) for key in self.knobs}
 
 
 def floor_from(matrix: ArrayF, fraction: float) -> float:
@@ -200,7 +184,8 @@ def floor_from(matrix: ArrayF, fraction: float) -> float:
     return float(fraction) * float(np.min(np.diag(matrix)))
 
 
-def check_fraction(name: str, value: float, *, low: float = 0.0, high: float = 1.0, closed_low: bool = False, closed_high: bool = True) -> float:
+def check_range(name: str, value: float, *, low: float = 0.0, high: float = 1.0, closed_low: bool = False, closed_high: bool = True) -> float:
+    """``value`` as a finite float in the interval (``(low, high]`` by default), else ValueError."""
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -211,6 +196,13 @@ def check_fraction(name: str, value: float, *, low: float = 0.0, high: float = 1
         lo, hi = ("[" if closed_low else "("), ("]" if closed_high else ")")
         raise ValueError(f"{name} must be in {lo}{low}, {high}{hi} (got {value!r})")
     return number
+
+
+def check_int(name: str, value: int, minimum: int) -> int:
+    """``value`` as an integer ``>= minimum`` (bools refused), else ValueError."""
+    if isinstance(value, bool) or int(value) != value or int(value) < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum} (got {value!r})")
+    return int(value)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -275,16 +267,10 @@ class AdaptiveResult:
     final: AdaptiveState
 
 
-def _take(noise: Mapping[str, ArrayF], rows: ArrayF) -> Noise:
-    return {key: value[rows] for key, value in noise.items()}
-
-
 def _put(noise: Mapping[str, ArrayF], rows: ArrayF, values: Mapping[str, ArrayF]) -> Noise:
-    out = {}
-    for key, value in noise.items():
-        copy = value.copy()
-        copy[rows] = values[key]
-        out[key] = copy
+    out = {key: value.copy() for key, value in noise.items()}
+    for key, value in out.items():
+        value[rows] = values[key]
     return out
 
 
@@ -319,19 +305,14 @@ class AdaptiveKalmanFilter:
         self.R0 = _std_matrix("r_std", r_std, layout.r_default)
         self.P0 = _std_matrix("p0_std", p0_std, layout.p0_default)
 
-    @property
-    def covariance_dim(self) -> int:
-        return self.model.state_dim
-
-    @property
-    def innovation_dim(self) -> int:
-        return self.model.measurement_dim
+    covariance_dim = KalmanFilter.covariance_dim
+    innovation_dim = KalmanFilter.innovation_dim
 
     def initial_state(self, batch: int) -> AdaptiveState:
         """``batch`` sequences before their first measurement (the model's prior, ``P0``)."""
         return AdaptiveState(
             x=self.model.prior_state(batch, np.float64),
-            P=np.broadcast_to(self.P0, (batch,) + self.P0.shape).copy(),
+            P=batched(self.P0, batch),
             initialised=np.zeros(batch, dtype=bool),
             since=np.zeros(batch),
             noise=self.rule.initial(batch, self.Q0, self.R0),
@@ -340,7 +321,7 @@ class AdaptiveKalmanFilter:
     def step(self, state: AdaptiveState, z: ArrayF, usable: ArrayB, dt: float, *, predict: bool = True) -> tuple[AdaptiveState, StepOutput]:
         """One step of every row: predict over ``dt`` (unless ``predict`` is False, as at
         ``t = 0``), then initialise or update the rows whose measurement ``z (B, m)`` is usable
-        (already sanitised: see :meth:`sanitize`)."""
+        (already sanitised by the model's ``sanitize``)."""
         model, rule = self.model, self.rule
         x, P, since, noise = state.x, state.P, state.since, state.noise
         if predict:
@@ -361,13 +342,12 @@ class AdaptiveKalmanFilter:
             z_rows = model.align(z[rows], x_rows)
             nu_rows = z_rows - model.measure(x_rows)
             ctx = UpdateContext(model, x_rows, P_rows, z_rows, nu_rows, np.maximum(since[rows], 1.0))
-            result, noise_rows = rule.update(ctx, dict(noise) if every else _take(noise, rows))
+            result, noise_rows = rule.update(ctx, {key: value if every else value[rows] for key, value in noise.items()})
             if every:
                 x, P, noise, nu, S = result.x, result.P, noise_rows, nu_rows, result.S
                 since = np.zeros(batch)
             else:
-                nu, S = np.zeros((batch, m)), np.empty((batch, m, m))
-                S[:] = _eye(m)
+                nu, S = np.zeros((batch, m)), batched(np.eye(m), batch)
                 x, P = x.copy(), P.copy()
                 x[rows], P[rows], nu[rows], S[rows] = result.x, result.P, nu_rows, result.S
                 noise = _put(noise, rows, noise_rows)
@@ -380,10 +360,6 @@ class AdaptiveKalmanFilter:
         new = AdaptiveState(x, P, state.initialised | usable, since, noise)
         return new, StepOutput(prior, nu, S, update_rows)
 
-    def sanitize(self, z: ArrayF, mask: ArrayB) -> tuple[ArrayF, ArrayB]:
-        """Measurements cleaned by the model's rules, and which are usable."""
-        return self.model.sanitize(np.asarray(z, dtype=float), np.asarray(mask, dtype=bool))
-
     def run(self, measurements: ArrayF, mask: ArrayB, *, dt: float) -> AdaptiveResult:
         """Filter a batch of sequences ``measurements (B, T, m)`` with validity ``mask (B, T)``."""
         measurements = np.asarray(measurements, dtype=float)
@@ -394,7 +370,7 @@ class AdaptiveKalmanFilter:
         if mask.shape != measurements.shape[:2]:
             raise ValueError(f"mask must have shape {measurements.shape[:2]} (got {mask.shape})")
         batch, steps, _ = measurements.shape
-        z_all, usable = self.sanitize(measurements, mask)
+        z_all, usable = self.model.sanitize(measurements, mask)
         # time-major buffers: one contiguous block per step
         means = np.empty((steps, batch, n))
         covariances = np.empty((steps, batch, n, n))
@@ -411,26 +387,16 @@ class AdaptiveKalmanFilter:
             means[t], covariances[t] = state.x, state.P
             prior_means[t] = out.prior_mean
             if out.innovation is None or out.innovation_covariance is None:
-                innovations[t], innovation_covs[t] = 0.0, _eye(m)
+                innovations[t], innovation_covs[t] = 0.0, np.eye(m)
             else:
                 innovations[t], innovation_covs[t] = out.innovation, out.innovation_covariance
             updated[t], initialised[t] = out.updated, state.initialised
             r_diag[t] = np.diagonal(self.rule.measurement_noise(state.noise), axis1=1, axis2=2)
             if q_diag is not None:
                 q_diag[t] = np.diagonal(self.rule.process_noise(state.noise), axis1=1, axis2=2)
-        batch_first = lambda a: None if a is None else np.swapaxes(a, 0, 1)  # noqa: E731
-        return AdaptiveResult(
-            means=batch_first(means),
-            covariances=batch_first(covariances),
-            innovations=batch_first(innovations),
-            innovation_covariances=batch_first(innovation_covs),
-            prior_means=batch_first(prior_means),
-            updated=batch_first(updated),
-            initialised=batch_first(initialised),
-            r_diag=batch_first(r_diag),
-            q_diag=batch_first(q_diag),
-            final=state,
-        )
+        buffers = (means, covariances, innovations, innovation_covs, prior_means, updated, initialised,
+                   r_diag, q_diag)
+        return AdaptiveResult(*(None if a is None else np.swapaxes(a, 0, 1) for a in buffers), final=state)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -441,21 +407,18 @@ _NO_MEASUREMENT, _NOT_USABLE, _USABLE = np.zeros((1, 7)), np.zeros(1, dtype=bool
 class AdaptiveEKFEstimator(RecursiveEstimator):
     """An adaptive EKF on the paper's pose-and-twist model as an estimator of the common API.
 
-    Subclasses set ``name``, ``description``, ``rule_class`` (a :class:`NoiseRule` built from
-    the knobs) and ``knobs`` (the names of the rule's keyword arguments). Keyword-only arguments:
-    the rule's knobs, ``q_std``, ``r_std``, ``p0_std`` (starting noise and ``P0``; default the
-    paper's manual tuning), ``name`` and ``description``.
+    Subclasses set ``name``, ``description`` and ``rule_class`` (a :class:`NoiseRule` built from
+    its ``knobs``). Keyword-only arguments: the rule's knobs, ``q_std``, ``r_std``, ``p0_std``
+    (starting noise and ``P0``; default the paper's manual tuning), ``name`` and ``description``.
 
     ``estimate`` runs every sequence of the batch at once; ``reset``/``step`` run the same
-    recursion on one sequence (observation times handled as by
-    :class:`~fkn_bench.estimators.KalmanEstimator`: an interval that differs from ``dt`` by more
-    than 1e-6 s is predicted over its actual length). The estimates' ``extras`` hold
+    recursion on one sequence (with the observation-time rules of
+    :class:`~fkn_bench.estimators.RecursiveEstimator`). The estimates' ``extras`` hold
     ``r_diag (B, T, 7)``, the adapted ``R``'s diagonal after each step, and for rules that adapt
     ``Q`` ``q_diag (B, T, 13)``.
     """
 
     rule_class: ClassVar[type[NoiseRule]]
-    knobs: ClassVar[tuple[str, ...]] = ()
 
     def __init__(
         self,
@@ -467,30 +430,30 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         description: str | None = None,
         **knobs: Any,
     ) -> None:
-        unknown = sorted(set(knobs) - set(self.knobs))
+        valid = self.rule_class.knobs
+        unknown = sorted(set(knobs) - set(valid))
         if unknown:
-            raise ValueError(f"unknown {type(self).__name__} options {unknown}; valid: {sorted(self.knobs + ('q_std', 'r_std', 'p0_std', 'name', 'description'))}")
+            raise ValueError(f"unknown {type(self).__name__} options {unknown}; valid: {sorted(valid + ('q_std', 'r_std', 'p0_std', 'name', 'description'))}")
         self.rule = self.rule_class(**knobs)
         self.filter = AdaptiveKalmanFilter(self.rule, q_std=q_std, r_std=r_std, p0_std=p0_std)
-        self._stds = {
-            key: (None if value is None else [float(v) for v in value])
+        self._stds = {  # the standard deviations given, for to_config
+            key: [float(v) for v in value]
             for key, value in (("q_std", q_std), ("r_std", r_std), ("p0_std", p0_std))
+            if value is not None
         }
         if name is not None:
             self.name = name
         if description is not None:
             self.description = description
 
-    # ------------------------------------------------------------------ batch
-    def _estimates(self, result: AdaptiveResult) -> Estimates:
-        extras = {"r_diag": result.r_diag} if result.q_diag is None else {"r_diag": result.r_diag, "q_diag": result.q_diag}
-        return filter_result_to_estimates(result, self.filter, extras=extras)
-
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)
-        return self._estimates(self.filter.run(z, m, dt=step))
+        result = self.filter.run(z, m, dt=step)
+        extras = {"r_diag": result.r_diag}
+        if result.q_diag is not None:
+            extras["q_diag"] = result.q_diag
+        return filter_result_to_estimates(result, self.filter, extras=extras)
 
-    # ------------------------------------------------------------------ online
     def _online_prior(self) -> AdaptiveState:
         return self.filter.initial_state(1)
 
@@ -506,13 +469,5 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
     def _online_report(self, state: AdaptiveState) -> tuple[ArrayF, ArrayF]:
         return state.x[0], state.P[0]
 
-    # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:
-        config: dict[str, Any] = dict(self.rule.config())
-        config.update({key: value for key, value in self._stds.items() if value is not None})
-        config.update(name=self.name, description=self.description)
-        return config
-
-    @classmethod
-    def from_config(cls, config: Mapping[str, Any]) -> AdaptiveEKFEstimator:
-        return cls(**dict(config))
+        return {**self.rule.config(), **self._stds, "name": self.name, "description": self.description}

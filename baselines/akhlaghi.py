@@ -36,28 +36,15 @@ Defaults: ``alpha = 0.3`` (the paper's value), both ``R`` and ``Q`` adapted (the
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-from fkn_bench.baselines.adaptive import (
-    AdaptiveEKFEstimator,
-    KalmanUpdate,
-    Noise,
-    NoiseRule,
-    UpdateContext,
-    check_fraction,
-    floor_from,
-    kalman_update,
-    outer,
-    projected_covariance,
-)
+from fkn_bench.baselines import adaptive as ad
 from fkn_bench.types import ArrayF
 
 __all__ = ["AkhlaghiRule", "AkhlaghiEstimator"]
 
 
-class AkhlaghiRule(NoiseRule):
+class AkhlaghiRule(ad.NoiseRule):
     """Akhlaghi-Zhou-Huang noise adaptation (see module docstring).
 
     Args:
@@ -67,53 +54,40 @@ class AkhlaghiRule(NoiseRule):
     """
 
     name = "akhlaghi"
+    knobs = ("alpha", "adapt_r", "adapt_q", "floor")
 
     def __init__(self, *, alpha: float = 0.3, adapt_r: bool = True, adapt_q: bool = True, floor: float = 1e-4) -> None:
-        self.alpha = check_fraction("alpha", alpha, closed_low=True)
+        self.alpha = ad.check_range("alpha", alpha, closed_low=True)
         self.adapt_r, self.adapt_q = bool(adapt_r), bool(adapt_q)
         self.adapts_q = self.adapt_q
-        self.floor = check_fraction("floor", floor, high=1.0, closed_high=False, closed_low=True)
+        self.floor = ad.check_range("floor", floor, high=1.0, closed_high=False, closed_low=True)
 
-    def initial(self, batch: int, Q0: ArrayF, R0: ArrayF) -> Noise:
+    def initial(self, batch: int, Q0: ArrayF, R0: ArrayF) -> ad.Noise:
         return {
-            "R": np.broadcast_to(R0, (batch,) + R0.shape).copy(),
-            "Q": np.broadcast_to(Q0, (batch,) + Q0.shape).copy(),
-            "r_floor": np.broadcast_to(floor_from(R0, self.floor) * np.eye(len(R0)), (batch,) + R0.shape).copy(),
-            "q_floor": np.broadcast_to(floor_from(Q0, self.floor) * np.eye(len(Q0)), (batch,) + Q0.shape).copy(),
+            **super().initial(batch, Q0, R0),
+            "r_floor": ad.batched(ad.floor_from(R0, self.floor) * np.eye(len(R0)), batch),
+            "q_floor": ad.batched(ad.floor_from(Q0, self.floor) * np.eye(len(Q0)), batch),
         }
 
-    def process_noise(self, noise: Noise) -> ArrayF:
-        return noise["Q"]
-
-    def measurement_noise(self, noise: Noise) -> ArrayF:
-        return noise["R"]
-
-    def update(self, ctx: UpdateContext, noise: Noise) -> tuple[KalmanUpdate, Noise]:
-        result = kalman_update(ctx.model, ctx.x_pred, ctx.P_pred, ctx.nu, noise["R"])
+    def update(self, ctx: ad.UpdateContext, noise: ad.Noise) -> tuple[ad.KalmanUpdate, ad.Noise]:
+        result = ad.kalman_update(ctx.model, ctx.x_pred, ctx.P_pred, ctx.nu, noise["R"])
         a = self.alpha
         R, Q = noise["R"], noise["Q"]
         # R and Q stay exactly symmetric: weighted sums of symmetric matrices (R, Q, the floors,
         # the symmetrised P+ block) and outer products a a^T (a_i a_j == a_j a_i)
         if self.adapt_r and a < 1.0:
             residual = ctx.z - ctx.model.measure(result.x)
-            R = a * R + (1.0 - a) * (outer(residual) + projected_covariance(ctx.model, result.P) + noise["r_floor"])
+            sample = ad.outer(residual) + ad.projected_covariance(ctx.model, result.P) + noise["r_floor"]
+            R = a * R + (1.0 - a) * sample
         if self.adapt_q and a < 1.0:
             correction = (result.K @ ctx.nu[:, :, None])[:, :, 0]
-            Q = a * Q + (1.0 - a) * (outer(correction) / ctx.steps[:, None, None] + noise["q_floor"])
+            Q = a * Q + (1.0 - a) * (ad.outer(correction) / ctx.steps[:, None, None] + noise["q_floor"])
         return result, {**noise, "R": R, "Q": Q}
 
-    def config(self) -> dict[str, Any]:
-        return {"alpha": self.alpha, "adapt_r": self.adapt_r, "adapt_q": self.adapt_q, "floor": self.floor}
 
-
-class AkhlaghiEstimator(AdaptiveEKFEstimator):
-    """``akhlaghi``: the paper's additive EKF with Akhlaghi-Zhou-Huang adaptation (module docstring).
-
-    Keyword-only knobs: ``alpha`` (0.3), ``adapt_r`` (True), ``adapt_q`` (True), ``floor`` (1e-4);
-    and ``q_std``, ``r_std``, ``p0_std``, ``name``, ``description``.
-    """
+class AkhlaghiEstimator(ad.AdaptiveEKFEstimator):
+    """``akhlaghi``: the paper's additive EKF with Akhlaghi-Zhou-Huang adaptation (module docstring)."""
 
     name = "akhlaghi"
     description = "Adaptive EKF of Akhlaghi, Zhou & Huang 2017 (alpha 0.3: residual-based R, innovation-based Q)"
     rule_class = AkhlaghiRule
-    knobs = ("alpha", "adapt_r", "adapt_q", "floor")

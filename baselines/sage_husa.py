@@ -39,29 +39,15 @@ for the first ``W`` updates, the usual practical remedy (not part of the publish
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 
-from fkn_bench.baselines.adaptive import (
-    AdaptiveEKFEstimator,
-    KalmanUpdate,
-    Noise,
-    NoiseRule,
-    UpdateContext,
-    check_fraction,
-    clamp_eigenvalues,
-    floor_from,
-    kalman_update,
-    outer,
-    projected_covariance,
-)
+from fkn_bench.baselines import adaptive as ad
 from fkn_bench.types import ArrayF
 
 __all__ = ["SageHusaRule", "SageHusaEstimator"]
 
 
-class SageHusaRule(NoiseRule):
+class SageHusaRule(ad.NoiseRule):
     """Sage-Husa covariance matching with forgetting factor (see module docstring).
 
     Args:
@@ -73,17 +59,16 @@ class SageHusaRule(NoiseRule):
     """
 
     name = "sage-husa"
+    knobs = ("forgetting", "adapt_r", "adapt_q", "floor", "warmup")
 
     def __init__(
         self, *, forgetting: float = 0.99, adapt_r: bool = True, adapt_q: bool = False, floor: float = 1e-4, warmup: int = 0
     ) -> None:
-        self.forgetting = check_fraction("forgetting", forgetting)
+        self.forgetting = ad.check_range("forgetting", forgetting)
         self.adapt_r, self.adapt_q = bool(adapt_r), bool(adapt_q)
         self.adapts_q = self.adapt_q
-        self.floor = check_fraction("floor", floor, high=1.0, closed_high=False)
-        if isinstance(warmup, bool) or int(warmup) != warmup or int(warmup) < 0:
-            raise ValueError(f"warmup must be an integer >= 0 (got {warmup!r})")
-        self.warmup = int(warmup)
+        self.floor = ad.check_range("floor", floor, high=1.0, closed_high=False)
+        self.warmup = ad.check_int("warmup", warmup, 0)
 
     def weight(self, k: ArrayF) -> ArrayF:
         """``d_k`` for update counts ``k (B,)`` (>= 1)."""
@@ -92,50 +77,34 @@ class SageHusaRule(NoiseRule):
             return 1.0 / (k + 1.0)
         return (1.0 - b) / (1.0 - b ** (k + 1.0))
 
-    def initial(self, batch: int, Q0: ArrayF, R0: ArrayF) -> Noise:
+    def initial(self, batch: int, Q0: ArrayF, R0: ArrayF) -> ad.Noise:
         return {
-            "R": np.broadcast_to(R0, (batch,) + R0.shape).copy(),
-            "Q": np.broadcast_to(Q0, (batch,) + Q0.shape).copy(),
+            **super().initial(batch, Q0, R0),
             "k": np.full(batch, -float(self.warmup)),
-            "r_floor": np.full(batch, floor_from(R0, self.floor)),
-            "q_floor": np.full(batch, floor_from(Q0, self.floor)),
+            "r_floor": np.full(batch, ad.floor_from(R0, self.floor)),
+            "q_floor": np.full(batch, ad.floor_from(Q0, self.floor)),
         }
 
-    def process_noise(self, noise: Noise) -> ArrayF:
-        return noise["Q"]
-
-    def measurement_noise(self, noise: Noise) -> ArrayF:
-        return noise["R"]
-
-    def update(self, ctx: UpdateContext, noise: Noise) -> tuple[KalmanUpdate, Noise]:
+    def update(self, ctx: ad.UpdateContext, noise: ad.Noise) -> tuple[ad.KalmanUpdate, ad.Noise]:
         k = noise["k"] + 1.0  # adapted samples so far (<= 0 during the warm-up: d = 0)
         d = np.where(k >= 1.0, self.weight(np.maximum(k, 1.0)), 0.0)[:, None, None]
         R, Q = noise["R"], noise["Q"]
         if self.adapt_r:
             # sums of exactly symmetric terms; clamp_eigenvalues symmetrises what it rebuilds
-            sample = outer(ctx.nu) - projected_covariance(ctx.model, ctx.P_pred)
-            R = clamp_eigenvalues((1.0 - d) * R + d * sample, noise["r_floor"])
-        result = kalman_update(ctx.model, ctx.x_pred, ctx.P_pred, ctx.nu, R)
+            sample = ad.outer(ctx.nu) - ad.projected_covariance(ctx.model, ctx.P_pred)
+            R = ad.clamp_eigenvalues((1.0 - d) * R + d * sample, noise["r_floor"])
+        result = ad.kalman_update(ctx.model, ctx.x_pred, ctx.P_pred, ctx.nu, R)
         if self.adapt_q:
             correction = (result.K @ ctx.nu[:, :, None])[:, :, 0]
             # exactly symmetric: an outer product plus the symmetrised P+ and P- (no symmetrisation needed)
-            excess = (outer(correction) + result.P - ctx.P_pred) / ctx.steps[:, None, None]
-            Q = clamp_eigenvalues((1.0 - d) * Q + d * (Q + excess), noise["q_floor"])
+            excess = (ad.outer(correction) + result.P - ctx.P_pred) / ctx.steps[:, None, None]
+            Q = ad.clamp_eigenvalues((1.0 - d) * Q + d * (Q + excess), noise["q_floor"])
         return result, {**noise, "R": R, "Q": Q, "k": k}
 
-    def config(self) -> dict[str, Any]:
-        return {"forgetting": self.forgetting, "adapt_r": self.adapt_r, "adapt_q": self.adapt_q, "floor": self.floor, "warmup": self.warmup}
 
-
-class SageHusaEstimator(AdaptiveEKFEstimator):
-    """``sage-husa``: the paper's additive EKF with Sage-Husa noise adaptation (module docstring).
-
-    Keyword-only knobs: ``forgetting`` (0.99), ``adapt_r`` (True), ``adapt_q`` (False), ``floor``
-    (1e-4), ``warmup`` (0); and ``q_std``, ``r_std``, ``p0_std``, ``name``, ``description`` as for every
-    :class:`~fkn_bench.baselines.adaptive.AdaptiveEKFEstimator`.
-    """
+class SageHusaEstimator(ad.AdaptiveEKFEstimator):
+    """``sage-husa``: the paper's additive EKF with Sage-Husa noise adaptation (module docstring)."""
 
     name = "sage-husa"
     description = "Sage-Husa adaptive EKF (forgetting factor 0.99, R adapted, eigenvalue clamping)"
     rule_class = SageHusaRule
-    knobs = ("forgetting", "adapt_r", "adapt_q", "floor", "warmup")

@@ -73,10 +73,8 @@ class TunedEKFEstimator(TrainedKalmanEstimator):
     descriptions = DESCRIPTIONS
 
 
-_OPTIMIZER_DEFAULTS: dict[str, dict[str, Any]] = {
-    # lbfgs: full-batch; one epoch = one L-BFGS step of up to `lbfgs_iterations` iterations
+_OPTIMIZER_DEFAULTS: dict[str, dict[str, Any]] = {  # see the module docstring
     "lbfgs": {"lr": 1.0, "epochs": 15, "patience": 2},
-    # adam: mini-batches; lr on the log standard deviations
     "adam": {"lr": 0.05, "epochs": 150, "patience": 20},
 }
 

@@ -51,22 +51,9 @@ drift.
 from __future__ import annotations
 
 import math
-from typing import Any
-
 import numpy as np
 
-from fkn_bench.baselines.adaptive import (
-    AdaptiveEKFEstimator,
-    KalmanUpdate,
-    Noise,
-    NoiseRule,
-    UpdateContext,
-    check_fraction,
-    floor_from,
-    kalman_update,
-    outer,
-    projected_covariance,
-)
+from fkn_bench.baselines import adaptive as ad
 from fkn_bench.linalg import spd_inverse, symmetrize
 from fkn_bench.types import ArrayF
 
@@ -76,17 +63,7 @@ DEFAULT_RHO = 1.0 - math.exp(-4.0)
 """The paper's forgetting factor of the measurement-noise posterior."""
 
 
-def _positive(name: str, value: float) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number (got {value!r})") from None
-    if not (math.isfinite(number) and number > 0):
-        raise ValueError(f"{name} must be a finite number > 0 (got {value!r})")
-    return number
-
-
-class VBAKFRule(NoiseRule):
+class VBAKFRule(ad.NoiseRule):
     """VBAKF noise inference (see module docstring).
 
     Args:
@@ -100,35 +77,31 @@ class VBAKFRule(NoiseRule):
     """
 
     name = "vbakf"
+    knobs = ("tau_p", "tau_r", "rho", "iterations", "floor")
 
     def __init__(
         self, *, tau_p: float = 3.0, tau_r: float = 3.0, rho: float = DEFAULT_RHO, iterations: int = 10, floor: float = 1e-4
     ) -> None:
-        self.tau_p = _positive("tau_p", tau_p)
-        self.tau_r = _positive("tau_r", tau_r)
-        self.rho = check_fraction("rho", rho)
-        if isinstance(iterations, bool) or int(iterations) != iterations or int(iterations) < 1:
-            raise ValueError(f"iterations must be an integer >= 1 (got {iterations!r})")
-        self.iterations = int(iterations)
-        self.floor = check_fraction("floor", floor, high=1.0, closed_high=False, closed_low=True)
+        self.tau_p = ad.check_range("tau_p", tau_p, high=math.inf, closed_high=False)
+        self.tau_r = ad.check_range("tau_r", tau_r, high=math.inf, closed_high=False)
+        self.rho = ad.check_range("rho", rho)
+        self.iterations = ad.check_int("iterations", iterations, 1)
+        self.floor = ad.check_range("floor", floor, high=1.0, closed_high=False, closed_low=True)
 
-    def initial(self, batch: int, Q0: ArrayF, R0: ArrayF) -> Noise:
+    def initial(self, batch: int, Q0: ArrayF, R0: ArrayF) -> ad.Noise:
         m = len(R0)
         return {
             "Q": np.broadcast_to(Q0, (batch,) + Q0.shape),  # the nominal Q~, fixed
             "u": np.full(batch, m + 1.0 + self.tau_r),
-            "U": np.broadcast_to(self.tau_r * R0, (batch,) + R0.shape).copy(),
-            "r_floor": np.broadcast_to(floor_from(R0, self.floor) * np.eye(m), (batch,) + R0.shape),
+            "U": ad.batched(self.tau_r * R0, batch),
+            "r_floor": np.broadcast_to(ad.floor_from(R0, self.floor) * np.eye(m), (batch,) + R0.shape),
         }
 
-    def process_noise(self, noise: Noise) -> ArrayF:
-        return noise["Q"]
-
-    def measurement_noise(self, noise: Noise) -> ArrayF:
+    def measurement_noise(self, noise: ad.Noise) -> ArrayF:
         m = noise["U"].shape[-1]
         return noise["U"] / (noise["u"] - m - 1.0)[:, None, None]
 
-    def update(self, ctx: UpdateContext, noise: Noise) -> tuple[KalmanUpdate, Noise]:
+    def update(self, ctx: ad.UpdateContext, noise: ad.Noise) -> tuple[ad.KalmanUpdate, ad.Noise]:
         model, tau = ctx.model, self.tau_p
         m = ctx.nu.shape[1]
         x_pred, P_nominal, nu = ctx.x_pred, ctx.P_pred, ctx.nu
@@ -139,9 +112,9 @@ class VBAKFRule(NoiseRule):
         x, P = x_pred, P_nominal
         for i in range(self.iterations):
             dx = x - x_pred
-            P_hat = (T_prior + P + outer(dx)) * (1.0 / (tau + 1.0))  # T / (t - n - 1), t = n + tau + 2
+            P_hat = (T_prior + P + ad.outer(dx)) * (1.0 / (tau + 1.0))  # T / (t - n - 1), t = n + tau + 2
             e = ctx.z - model.measure(x)
-            U = U_prior + outer(e) + projected_covariance(model, P)
+            U = U_prior + ad.outer(e) + ad.projected_covariance(model, P)
             R_hat = U * scale_r
             if i == self.iterations - 1:
                 break
@@ -156,22 +129,14 @@ class VBAKFRule(NoiseRule):
             # symmetrised: P feeds P^ and U (R's posterior), which then stay exactly symmetric
             # (sums of symmetric matrices and outer products)
             P = symmetrize(P_hat - HP.swapaxes(1, 2) @ Kt)
-        result = kalman_update(model, x_pred, P_hat, nu, R_hat)
+        result = ad.kalman_update(model, x_pred, P_hat, nu, R_hat)
         return result, {**noise, "u": u, "U": U}
 
-    def config(self) -> dict[str, Any]:
-        return {"tau_p": self.tau_p, "tau_r": self.tau_r, "rho": self.rho, "iterations": self.iterations, "floor": self.floor}
 
-
-class VBAKFEstimator(AdaptiveEKFEstimator):
-    """``vbakf``: the paper's additive EKF with Huang et al.'s VB inference of ``P-`` and ``R``.
-
-    Keyword-only knobs: ``tau_p`` (3), ``tau_r`` (3), ``rho`` (1 - exp(-4)), ``iterations`` (10),
-    ``floor`` (1e-4); and ``q_std`` (the nominal ``Q~``), ``r_std`` (the prior mean of ``R``), ``p0_std``,
-    ``name``, ``description``.
-    """
+class VBAKFEstimator(ad.AdaptiveEKFEstimator):
+    """``vbakf``: the paper's additive EKF with Huang et al.'s VB inference of ``P-`` and ``R``
+    (``q_std`` is the nominal ``Q~``, ``r_std`` the prior mean of ``R``)."""
 
     name = "vbakf"
     description = "Variational Bayesian adaptive EKF of Huang et al. 2018 (IW priors on P- and R; tau 3, rho 1-e^-4, 10 iterations)"
     rule_class = VBAKFRule
-    knobs = ("tau_p", "tau_r", "rho", "iterations", "floor")

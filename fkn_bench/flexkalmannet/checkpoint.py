@@ -42,7 +42,7 @@ def _model_skeleton(config: FlexKalmanNetConfig, reference: torch.Tensor, mean: 
             layers=config.layers,
             activation=config.activation,
             dropout=config.dropout,
-            dtype=config.torch_network_dtype,
+            dtype=getattr(torch, config.network_dtype),  # float32 or float64
             output_scale=config.output_scale,
         )
     return FlexKalmanNet(

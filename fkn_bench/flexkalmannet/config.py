@@ -15,8 +15,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import torch
-
 from fkn_bench.filters.parameters import LEARNABLE_ENTRIES
 from fkn_bench.training import TrainConfig
 from fkn_bench.training.pipeline import options_with_file
@@ -90,14 +88,8 @@ class FlexKalmanNetConfig(TrainConfig):
     Model: ``variant`` (ekf, ukf, mekf), ``learn`` (entries of the parameter set, default the
     paper's 20 standard deviations), ``positivity``, ``hidden``, ``layers``, ``activation``,
     ``dropout``, ``network_dtype``, ``mode`` (constant or time_varying), ``samples_per_window``,
-    ``history``.
-    Data: ``window`` (consecutive samples per training window; the paper's batch of 512),
-    ``stride``, ``train_measurement_every``, ``episodes`` (recordings in the data set; the paper: 1).
-    Optimisation: ``objective``, ``epochs``, ``patience``, ``lr``, ``weight_decay``,
-    ``windows_per_batch``, ``loss_cut``, ``seed``, ``scheduler_factor``,
-    ``scheduler_patience``, ``max_grad_norm``, ``threads``.
-    The data and optimisation fields are :class:`~fkn_bench.training.TrainConfig`'s (the
-    benchmark's protocol, shared with the tuned baselines) with FlexKalmanNet's ``lr`` and
+    ``history``. The data and optimisation fields are :class:`~fkn_bench.training.TrainConfig`'s
+    (the benchmark's protocol, shared with the tuned baselines) with FlexKalmanNet's ``lr`` and
     ``scheduler_patience``; it trains with Adam (``optimizer`` and the L-BFGS settings are not
     among its options: :meth:`to_dict` lists the options).
     """
@@ -130,10 +122,6 @@ class FlexKalmanNetConfig(TrainConfig):
         if self.samples_per_window is not None and self.samples_per_window < 1:
             raise ValueError(f"samples_per_window must be >= 1 or None (got {self.samples_per_window})")
         super().__post_init__()  # the variant, data protocol and optimisation fields
-
-    @property
-    def torch_network_dtype(self) -> torch.dtype:
-        return torch.float32 if self.network_dtype == "float32" else torch.float64
 
     def to_dict(self) -> dict[str, Any]:
         """The options: the variant, the model fields, then the data and optimisation fields."""

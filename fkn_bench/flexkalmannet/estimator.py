@@ -26,7 +26,7 @@ from fkn_bench.scenarios import Scenario
 from fkn_bench.training.artifacts import TrainedKalmanEstimator, artifact_factory, deployed_estimator_config
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["FlexKalmanNetEstimator", "AdaptiveFlexKalmanNetEstimator", "flexkalmannet_factory", "deployed_estimator_config"]
+__all__ = ["FlexKalmanNetEstimator", "AdaptiveFlexKalmanNetEstimator", "flexkalmannet_factory"]
 
 
 class FlexKalmanNetEstimator(TrainedKalmanEstimator):
@@ -75,18 +75,14 @@ class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
         super().reset(dt=dt)
         self._recent.clear()
 
-    def _current_raw(self) -> torch.Tensor:
-        if not self._recent:
-            return self.model.deployed_raw()
-        return torch.stack(tuple(self._recent)).mean(0)
-
     def _online_observe(self, z: ArrayF | None) -> None:
         """The step's noise: the network's outputs averaged over the recent measurements, this
         step's included."""
         with torch.no_grad(), torch_threads():
             if z is not None:
                 self._recent.append(self.model._outputs(torch.from_numpy(z))[0])
-            noise = self.model.parameter_set.to_noise(self._current_raw()[None])
+            raw = torch.stack(tuple(self._recent)).mean(0) if self._recent else self.model.deployed_raw()
+            noise = self.model.parameter_set.to_noise(raw[None])
         self._online_noise = tuple(m[0].to(torch.float64).numpy() for m in (noise.process, noise.measurement, noise.initial))
 
     def to_config(self) -> dict[str, Any]:
