@@ -24,30 +24,11 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
     topic, used as is, or synthesised from the truth with the scenario's noise model, seeded by
     the episode seed. Everything else follows ``AstrobeeTumble-v0``.
 
-    ## Observation Space
+    ## Observation Space, Action Space, Rewards and Episode End
 
-    A ``Dict`` with ``pose`` (``PoseBox(7,)``: measured ``[qw, qx, qy, qz, rx, ry, rz]``, all NaN
-    when missing), ``valid`` (``Discrete(2)``) and ``time`` (``Box(0, T dt, ())``, s from the
-    first truth message), as in ``AstrobeeTumble-v0``.
-
-    ## Action Space
-
-    ``Box(13,)`` float64: the state estimate ``[q(wxyz), r, w (world frame), v]`` at the time of
-    the current observation; validated as in ``AstrobeeTumble-v0``.
-
-    ## Rewards
-
-    ``-(theta + 1 |dr| + 10 |dw| + 10 |dv|)`` against the replayed truth (``reward_weights``
-    changes the weights; see :mod:`fkn_bench.envs.rewards`).
-
-    ## Starting State
-
-    The first truth message of the recording.
-
-    ## Episode End
-
-    Truncated when the last replayed step has been observed (the step that returns it has
-    ``truncated=True``); its estimate is not scored.
+    As ``AstrobeeTumble-v0``, against the replayed truth: observations carry the time in s from
+    the first truth message, the episode starts at that message and is truncated when the last
+    replayed step has been observed.
 
     ## Arguments
 

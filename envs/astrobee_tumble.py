@@ -71,7 +71,7 @@ class _EpisodeWalk:
         self._times, self._truth, self._meas, self._valid = self._stream.advance(self._chunk_size)
 
     def _next_step(self) -> bool:
-        """Move to the next step (loading the next chunk when needed); True at the episode's last."""
+        """Go to the next step (loading the next chunk when needed); True at the episode's last."""
         self._index += 1
         if self._index - self._chunk_start >= len(self._times):
             self._load_chunk()

@@ -75,16 +75,12 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
         }
 
     def _info(self) -> dict[str, Any]:
-        everywhere = np.ones(self.num_envs, dtype=bool)
-        info: dict[str, Any] = {
-            "step": np.full(self.num_envs, self._index, dtype=np.int64),
-            "_step": everywhere,
-            "episode_seed": self.episode_seeds.copy(),
-            "_episode_seed": everywhere.copy(),
-        }
+        info: dict[str, Any] = {"step": np.full(self.num_envs, self._index, dtype=np.int64)}
+        info["episode_seed"] = self.episode_seeds.copy()
         if self.expose_truth:
             info["truth"] = self._truth[:, self._index - self._chunk_start].copy()
-            info["_truth"] = everywhere.copy()
+        for key in list(info):  # Gymnasium's masks: every sub-environment has every key
+            info[f"_{key}"] = np.ones(self.num_envs, dtype=bool)
         return info
 
     # ------------------------------------------------------------------ Gymnasium API
@@ -124,4 +120,5 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
         truth = self._truth[:, self._index - self._chunk_start]
         rewards = -estimate_cost(truth, estimates, self.reward_weights)
         truncated = self._needs_autoreset = self._next_step()
-        return self._observation(), rewards, np.zeros(n, dtype=bool), np.full(n, truncated), self._info()
+        terminated = np.zeros(n, dtype=bool)
+        return self._observation(), rewards, terminated, np.full(n, truncated), self._info()
