@@ -223,8 +223,7 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
 
 
 def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:
-    if weights is None:
-        return dict(DEFAULT_WEIGHTS)
+    weights = weights or {}
     unknown = set(weights) - set(DEFAULT_WEIGHTS)
     if unknown:
         raise ValueError(f"unknown reward weight(s) {sorted(unknown)}; valid keys: {sorted(DEFAULT_WEIGHTS)}")
