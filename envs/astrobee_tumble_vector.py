@@ -67,11 +67,10 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
 
     def _observation(self) -> dict[str, Any]:
         i = self._index - self._chunk_start
-        n = self.num_envs
         return {
             "pose": self._meas[:, i].copy().view(MeasuredPose),
             "valid": self._valid[:, i].astype(np.int64),
-            "time": np.full(n, self._times[i]),
+            "time": np.full(self.num_envs, self._times[i]),
         }
 
     def _info(self) -> dict[str, Any]:

@@ -91,12 +91,8 @@ def initial_states(scenario: Scenario, seeds: Sequence[int]) -> tuple[ArrayF, Ar
 
 
 class EpisodeStream:
-    """Generates a batch of episodes chunk by chunk (``advance(n)``), for the environments.
-
-    Args:
-        scenario: the configuration.
-        seeds: one non-negative integer seed per episode.
-    """
+    """Generates a batch of episodes of ``scenario``, one per non-negative integer seed, chunk by
+    chunk (``advance(n)``), for the environments."""
 
     def __init__(self, scenario: Scenario, seeds: Sequence[int]) -> None:
         self.scenario = scenario
@@ -156,16 +152,9 @@ class EpisodeStream:
 def generate_episodes(
     scenario: str | Scenario, seeds: int | Sequence[int], *, split: str = "full"
 ) -> Episodes:
-    """Generate whole episodes for ``seeds`` (an int ``N`` means seeds ``0 .. N-1``).
-
-    Args:
-        scenario: a registered name or a :class:`Scenario`.
-        seeds: episode seeds, or their number.
-        split: ``full`` (default), ``train``, ``val`` or ``test``.
-
-    Returns:
-        :class:`Episodes` with batch axis first.
-    """
+    """:class:`Episodes` (batch axis first) of ``scenario`` (a registered name or a
+    :class:`Scenario`) for ``seeds`` (an int ``N`` means seeds ``0 .. N-1``), whole or one
+    ``split`` (``full``, ``train``, ``val`` or ``test``)."""
     scenario = get_scenario(scenario)
     start, stop = _split_bounds(scenario, split)
     seed_list = list(range(seeds)) if isinstance(seeds, (int, np.integer)) else [int(s) for s in seeds]

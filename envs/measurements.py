@@ -61,12 +61,7 @@ def stream(seed: int, name: str, block: int = 0) -> np.random.Generator:
 
 
 class MeasurementGenerator:
-    """Measurements for a batch of episodes over any step range.
-
-    Args:
-        scenario: noise, schedule and corruption settings.
-        seeds: one episode seed per batch row.
-    """
+    """Measurements for a batch of episodes (one seed per batch row) over any step range."""
 
     def __init__(self, scenario: Scenario, seeds: Sequence[int]) -> None:
         self._scenario = scenario
