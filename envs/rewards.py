@@ -33,9 +33,9 @@ DEFAULT_WEIGHTS: Mapping[str, float] = {"attitude": 1.0, "position": 1.0, "omega
 
 def _chords(e: Sequence, t: Sequence, sqrt: Callable) -> tuple:
     """``|u - v|`` and ``|u + v|`` for ``u``, ``v`` the normalised estimate ``e`` and truth ``t``
-    (four components each: columns of a batch with ``np.sqrt``, or floats with ``math.sqrt``)."""
-    e0, e1, e2, e3 = e
-    t0, t1, t2, t3 = t
+    (components 0-3: rows of transposed batches with ``np.sqrt``, or floats with ``math.sqrt``)."""
+    e0, e1, e2, e3 = e[0], e[1], e[2], e[3]
+    t0, t1, t2, t3 = t[0], t[1], t[2], t[3]
     norm = sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
     u0, u1, u2, u3 = e0 / norm, e1 / norm, e2 / norm, e3 / norm
     norm = sqrt(t0 * t0 + t1 * t1 + t2 * t2 + t3 * t3)
@@ -71,7 +71,7 @@ def estimate_cost_scalar(
     truth: Sequence[float], estimate: Sequence[float], weights: Mapping[str, float] = DEFAULT_WEIGHTS
 ) -> float:
     """:func:`estimate_cost` for one 13-element truth and estimate (lists of floats)."""
-    minus, plus = _chords(estimate[:4], truth[:4], math.sqrt)
+    minus, plus = _chords(estimate, truth, math.sqrt)
     # numpy's arctan2, not math.atan2: the two may differ in the last bit
     angle = 4.0 * float(np.arctan2(min(minus, plus), max(minus, plus)))
     d = [estimate[i] - truth[i] for i in range(4, 13)]
