@@ -6,11 +6,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from fkn_bench.envs.astrobee_tumble import AstrobeeTumbleEnv
 from fkn_bench.envs.episodes import Episodes
-from fkn_bench.types import ArrayF
 
 __all__ = ["AstrobeeReplayEnv"]
 
@@ -27,30 +24,11 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
     topic, used as is, or synthesised from the truth with the scenario's noise model, seeded by
     the episode seed. Everything else follows ``AstrobeeTumble-v0``.
 
-    ## Observation Space
+    ## Observation Space, Action Space, Rewards and Episode End
 
-    A ``Dict`` with ``pose`` (``PoseBox(7,)``: measured ``[qw, qx, qy, qz, rx, ry, rz]``, all NaN
-    when missing), ``valid`` (``Discrete(2)``) and ``time`` (``Box(0, T dt, ())``, s from the
-    first truth message), as in ``AstrobeeTumble-v0``.
-
-    ## Action Space
-
-    ``Box(13,)`` float64: the state estimate ``[q(wxyz), r, w (world frame), v]`` at the time of
-    the current observation; validated as in ``AstrobeeTumble-v0``.
-
-    ## Rewards
-
-    ``-(theta + 1 |dr| + 10 |dw| + 10 |dv|)`` against the replayed truth (``reward_weights``
-    changes the weights; see :mod:`fkn_bench.envs.rewards`).
-
-    ## Starting State
-
-    The first truth message of the recording.
-
-    ## Episode End
-
-    Truncated when the last replayed step has been observed (the step that returns it has
-    ``truncated=True``); its estimate is not scored.
+    As ``AstrobeeTumble-v0``, against the replayed truth: observations carry the time in s from
+    the first truth message, the episode starts at that message and is truncated when the last
+    replayed step has been observed.
 
     ## Arguments
 
@@ -88,29 +66,21 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
     ) -> None:
         from fkn_bench.recordings.replay import read_recording
 
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']} (got {render_mode!r})")
+        self._check_render_mode(render_mode)  # before reading the recording
         self.trajectory = read_recording(path, **recording_options)
         self.report = self.trajectory.report
         super().__init__(self.trajectory.scenario, expose_truth=expose_truth, reward_weights=reward_weights,
-                         render_mode=render_mode, chunk_size=self.trajectory.scenario.n_steps)
+                         render_mode=render_mode)
 
-    def _new_stream(self, seed: int) -> _WholeEpisode:
-        return _WholeEpisode(self.trajectory.episodes(seed))
+    def _new_stream(self, seed: int) -> Episodes:
+        return self.trajectory.episodes(seed)
+
+    def _load_chunk(self) -> None:
+        """The whole replayed episode is one chunk (loaded by ``reset``)."""
+        e = self._stream
+        self._chunk_start = 0
+        self._times, self._truth, self._meas, self._valid = e.times, e.truth, e.measurements, e.valid
+        self._truth_rows = self._truth[0].tolist()
 
     def _render_name(self) -> tuple[str, int]:
         return f"replay {self.report.path.name}", 2
-
-
-class _WholeEpisode:
-    """A replayed episode as a stream of one chunk (the interface of
-    :class:`~fkn_bench.envs.episodes.EpisodeStream` that the environment uses)."""
-
-    def __init__(self, episodes: Episodes) -> None:
-        self.index = 0
-        self._episodes = episodes
-
-    def advance(self, n: int) -> tuple[ArrayF, ArrayF, ArrayF, np.ndarray]:
-        e = self._episodes
-        self.index = len(e.times)
-        return e.times, e.truth, e.measurements, e.valid

@@ -30,7 +30,55 @@ def episode_seed_for_reset(seed: int | None, np_random: np.random.Generator) -> 
     return int(seed)
 
 
-class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
+class _EpisodeWalk:
+    """What the single and the vector environment share: their configuration, and the walk
+    through episode data (batch first) that a stream delivers ``chunk_size`` steps at a time."""
+
+    metadata: dict[str, Any]
+
+    def _check_render_mode(self, render_mode: str | None) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            modes = self.metadata["render_modes"]
+            raise ValueError(f"render_mode must be None or one of {modes} (got {render_mode!r})")
+
+    def _configure(
+        self,
+        scenario: str | Scenario,
+        expose_truth: bool,
+        reward_weights: Mapping[str, float] | None,
+        render_mode: str | None,
+        chunk_size: int,
+        overrides: Mapping[str, Any],
+    ) -> None:
+        self.scenario: Scenario = get_scenario(scenario, **overrides)
+        self._check_render_mode(render_mode)
+        if int(chunk_size) < 1:
+            raise ValueError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
+        self.render_mode = render_mode
+        self.expose_truth = bool(expose_truth)
+        self.reward_weights = _check_weights(reward_weights)
+        self._chunk_size = int(chunk_size)
+        self._stream: Any = None
+        self._index = 0
+
+    def _start(self, stream: Any) -> None:
+        self._stream = stream
+        self._index = 0
+        self._load_chunk()
+
+    def _load_chunk(self) -> None:
+        self._chunk_start = self._stream.index
+        self._times, self._truth, self._meas, self._valid = self._stream.advance(self._chunk_size)
+
+    def _next_step(self) -> bool:
+        """Go to the next step (loading the next chunk when needed); True at the episode's last."""
+        self._index += 1
+        if self._index - self._chunk_start >= len(self._times):
+            self._load_chunk()
+        return self._index == self.scenario.n_steps - 1
+
+
+class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
     """Estimate the pose and twist of a tumbling Astrobee from noisy pose measurements.
 
     ## Description
@@ -112,19 +160,9 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
         chunk_size: int = 512,
         **overrides: Any,
     ) -> None:
-        self.scenario: Scenario = get_scenario(scenario, **overrides)
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']} (got {render_mode!r})")
-        if int(chunk_size) < 1:
-            raise ValueError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
-        self.render_mode = render_mode
-        self.expose_truth = bool(expose_truth)
-        self.reward_weights = _check_weights(reward_weights)
+        self._configure(scenario, expose_truth, reward_weights, render_mode, chunk_size, overrides)
         self.observation_space = observation_space(self.scenario.n_steps, self.scenario.dt)
         self.action_space = action_space()
-        self._chunk_size = int(chunk_size)
-        self._stream: Any = None
-        self._index = 0
         self.episode_seed: int | None = None
 
     def _new_stream(self, seed: int) -> Any:
@@ -134,24 +172,21 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
 
     # ------------------------------------------------------------------ episode data
     def _load_chunk(self) -> None:
-        assert self._stream is not None
-        self._chunk_start = self._stream.index
-        times, truth, meas, valid = self._stream.advance(self._chunk_size)
-        self._times, self._truth, self._meas, self._valid = times, truth[0], meas[0], valid[0]
-        self._truth_rows = self._truth.tolist()  # Python floats for the fast reward path
+        super()._load_chunk()
+        self._truth_rows = self._truth[0].tolist()  # Python floats for the fast reward path
 
     def _observation(self) -> dict[str, Any]:
         i = self._index - self._chunk_start
         return {
-            "pose": self._meas[i].copy().view(MeasuredPose),
-            "valid": np.int64(self._valid[i]),
+            "pose": self._meas[0, i].copy().view(MeasuredPose),
+            "valid": np.int64(self._valid[0, i]),
             "time": np.array(self._times[i]),
         }
 
     def _info(self) -> dict[str, Any]:
         info: dict[str, Any] = {"step": self._index, "episode_seed": self.episode_seed}
         if self.expose_truth:
-            info["truth"] = self._truth[self._index - self._chunk_start].copy()
+            info["truth"] = self._truth[0, self._index - self._chunk_start].copy()
         return info
 
     # ------------------------------------------------------------------ Gymnasium API
@@ -160,9 +195,7 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
     ) -> tuple[dict[str, Any], dict[str, Any]]:
         super().reset(seed=seed)
         self.episode_seed = episode_seed_for_reset(seed, self.np_random)
-        self._stream = self._new_stream(self.episode_seed)
-        self._index = 0
-        self._load_chunk()
+        self._start(self._new_stream(self.episode_seed))
         return self._observation(), self._info()
 
     def step(self, action: ArrayF) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
@@ -173,10 +206,7 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
         values = action_values(action)
         truth = self._truth_rows[self._index - self._chunk_start]
         reward = -estimate_cost_scalar(truth, values, self.reward_weights)
-        self._index += 1
-        if self._index - self._chunk_start >= len(self._times):
-            self._load_chunk()
-        truncated = self._index == self.scenario.n_steps - 1
+        truncated = self._next_step()
         return self._observation(), reward, False, truncated, self._info()
 
     def _render_name(self) -> tuple[str, int]:
@@ -187,14 +217,13 @@ class AstrobeeTumbleEnv(gym.Env[dict[str, Any], ArrayF]):
         if self.render_mode != "ansi" or self._stream is None:
             return None
         i = self._index - self._chunk_start
-        shown = "missing" if not self._valid[i] else np.array2string(self._meas[i], precision=3)
+        shown = "missing" if not self._valid[0, i] else np.array2string(self._meas[0, i], precision=3)
         name, digits = self._render_name()
         return f"{name} seed={self.episode_seed} step={self._index} t={self._times[i]:.{digits}f}s pose={shown}"
 
 
 def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:
-    if weights is None:
-        return dict(DEFAULT_WEIGHTS)
+    weights = weights or {}
     unknown = set(weights) - set(DEFAULT_WEIGHTS)
     if unknown:
         raise ValueError(f"unknown reward weight(s) {sorted(unknown)}; valid keys: {sorted(DEFAULT_WEIGHTS)}")

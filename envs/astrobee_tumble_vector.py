@@ -6,23 +6,22 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from fkn_bench.envs.astrobee_tumble import EPISODE_SEED_BOUND, _check_weights
+from fkn_bench.envs.astrobee_tumble import _EpisodeWalk, episode_seed_for_reset
 from fkn_bench.envs.episodes import EpisodeStream
 from fkn_bench.envs.rewards import estimate_cost
 from fkn_bench.envs.spaces import MeasuredPose, action_space, observation_space, pose_space, validate_actions
-from fkn_bench.scenarios import Scenario, get_scenario
+from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
 
 __all__ = ["AstrobeeTumbleVectorEnv"]
 
 
-class AstrobeeTumbleVectorEnv(VectorEnv):
+class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
     """``num_envs`` Astrobee episodes stepped together with numpy arrays.
 
     Observations, actions and rewards are those of
@@ -51,65 +50,36 @@ class AstrobeeTumbleVectorEnv(VectorEnv):
     ) -> None:
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
-        if render_mode is not None:
-            raise ValueError("AstrobeeTumbleVectorEnv supports no render mode")
-        if int(chunk_size) < 1:
-            raise ValueError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
         self.num_envs = num_envs
-        self.scenario: Scenario = get_scenario(scenario, **overrides)
-        self.expose_truth = bool(expose_truth)
-        self.reward_weights = _check_weights(reward_weights)
-        self.render_mode = None
-        n_steps, dt = self.scenario.n_steps, self.scenario.dt
-        self.single_observation_space = observation_space(n_steps, dt)
+        self._configure(scenario, expose_truth, reward_weights, render_mode, chunk_size, overrides)
+        self.single_observation_space = observation_space(self.scenario.n_steps, self.scenario.dt)
         self.single_action_space = action_space()
-        self.observation_space = spaces.Dict(
-            {
-                "pose": pose_space(num_envs),
-                "valid": spaces.MultiDiscrete(np.full(num_envs, 2)),
-                "time": spaces.Box(low=0.0, high=float(n_steps * dt), shape=(num_envs,), dtype=np.float64),
-            }
-        )
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.observation_space["pose"] = pose_space(num_envs)  # a missing (NaN) pose stays a member
         self.action_space = batch_space(self.single_action_space, num_envs)
-        self._chunk_size = int(chunk_size)
         self._rngs: list[np.random.Generator] = []
-        self._stream: EpisodeStream | None = None
-        self._index = 0
         self._needs_autoreset = False
         self.episode_seeds = np.zeros(num_envs, dtype=np.int64)
 
-    # ------------------------------------------------------------------ episode data
     def _start_episodes(self, seeds: Sequence[int]) -> None:
         self.episode_seeds = np.asarray(seeds, dtype=np.int64)
-        self._stream = EpisodeStream(self.scenario, [int(s) for s in seeds])
-        self._index = 0
-        self._load_chunk()
-
-    def _load_chunk(self) -> None:
-        assert self._stream is not None
-        self._chunk_start = self._stream.index
-        self._times, self._truth, self._meas, self._valid = self._stream.advance(self._chunk_size)
+        self._start(EpisodeStream(self.scenario, [int(s) for s in seeds]))
 
     def _observation(self) -> dict[str, Any]:
         i = self._index - self._chunk_start
-        n = self.num_envs
         return {
             "pose": self._meas[:, i].copy().view(MeasuredPose),
             "valid": self._valid[:, i].astype(np.int64),
-            "time": np.full(n, self._times[i]),
+            "time": np.full(self.num_envs, self._times[i]),
         }
 
     def _info(self) -> dict[str, Any]:
-        everywhere = np.ones(self.num_envs, dtype=bool)
-        info: dict[str, Any] = {
-            "step": np.full(self.num_envs, self._index, dtype=np.int64),
-            "_step": everywhere,
-            "episode_seed": self.episode_seeds.copy(),
-            "_episode_seed": everywhere.copy(),
-        }
+        info: dict[str, Any] = {"step": np.full(self.num_envs, self._index, dtype=np.int64)}
+        info["episode_seed"] = self.episode_seeds.copy()
         if self.expose_truth:
             info["truth"] = self._truth[:, self._index - self._chunk_start].copy()
-            info["_truth"] = everywhere.copy()
+        for key in list(info):  # Gymnasium's masks: every sub-environment has every key
+            info[f"_{key}"] = np.ones(self.num_envs, dtype=bool)
         return info
 
     # ------------------------------------------------------------------ Gymnasium API
@@ -133,10 +103,7 @@ class AstrobeeTumbleVectorEnv(VectorEnv):
         super().reset(seed=seeds[0])
         if seed is not None or not self._rngs:
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
-        episode = [
-            s if s is not None else int(rng.integers(EPISODE_SEED_BOUND)) for s, rng in zip(seeds, self._rngs)
-        ]
-        self._start_episodes(episode)
+        self._start_episodes([episode_seed_for_reset(s, rng) for s, rng in zip(seeds, self._rngs)])
         self._needs_autoreset = False
         return self._observation(), self._info()
 
@@ -145,21 +112,12 @@ class AstrobeeTumbleVectorEnv(VectorEnv):
             raise ResetNeeded("call reset() before step()")
         n = self.num_envs
         if self._needs_autoreset:
-            self._start_episodes([int(rng.integers(EPISODE_SEED_BOUND)) for rng in self._rngs])
+            self._start_episodes([episode_seed_for_reset(None, rng) for rng in self._rngs])
             self._needs_autoreset = False
             return self._observation(), np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), self._info()
         estimates = validate_actions(actions, batch=n)
         truth = self._truth[:, self._index - self._chunk_start]
         rewards = -estimate_cost(truth, estimates, self.reward_weights)
-        self._index += 1
-        if self._index - self._chunk_start >= len(self._times):
-            self._load_chunk()
-        truncated = self._index == self.scenario.n_steps - 1
-        self._needs_autoreset = truncated
-        return (
-            self._observation(),
-            rewards,
-            np.zeros(n, dtype=bool),
-            np.full(n, truncated),
-            self._info(),
-        )
+        truncated = self._needs_autoreset = self._next_step()
+        terminated = np.zeros(n, dtype=bool)
+        return self._observation(), rewards, terminated, np.full(n, truncated), self._info()

@@ -46,10 +46,6 @@ def _rotate(q: ArrayF, v: ArrayF) -> ArrayF:
     )
 
 
-def _rotate_inverse(q: ArrayF, v: ArrayF) -> ArrayF:
-    return _rotate(q * np.array([1.0, -1.0, -1.0, -1.0]), v)
-
-
 class ForcedRotation:
     """Constant world-frame angular velocity; attitude from the exact quaternion exponential.
 
@@ -124,7 +120,8 @@ class FreeTumble:
         jx, jy, jz = (float(v) for v in inertia)
         # Euler's equations: dw_x = (Jy - Jz)/Jx w_y w_z and cyclic
         self._coeff = np.array([(jy - jz) / jx, (jz - jx) / jy, (jx - jy) / jz])
-        omega_body = _rotate_inverse(q0, np.array(omega_world0, dtype=float))
+        conjugate = q0 * np.array([1.0, -1.0, -1.0, -1.0])  # the world rate in the body frame:
+        omega_body = _rotate(conjugate, np.array(omega_world0, dtype=float))
         self._y = np.concatenate([q0, omega_body], axis=1)
         self._h = float(dt) / int(substeps)
         self._substeps = int(substeps)

@@ -67,10 +67,13 @@ class Episodes:
         """The named split (``train``, ``val``, ``test`` or ``full``) of full-length episodes."""
         if self.start != 0 or self.n_steps != self.scenario.n_steps:
             raise ValueError("split() needs full-length episodes (generate with split='full')")
-        if name not in SPLITS:
-            raise ValueError(f"unknown split {name!r}; valid splits: {', '.join(SPLITS)}")
-        start, stop = self.scenario.split_bounds()[name]
-        return self.window(start, stop)
+        return self.window(*_split_bounds(self.scenario, name))
+
+
+def _split_bounds(scenario: Scenario, name: str) -> tuple[int, int]:
+    if name not in SPLITS:
+        raise ValueError(f"unknown split {name!r}; valid splits: {', '.join(SPLITS)}")
+    return scenario.split_bounds()[name]
 
 
 def initial_states(scenario: Scenario, seeds: Sequence[int]) -> tuple[ArrayF, ArrayF, ArrayF]:
@@ -88,12 +91,8 @@ def initial_states(scenario: Scenario, seeds: Sequence[int]) -> tuple[ArrayF, Ar
 
 
 class EpisodeStream:
-    """Generates a batch of episodes chunk by chunk (``advance(n)``), for the environments.
-
-    Args:
-        scenario: the configuration.
-        seeds: one non-negative integer seed per episode.
-    """
+    """Generates a batch of episodes of ``scenario``, one per non-negative integer seed, chunk by
+    chunk (``advance(n)``), for the environments."""
 
     def __init__(self, scenario: Scenario, seeds: Sequence[int]) -> None:
         self.scenario = scenario
@@ -153,32 +152,16 @@ class EpisodeStream:
 def generate_episodes(
     scenario: str | Scenario, seeds: int | Sequence[int], *, split: str = "full"
 ) -> Episodes:
-    """Generate whole episodes for ``seeds`` (an int ``N`` means seeds ``0 .. N-1``).
-
-    Args:
-        scenario: a registered name or a :class:`Scenario`.
-        seeds: episode seeds, or their number.
-        split: ``full`` (default), ``train``, ``val`` or ``test``.
-
-    Returns:
-        :class:`Episodes` with batch axis first.
-    """
+    """:class:`Episodes` (batch axis first) of ``scenario`` (a registered name or a
+    :class:`Scenario`) for ``seeds`` (an int ``N`` means seeds ``0 .. N-1``), whole or one
+    ``split`` (``full``, ``train``, ``val`` or ``test``)."""
     scenario = get_scenario(scenario)
-    if split not in SPLITS:
-        raise ValueError(f"unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
+    start, stop = _split_bounds(scenario, split)
     seed_list = list(range(seeds)) if isinstance(seeds, (int, np.integer)) else [int(s) for s in seeds]
     if not seed_list:
         raise ValueError("at least one seed is required")
-    start, stop = scenario.split_bounds()[split]
     source = EpisodeStream(scenario, seed_list)
     source.seek(start)
     times, truth, measurements, valid = source.advance(stop - start)
-    return Episodes(
-        scenario,
-        tuple(seed_list),
-        start,
-        times,
-        np.ascontiguousarray(truth),
-        np.ascontiguousarray(measurements),
-        valid,
-    )
+    truth, measurements = np.ascontiguousarray(truth), np.ascontiguousarray(measurements)
+    return Episodes(scenario, tuple(seed_list), start, times, truth, measurements, valid)

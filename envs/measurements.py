@@ -31,25 +31,6 @@ from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["STREAMS", "BLOCK", "stream", "MeasurementGenerator"]
 
-STREAMS: tuple[str, ...] = (
-    "attitude0",
-    "position0",
-    "position_noise",
-    "attitude_noise",
-    "dropout",
-    "burst",
-    "outlier",
-    "outlier_attitude",
-    "outlier_position",
-    "sign_flip",
-)
-"""Names of the independent random streams of an episode. Their order fixes their keys: append
-new streams at the end."""
-
-BLOCK = 4096
-"""Steps per random-stream block."""
-
-# per-step draw shape and method of each measurement stream
 _SCHEDULED = ("position_noise", "attitude_noise")
 _DRAWS: dict[str, tuple[str, tuple[int, ...]]] = {
     "position_noise": ("standard_normal", (3,)),
@@ -61,6 +42,14 @@ _DRAWS: dict[str, tuple[str, tuple[int, ...]]] = {
     "outlier_position": ("standard_normal", (3,)),
     "sign_flip": ("random", ()),
 }
+"""Per-step draw method and shape of each measurement stream."""
+
+STREAMS: tuple[str, ...] = ("attitude0", "position0", *_DRAWS)
+"""Names of the independent random streams of an episode. Their order fixes their keys: append
+new streams at the end (of :data:`_DRAWS`)."""
+
+BLOCK = 4096
+"""Steps per random-stream block."""
 
 
 def stream(seed: int, name: str, block: int = 0) -> np.random.Generator:
@@ -72,27 +61,12 @@ def stream(seed: int, name: str, block: int = 0) -> np.random.Generator:
 
 
 class MeasurementGenerator:
-    """Measurements for a batch of episodes over any step range.
-
-    Args:
-        scenario: noise, schedule and corruption settings.
-        seeds: one episode seed per batch row.
-    """
+    """Measurements for a batch of episodes (one seed per batch row) over any step range."""
 
     def __init__(self, scenario: Scenario, seeds: Sequence[int]) -> None:
         self._scenario = scenario
         self._seeds = tuple(int(s) for s in seeds)
         self._cache: dict[str, tuple[int, ArrayF]] = {}
-        sc = scenario
-        self._active = ["position_noise", "attitude_noise"]
-        if sc.dropout > 0:
-            self._active.append("dropout")
-        if sc.burst_length > 0 and sc.burst_rate > 0:
-            self._active.append("burst")
-        if sc.outlier_fraction > 0:
-            self._active += ["outlier", "outlier_attitude", "outlier_position"]
-        if sc.sign_flip_probability > 0:
-            self._active.append("sign_flip")
 
     def _block_steps(self, name: str, block: int) -> ArrayF:
         """Global steps that own one draw each in ``block`` of stream ``name``."""
@@ -159,9 +133,9 @@ class MeasurementGenerator:
         columns = scheduled - start
         valid = np.zeros((batch, n), dtype=bool)
         valid[:, columns] = True
-        if "dropout" in self._active:
+        if sc.dropout > 0:
             valid &= self.draws("dropout", steps) >= sc.dropout
-        if "burst" in self._active:
+        if sc.burst_length > 0 and sc.burst_rate > 0:
             valid &= ~self._burst_gaps(start, stop)
 
         # noisy poses at the scheduled steps only: (B, m, 7)
@@ -173,14 +147,14 @@ class MeasurementGenerator:
         r = self.draws("position_noise", scheduled)
         r *= sc.sigma_position_effective
         np.add(truth_at[..., 4:7], r, out=pose[..., 4:])
-        if "outlier" in self._active:
+        if sc.outlier_fraction > 0:
             is_outlier = valid[:, columns] & (self.draws("outlier", scheduled) < sc.outlier_fraction)
             random_q = self.draws("outlier_attitude", scheduled)
             random_q /= np.linalg.norm(random_q, axis=-1, keepdims=True)
             offset = sc.outlier_position_sigma * self.draws("outlier_position", scheduled)
             pose[..., :4] = np.where(is_outlier[..., None], random_q, pose[..., :4])
             pose[..., 4:] += np.where(is_outlier[..., None], offset, 0.0)
-        if "sign_flip" in self._active:
+        if sc.sign_flip_probability > 0:
             flip = self.draws("sign_flip", scheduled) < sc.sign_flip_probability
             pose[..., :4] *= np.where(flip, -1.0, 1.0)[..., None]
 

@@ -10,22 +10,20 @@ import gymnasium as gym
 
 __all__ = ["register_environments", "ENV_IDS"]
 
-ENV_IDS: tuple[str, ...] = ("AstrobeeTumble-v0", "AstrobeeReplay-v0")
+_ENTRY_POINTS: dict[str, dict[str, str]] = {
+    "AstrobeeTumble-v0": {
+        "entry_point": "fkn_bench.envs.astrobee_tumble:AstrobeeTumbleEnv",
+        "vector_entry_point": "fkn_bench.envs.astrobee_tumble_vector:AstrobeeTumbleVectorEnv",
+    },
+    # a recording replayed through the estimator loop (fkn_bench.recordings); no vector version
+    "AstrobeeReplay-v0": {"entry_point": "fkn_bench.envs.astrobee_replay:AstrobeeReplayEnv"},
+}
+
+ENV_IDS: tuple[str, ...] = tuple(_ENTRY_POINTS)
 
 
 def register_environments() -> None:
     """Register the environment ids; a second call is a no-op."""
-    if "AstrobeeTumble-v0" not in gym.registry:
-        gym.register(
-            id="AstrobeeTumble-v0",
-            entry_point="fkn_bench.envs.astrobee_tumble:AstrobeeTumbleEnv",
-            vector_entry_point="fkn_bench.envs.astrobee_tumble_vector:AstrobeeTumbleVectorEnv",
-            disable_env_checker=False,
-        )
-    if "AstrobeeReplay-v0" not in gym.registry:
-        # a recording replayed through the estimator loop (fkn_bench.recordings); no vector version
-        gym.register(
-            id="AstrobeeReplay-v0",
-            entry_point="fkn_bench.envs.astrobee_replay:AstrobeeReplayEnv",
-            disable_env_checker=False,
-        )
+    for env_id, entry_points in _ENTRY_POINTS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, disable_env_checker=False, **entry_points)

@@ -20,7 +20,7 @@ bit for bit, which keeps the vector environment's rewards identical to single en
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
@@ -31,18 +31,23 @@ __all__ = ["DEFAULT_WEIGHTS", "estimate_cost", "estimate_cost_scalar", "attitude
 DEFAULT_WEIGHTS: Mapping[str, float] = {"attitude": 1.0, "position": 1.0, "omega": 10.0, "velocity": 10.0}
 
 
-def attitude_error_angle(q_true: ArrayF, q_est: ArrayF) -> ArrayF:
-    """Rotation angle (rad) between attitudes ``(N, 4)``; neither need be exactly unit."""
-    e0, e1, e2, e3 = q_est[:, 0], q_est[:, 1], q_est[:, 2], q_est[:, 3]
-    t0, t1, t2, t3 = q_true[:, 0], q_true[:, 1], q_true[:, 2], q_true[:, 3]
-    norm = np.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
+def _chords(e: Sequence, t: Sequence, sqrt: Callable) -> tuple:
+    """``|u - v|`` and ``|u + v|`` for ``u``, ``v`` the normalised estimate ``e`` and truth ``t``
+    (components 0-3: rows of transposed batches with ``np.sqrt``, or floats with ``math.sqrt``)."""
+    e0, e1, e2, e3 = e[0], e[1], e[2], e[3]
+    t0, t1, t2, t3 = t[0], t[1], t[2], t[3]
+    norm = sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
     u0, u1, u2, u3 = e0 / norm, e1 / norm, e2 / norm, e3 / norm
-    norm = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2 + t3 * t3)
+    norm = sqrt(t0 * t0 + t1 * t1 + t2 * t2 + t3 * t3)
     t0, t1, t2, t3 = t0 / norm, t1 / norm, t2 / norm, t3 / norm
     m0, m1, m2, m3 = u0 - t0, u1 - t1, u2 - t2, u3 - t3
     p0, p1, p2, p3 = u0 + t0, u1 + t1, u2 + t2, u3 + t3
-    minus = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2 + m3 * m3)
-    plus = np.sqrt(p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
+    return sqrt(m0 * m0 + m1 * m1 + m2 * m2 + m3 * m3), sqrt(p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
+
+
+def attitude_error_angle(q_true: ArrayF, q_est: ArrayF) -> ArrayF:
+    """Rotation angle (rad) between attitudes ``(N, 4)``; neither need be exactly unit."""
+    minus, plus = _chords(q_est.T, q_true.T, np.sqrt)
     return 4.0 * np.arctan2(np.minimum(minus, plus), np.maximum(minus, plus))
 
 
@@ -66,16 +71,7 @@ def estimate_cost_scalar(
     truth: Sequence[float], estimate: Sequence[float], weights: Mapping[str, float] = DEFAULT_WEIGHTS
 ) -> float:
     """:func:`estimate_cost` for one 13-element truth and estimate (lists of floats)."""
-    e0, e1, e2, e3 = estimate[0], estimate[1], estimate[2], estimate[3]
-    t0, t1, t2, t3 = truth[0], truth[1], truth[2], truth[3]
-    norm = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3)
-    u0, u1, u2, u3 = e0 / norm, e1 / norm, e2 / norm, e3 / norm
-    norm = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2 + t3 * t3)
-    t0, t1, t2, t3 = t0 / norm, t1 / norm, t2 / norm, t3 / norm
-    m0, m1, m2, m3 = u0 - t0, u1 - t1, u2 - t2, u3 - t3
-    p0, p1, p2, p3 = u0 + t0, u1 + t1, u2 + t2, u3 + t3
-    minus = math.sqrt(m0 * m0 + m1 * m1 + m2 * m2 + m3 * m3)
-    plus = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
+    minus, plus = _chords(estimate, truth, math.sqrt)
     # numpy's arctan2, not math.atan2: the two may differ in the last bit
     angle = 4.0 * float(np.arctan2(min(minus, plus), max(minus, plus)))
     d = [estimate[i] - truth[i] for i in range(4, 13)]

@@ -78,17 +78,12 @@ class PoseBox(spaces.Box):
         return f"PoseBox({self.shape}, {self.dtype}, NaN rows = missing)"
 
 
-def _pose_bounds() -> tuple[ArrayF, ArrayF]:
-    high = np.array([1.0] * 4 + [POSITION_LIMIT] * 3)
-    return -high, high
-
-
 def pose_space(batch: int | None = None) -> PoseBox:
     """Space of one pose ``(7,)`` or of a batch ``(batch, 7)``."""
-    low, high = _pose_bounds()
+    high = np.array([1.0] * 4 + [POSITION_LIMIT] * 3)
     if batch is not None:
-        low, high = np.tile(low, (batch, 1)), np.tile(high, (batch, 1))
-    return PoseBox(low=low, high=high, dtype=np.float64)
+        high = np.tile(high, (batch, 1))
+    return PoseBox(low=-high, high=high, dtype=np.float64)
 
 
 def observation_space(n_steps: int, dt: float) -> spaces.Dict:

@@ -13,78 +13,16 @@ per-run values; the harness (:mod:`fkn_bench.harness`) joins estimators, episode
 * :mod:`~fkn_bench.metrics.aggregate`: mean, median and IQR over seeds.
 """
 
-from fkn_bench.metrics.accuracy import MAGNITUDE_STATISTICS, component_rmse, magnitude_statistics, state_rmse
-from fkn_bench.metrics.aggregate import SUMMARY_FIELDS, Summary, summarize
-from fkn_bench.metrics.consistency import (
-    NEES_DOF,
-    NIS_DOF,
-    AverageStatistic,
-    QuadraticForm,
-    StatisticSums,
-    average_statistic,
-    chi2_interval,
-    chi2_upper,
-    normalized_squares,
-    positive_definite,
-    statistic_sums,
-)
-from fkn_bench.metrics.errors import GROUP_UNITS, GROUPS, attitude_error_deg, component_errors, error_state, group_errors
-from fkn_bench.metrics.scoring import MetricSettings, RunScores, score_run
-from fkn_bench.metrics.settling import (
-    DEFAULT_PEAK_FRACTION,
-    DEFAULT_TOLERANCES,
-    SettlingResult,
-    moving_rms,
-    settling_band,
-    settling_time,
-)
-from fkn_bench.metrics.stability import (
-    DEFAULT_GROWTH_FLOORS,
-    DIVERGENCE_REASONS,
-    DivergenceFlags,
-    error_growth,
-    nees_high,
-    window_rms,
-)
+from fkn_bench.metrics import accuracy, aggregate, consistency, errors, scoring, settling, stability
+from fkn_bench.metrics.accuracy import *  # noqa: F403  (the public API of each module, republished)
+from fkn_bench.metrics.aggregate import *  # noqa: F403
+from fkn_bench.metrics.consistency import *  # noqa: F403
+from fkn_bench.metrics.errors import *  # noqa: F403
+from fkn_bench.metrics.scoring import *  # noqa: F403
+from fkn_bench.metrics.settling import *  # noqa: F403
+from fkn_bench.metrics.stability import *  # noqa: F403
 
-__all__ = [
-    "AverageStatistic",
-    "DEFAULT_GROWTH_FLOORS",
-    "DEFAULT_PEAK_FRACTION",
-    "DEFAULT_TOLERANCES",
-    "DIVERGENCE_REASONS",
-    "DivergenceFlags",
-    "GROUPS",
-    "GROUP_UNITS",
-    "MAGNITUDE_STATISTICS",
-    "MetricSettings",
-    "NEES_DOF",
-    "NIS_DOF",
-    "QuadraticForm",
-    "RunScores",
-    "SUMMARY_FIELDS",
-    "SettlingResult",
-    "StatisticSums",
-    "Summary",
-    "attitude_error_deg",
-    "average_statistic",
-    "chi2_interval",
-    "chi2_upper",
-    "component_errors",
-    "component_rmse",
-    "error_growth",
-    "error_state",
-    "group_errors",
-    "magnitude_statistics",
-    "moving_rms",
-    "nees_high",
-    "normalized_squares",
-    "positive_definite",
-    "score_run",
-    "settling_band",
-    "settling_time",
-    "state_rmse",
-    "statistic_sums",
-    "summarize",
-    "window_rms",
-]
+__all__ = sorted(
+    accuracy.__all__ + aggregate.__all__ + consistency.__all__ + errors.__all__ + scoring.__all__
+    + settling.__all__ + stability.__all__
+)

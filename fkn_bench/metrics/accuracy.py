@@ -18,16 +18,20 @@ MAGNITUDE_STATISTICS: tuple[str, ...] = ("rmse", "median", "p95", "max")
 """Statistics of an error magnitude over time that :func:`magnitude_statistics` returns."""
 
 
+def _errors(errors: ArrayF) -> ArrayF:
+    errors = np.asarray(errors, dtype=np.float64)
+    if errors.ndim != 3 or errors.shape[1] == 0:
+        raise ValueError(f"errors must have shape (B, T, n) with T >= 1 (got {errors.shape})")
+    return errors
+
+
 def component_rmse(errors: ArrayF) -> ArrayF:
     """Root mean square over time of each component: ``(B, T, n) -> (B, n)``.
 
     With :func:`fkn_bench.metrics.errors.component_errors` this is the paper's per-variable RMSE
     table (FlexKalmanNet, "RMSE of each variable of the state vector").
     """
-    errors = np.asarray(errors, dtype=np.float64)
-    if errors.ndim != 3 or errors.shape[1] == 0:
-        raise ValueError(f"errors must have shape (B, T, n) with T >= 1 (got {errors.shape})")
-    return np.sqrt(np.mean(np.square(errors), axis=1))
+    return np.sqrt(np.mean(np.square(_errors(errors)), axis=1))
 
 
 def state_rmse(errors: ArrayF) -> ArrayF:
@@ -37,10 +41,7 @@ def state_rmse(errors: ArrayF) -> ArrayF:
 
     This is fkn-bench's primary score (lower is better).
     """
-    errors = np.asarray(errors, dtype=np.float64)
-    if errors.ndim != 3 or errors.shape[1] == 0:
-        raise ValueError(f"errors must have shape (B, T, n) with T >= 1 (got {errors.shape})")
-    return np.sqrt(np.mean(np.square(errors), axis=(1, 2)))
+    return np.sqrt(np.mean(np.square(_errors(errors)), axis=(1, 2)))
 
 
 def magnitude_statistics(magnitudes: ArrayF) -> dict[str, ArrayF]:

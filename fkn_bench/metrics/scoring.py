@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from fkn_bench.metrics.accuracy import component_rmse, magnitude_statistics, state_rmse
-from fkn_bench.metrics.consistency import NEES_DOF, StatisticSums, normalized_squares, statistic_sums
+from fkn_bench.metrics.consistency import StatisticSums, normalized_squares, statistic_sums
 from fkn_bench.metrics.errors import GROUPS, component_errors, error_state, group_errors
 from fkn_bench.metrics.settling import DEFAULT_PEAK_FRACTION, DEFAULT_TOLERANCES, SettlingResult, settling_time
 from fkn_bench.metrics.stability import DEFAULT_GROWTH_FLOORS, DivergenceFlags, error_growth, nees_high
@@ -173,13 +173,8 @@ def score_run(
     stats = {g: magnitude_statistics(magnitudes[g][:, scored]) for g in GROUPS}
 
     settling = {
-        g: settling_time(
-            magnitudes[g],
-            dt,
-            tolerance=settings.settling_tolerances[g],
-            window=settings.settling_window,
-            peak_fraction=settings.peak_fraction,
-        )
+        g: settling_time(magnitudes[g], dt, tolerance=settings.settling_tolerances[g],
+                         window=settings.settling_window, peak_fraction=settings.peak_fraction)
         for g in GROUPS
     }
     settling_all = np.max(np.stack([settling[g].time for g in GROUPS]), axis=0)
@@ -193,9 +188,10 @@ def score_run(
         P = np.asarray(error_covariances, dtype=np.float64)
         if P.shape != (B, T, ERROR_DIM, ERROR_DIM):
             raise ValueError(f"error_covariances must have shape {(B, T, ERROR_DIM, ERROR_DIM)} (got {P.shape})")
-        non_finite |= ~np.all(np.isfinite(P[:, scored]), axis=(1, 2, 3))
+        finite = np.all(np.isfinite(P[:, scored]), axis=(2, 3))
+        non_finite |= ~np.all(finite, axis=1)
         nees = normalized_squares(error_state(truth[:, scored], means[:, scored]), P[:, scored])
-        cholesky_failed = ~np.all(nees.positive_definite | ~np.all(np.isfinite(P[:, scored]), axis=(2, 3)), axis=1)
+        cholesky_failed = ~np.all(nees.positive_definite | ~finite, axis=1)
         nees_values = nees.values
         nees_sums = statistic_sums(nees_values)
 
@@ -210,17 +206,10 @@ def score_run(
         nis_values = normalized_squares(nu[:, scored], S[:, scored], mask[:, scored]).values
         nis_sums = statistic_sums(nis_values)
 
-    divergence = DivergenceFlags(
-        non_finite=non_finite,
-        cholesky_failed=cholesky_failed,
-        error_growth=error_growth(
-            magnitudes,
-            initial_steps=settings.initial_steps,
-            final_steps=settings.final_steps,
-            floors=settings.growth_floors,
-        ),
-        nees_high=nees_high(nees_values, final_steps=settings.final_steps, quantile=settings.nees_quantile, dof=NEES_DOF),
-    )
+    growth = error_growth(magnitudes, initial_steps=settings.initial_steps,
+                          final_steps=settings.final_steps, floors=settings.growth_floors)
+    high = nees_high(nees_values, final_steps=settings.final_steps, quantile=settings.nees_quantile)
+    divergence = DivergenceFlags(non_finite, cholesky_failed, growth, high)
     return RunScores(
         n_steps=T,
         scored_steps=T - cut,

@@ -1,25 +1,7 @@
 """Scenario configurations and their registry (see :class:`Scenario`)."""
 
-from fkn_bench.scenarios.registry import (
-    UnknownScenarioError,
-    get_scenario,
-    list_scenarios,
-    load_scenarios,
-    register_scenario,
-    scenario_names,
-)
-from fkn_bench.scenarios.scenario import ASTROBEE_INERTIA, ASTROBEE_MASS, SPLITS, ConfigError, Scenario
+from fkn_bench.scenarios import registry, scenario
+from fkn_bench.scenarios.registry import *  # noqa: F403  (the public API of both modules, republished)
+from fkn_bench.scenarios.scenario import *  # noqa: F403
 
-__all__ = [
-    "ASTROBEE_INERTIA",
-    "ASTROBEE_MASS",
-    "SPLITS",
-    "ConfigError",
-    "Scenario",
-    "UnknownScenarioError",
-    "get_scenario",
-    "list_scenarios",
-    "load_scenarios",
-    "register_scenario",
-    "scenario_names",
-]
+__all__ = scenario.__all__ + registry.__all__

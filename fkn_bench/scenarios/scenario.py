@@ -49,15 +49,9 @@ def _vector(value: Any, name: str, length: int) -> tuple[float, ...]:
     try:
         items = tuple(float(v) for v in value)
     except (TypeError, ValueError):
-        raise ConfigError(
-            f"scenario field '{name}' must be a sequence of {length} finite numbers (got {value!r})"
-        ) from None
-    _check(
-        len(items) == length and all(math.isfinite(v) for v in items),
-        name,
-        f"a sequence of {length} finite numbers",
-        value,
-    )
+        items = ()
+    ok = len(items) == length and all(map(math.isfinite, items))
+    _check(ok, name, f"a sequence of {length} finite numbers", value)
     return items
 
 
@@ -122,7 +116,8 @@ class Scenario:
         set_ = object.__setattr__
         _check(isinstance(self.name, str) and self.name != "", "name", "a non-empty string", self.name)
         _check(self.dynamics in ("forced", "free"), "dynamics", "'forced' or 'free'", self.dynamics)
-        set_(self, "omega0", _vector(self.omega0, "omega0", 3))
+        for name in ("omega0", "position0", "velocity0"):
+            set_(self, name, _vector(getattr(self, name), name, 3))
         inertia = _vector(self.inertia, "inertia", 3)
         _check(all(v > 0 for v in inertia), "inertia", "three positive moments (kg m^2)", self.inertia)
         a, b, c = sorted(inertia)
@@ -133,8 +128,6 @@ class Scenario:
             norm = math.sqrt(sum(v * v for v in q))
             _check(norm > 1e-9, "attitude0", "a non-zero quaternion (wxyz) or None", self.attitude0)
             set_(self, "attitude0", tuple(v / norm for v in q))
-        set_(self, "position0", _vector(self.position0, "position0", 3))
-        set_(self, "velocity0", _vector(self.velocity0, "velocity0", 3))
         for name in ("position0_std", "sigma_position", "sigma_attitude", "noise_scale",
                      "outlier_position_sigma"):
             value = getattr(self, name)
