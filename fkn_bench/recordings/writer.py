@@ -97,11 +97,7 @@ DEFAULT_START_EPOCH_NS = 1_735_689_600 * 1_000_000_000
 RECORDING_FORMAT = "fkn-bench-recording"
 RECORDING_FORMAT_VERSION = 1
 
-COMPRESSIONS: dict[str, CompressionType] = {
-    "zstd": CompressionType.ZSTD,
-    "lz4": CompressionType.LZ4,
-    "none": CompressionType.NONE,
-}
+COMPRESSIONS: dict[str, CompressionType] = {name: CompressionType[name.upper()] for name in ("zstd", "lz4", "none")}
 
 _POSE = "geometry_msgs/msg/PoseStamped"
 _TWIST = "geometry_msgs/msg/TwistStamped"
@@ -110,11 +106,6 @@ _FOXGLOVE_POSE = "foxglove.PoseInFrame"
 
 # position-first order of the ROS 6x6 pose covariance, as indices into [dtheta, dr, ...]
 _ROS_POSE_ORDER = np.array([3, 4, 5, 0, 1, 2])
-
-
-def _join(namespace: str, name: str) -> str:
-    namespace = namespace.strip("/")
-    return f"/{namespace}{name}" if namespace else name
 
 
 @dataclass(frozen=True)
@@ -136,7 +127,8 @@ class RecordingTopics:
         """The default names under ``namespace`` (``"honey"`` -> ``/honey/loc/truth/pose``)."""
         if not isinstance(namespace, str) or any(c.isspace() for c in namespace):
             raise ValueError(f"namespace must be a string without spaces (got {namespace!r})")
-        return cls(**{f.name: _join(namespace, f.default) for f in fields(cls)})  # type: ignore[arg-type]
+        prefix = "/" + namespace.strip("/") if namespace.strip("/") else ""
+        return cls(**{f.name: prefix + f.default for f in fields(cls)})  # type: ignore[operator]
 
 
 @dataclass(frozen=True)
@@ -183,7 +175,7 @@ def stamps_from_times(times: ArrayF, start_epoch_ns: int = DEFAULT_START_EPOCH_N
     return int(start_epoch_ns) + np.round(times * 1e9).astype(np.int64)
 
 
-def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
+def provenance() -> dict[str, str]:
     """The ``fkn_bench.provenance`` metadata (MCAP metadata values are strings): the versions,
     machine and git commit of :func:`fkn_bench.provenance.environment`, the mcap packages'
     versions, the command line and the time."""
@@ -195,7 +187,7 @@ def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
             return ""
 
     env = environment()
-    record = {
+    return {
         "fkn_bench_version": str(env["fkn_bench"]),
         "python": str(env["python"]),
         "platform": str(env["machine"]["platform"]),
@@ -206,9 +198,6 @@ def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
         "git_commit": env["git_commit"] or "",
         "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
-    for key, value in (extra or {}).items():
-        record[str(key)] = value if isinstance(value, str) else json.dumps(value)
-    return record
 
 
 def _checked(name: str, array: Any, shape: tuple[int, ...], dtype: type = np.float64) -> Any:
@@ -349,12 +338,12 @@ def write_recording(
             writer.add_metadata("fkn_bench.recording", recording_meta)
             for name, record in (metadata or {}).items():
                 writer.add_metadata(name, {str(k): str(v) for k, v in record.items()})
-            schema_ids: dict[str, int] = {}
-            for schema in dict.fromkeys(s[1] for s in streams):
-                if schema == _FOXGLOVE_POSE:
-                    schema_ids[schema] = writer.register_schema(schema, "jsonschema", FOXGLOVE_SCHEMAS[schema])
-                else:
-                    schema_ids[schema] = writer.register_schema(schema, "ros2msg", ros2_schema_text(schema).encode())
+            schema_ids = {
+                schema: writer.register_schema(schema, "jsonschema", FOXGLOVE_SCHEMAS[schema])
+                if schema == _FOXGLOVE_POSE
+                else writer.register_schema(schema, "ros2msg", ros2_schema_text(schema).encode())
+                for schema in dict.fromkeys(s[1] for s in streams)
+            }
             channels = [
                 writer.register_channel(topic, "json" if schema == _FOXGLOVE_POSE else "cdr", schema_ids[schema])
                 for topic, schema, _, _ in streams
@@ -385,7 +374,6 @@ def episode_metadata(
     scenario: Any = None,
     estimator: Any = None,
     extra: Mapping[str, Mapping[str, str]] | None = None,
-    provenance_extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Mapping[str, str]]:
     """The metadata records of a recorded episode: ``fkn_bench.scenario`` (each field of a
     :class:`~fkn_bench.scenarios.Scenario` JSON-encoded, plus ``config_hash``), ``fkn_bench.episode``,
@@ -404,7 +392,7 @@ def episode_metadata(
         if callable(getattr(estimator, "to_config", None)):
             record["config"] = json.dumps(to_jsonable(estimator.to_config()))
         metadata["fkn_bench.estimator"] = record
-    metadata["fkn_bench.provenance"] = provenance(provenance_extra)
+    metadata["fkn_bench.provenance"] = provenance()
     metadata.update(extra or {})
     return metadata
 
@@ -418,7 +406,6 @@ def record_episode(
     estimator: Any = None,
     split: str | None = None,
     extra_metadata: Mapping[str, Mapping[str, str]] | None = None,
-    provenance_extra: Mapping[str, Any] | None = None,
     **options: Any,
 ) -> RecordingSummary:
     """Record row ``index`` of ``episodes`` (an :class:`~fkn_bench.envs.Episodes`) and, when
@@ -437,11 +424,8 @@ def record_episode(
             raise ValueError(
                 f"estimates cover {estimates.means.shape[:2]} (batch, steps); the episodes {episodes.truth.shape[:2]}"
             )
-        means = estimates.means[index]
-        if estimates.error_covariances is not None:
-            covariances = estimates.error_covariances[index]
-        if estimates.initialised is not None:
-            mask = estimates.initialised[index]
+        arrays = (estimates.means, estimates.error_covariances, estimates.initialised)
+        means, covariances, mask = (None if a is None else a[index] for a in arrays)
     episode = {
         "seed": str(episodes.seeds[index]),
         "split": split or ("full" if episodes.start == 0 and episodes.n_steps == episodes.scenario.n_steps else "window"),
@@ -449,9 +433,7 @@ def record_episode(
         "n_steps": str(episodes.n_steps),
         "dt": repr(episodes.scenario.dt),
     }
-    metadata = episode_metadata(
-        episode, scenario=episodes.scenario, estimator=estimator, extra=extra_metadata, provenance_extra=provenance_extra
-    )
+    metadata = episode_metadata(episode, scenario=episodes.scenario, estimator=estimator, extra=extra_metadata)
     return write_recording(
         path,
         times=episodes.times,
