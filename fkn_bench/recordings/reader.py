@@ -591,14 +591,11 @@ class McapRecording:
         if type_name in TWIST_TYPES:
             linear = 43 if type_name == _ODOMETRY else 0
             twists = np.concatenate([values[:, linear + 3 : linear + 6], values[:, linear : linear + 3]], axis=1)
-        ok = np.ones(len(indices), dtype=bool)
-        for array in (poses, twists):
-            if array is not None:
-                ok &= np.isfinite(array).all(axis=1)
-        zero_q = np.zeros(len(indices), dtype=bool)
+        ok = np.isfinite(np.concatenate([a for a in (poses, twists) if a is not None], axis=1)).all(axis=1)
+        zero_q = np.zeros_like(ok)
         if poses is not None:
             zero_q = ok & (np.linalg.norm(np.nan_to_num(poses[:, :4]), axis=1) < 1e-9)
-            ok &= ~zero_q
+        ok &= ~zero_q
         bad = keep & ~ok
         if bad.any():
             i = int(np.argmax(bad))

@@ -283,17 +283,6 @@ def _pick_truth_topic(rec: McapRecording, recorded_topics: Mapping[str, str]) ->
     )
 
 
-def _twist_topic_for(rec: McapRecording, truth_topic: str) -> str | None:
-    """The TwistStamped topic next to the truth topic (``.../pose`` -> ``.../twist``), if any."""
-    if not truth_topic.endswith("pose"):
-        return None
-    candidate = truth_topic[: -len("pose")] + "twist"
-    info = rec.topics().get(candidate)
-    if info is not None and info.type_name == "geometry_msgs/TwistStamped" and info.message_count != 0:
-        return candidate
-    return None
-
-
 def _grid(first: int, last: int, dt: float) -> np.ndarray:
     steps = int(np.floor((last - first) / (dt * 1e9) + 1e-6)) + 1
     return first + np.round(np.arange(steps) * dt * 1e9).astype(np.int64)
@@ -344,8 +333,11 @@ def read_recording(
     truth_name = truth_topic if truth_topic is not None else _pick_truth_topic(rec, recorded_topics)
     truth_info = rec.require_topic(truth_name, "truth")
     twist_name = None if twist_topic == "auto" else twist_topic
-    if twist_topic == "auto" and truth_info.type_name != "nav_msgs/Odometry":
-        twist_name = _twist_topic_for(rec, truth_name)
+    if twist_topic == "auto" and truth_info.type_name != "nav_msgs/Odometry" and truth_name.endswith("pose"):
+        twist_name = truth_name[: -len("pose")] + "twist"  # the TwistStamped topic next to the truth, if any
+        info = rec.topics().get(twist_name)
+        if info is None or info.type_name != "geometry_msgs/TwistStamped" or info.message_count == 0:
+            twist_name = None
     elif twist_name is not None:
         rec.require_topic(twist_name, "twist")
     rec.prefetch([t for t in (truth_name, twist_name, measurement_topic) if t])
@@ -414,8 +406,7 @@ def read_recording(
     if measurement_topic is not None:
         meas = read(rec.read_poses(measurement_topic, role="measurement", time_source=time_source,
                                    quaternion_tolerance=quaternion_tolerance))
-        measurements, valid, more = _snap_measurements(meas, grid, step)
-        notes += more
+        measurements, valid = _snap_measurements(meas, grid, step, notes)
         measurement_source = f"topic {measurement_topic}"
     else:
         measurement_source = f"synthesised ({base.name} noise model)"
@@ -469,9 +460,8 @@ def read_recording(
     )
 
 
-def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float) -> tuple[ArrayF, ArrayB, list[str]]:
-    """Assign each measurement to the nearest grid step (the last one wins a step)."""
-    notes: list[str] = []
+def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float, notes: list[str]) -> tuple[ArrayF, ArrayB]:
+    """Assign each measurement to the nearest grid step (the last one wins a step); remarks go to ``notes``."""
     n = len(grid)
     k = np.floor((series.stamps_ns - grid[0]).astype(np.float64) / (dt * 1e9) + 0.5).astype(np.int64)
     inside = (k >= 0) & (k < n)
@@ -490,7 +480,7 @@ def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float) -> tuple
         offset = np.abs(series.stamps_ns[inside] - grid[k_in]).max() / 1e9
         if offset > 1e-6:
             notes.append(f"{series.topic}: measurements moved to the nearest step (up to {offset * 1e3:.4g} ms)")
-    return measurements, valid, notes
+    return measurements, valid
 
 
 def load_episodes(path: str | Path, *, seed: int = 0, **options: Any) -> Episodes:

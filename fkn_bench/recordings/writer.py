@@ -84,7 +84,6 @@ __all__ = [
     "RecordingTopics",
     "RecordingSummary",
     "ros_pose_covariance",
-    "stamps_from_times",
     "write_recording",
     "record_episode",
     "provenance",
@@ -167,12 +166,6 @@ def ros_pose_covariance(error_covariance: ArrayF) -> ArrayF:
         raise ValueError(f"error covariances must have shape (..., 12, 12) (got {P.shape})")
     block = P[..., _ROS_POSE_ORDER, :][..., :, _ROS_POSE_ORDER]  # same order for rows and columns: symmetric as P is
     return block.reshape(*P.shape[:-2], 36)
-
-
-def stamps_from_times(times: ArrayF, start_epoch_ns: int = DEFAULT_START_EPOCH_NS) -> np.ndarray:
-    """Integer ns stamps ``start_epoch_ns + round(times * 1e9)`` of times in s."""
-    times = np.asarray(times, dtype=np.float64)
-    return int(start_epoch_ns) + np.round(times * 1e9).astype(np.int64)
 
 
 def provenance() -> dict[str, str]:
@@ -278,7 +271,7 @@ def write_recording(
     if compression not in COMPRESSIONS:
         raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)} (got {compression!r})")
     topics = topics if topics is not None else RecordingTopics.with_namespace(namespace)
-    stamps = stamps_from_times(times, start_epoch_ns)
+    stamps = int(start_epoch_ns) + np.round(times * 1e9).astype(np.int64)  # see the module docstring
     if np.any(np.diff(stamps) <= 0):
         raise ValueError("times closer than 1 ns cannot be stamped apart")
 
