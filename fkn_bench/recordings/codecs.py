@@ -143,7 +143,8 @@ def encode_ros2(
 
 
 def decode_stamped(type_name: str, encoding: str, data: bytes) -> tuple[int, str, str, tuple[float, ...]]:
-    """Parse one message of a type in :data:`LAYOUTS`.
+    """Parse one message of a type in :data:`LAYOUTS`, or (``encoding="json"``) a
+    ``foxglove.PoseInFrame`` (:func:`decode_pose_in_frame`).
 
     Returns:
         ``(stamp_ns, frame_id, child_frame_id, values)`` with ``values`` the type's float64
@@ -152,6 +153,9 @@ def decode_stamped(type_name: str, encoding: str, data: bytes) -> tuple[int, str
     Raises:
         DecodeError: naming the field that could not be read.
     """
+    if encoding == "json":
+        stamp, frame_id, values = decode_pose_in_frame(data)
+        return stamp, frame_id, "", values
     layout = LAYOUTS[canonical_type_name(type_name)]
     size = len(data)
     if encoding == "cdr":

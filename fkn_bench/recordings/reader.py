@@ -51,7 +51,7 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from fkn_bench.geometry.quaternion import xyzw_to_wxyz
-from fkn_bench.recordings.codecs import DecodeError, decode_pose_in_frame, decode_stamped
+from fkn_bench.recordings.codecs import DecodeError, decode_stamped
 from fkn_bench.recordings.schemas import canonical_type_name
 
 __all__ = [
@@ -535,11 +535,7 @@ class McapRecording:
         dropped: list[tuple[int, int, BaseException]] = []
         for i, (log_time, _, data) in enumerate(self._raw(topic).messages):
             try:
-                if encoding == "json":
-                    stamp, frame, values = decode_pose_in_frame(data)
-                    child = ""
-                else:
-                    stamp, frame, child, values = decode_stamped(type_name, encoding, data)
+                stamp, frame, child, values = decode_stamped(type_name, encoding, data)
             except (DecodeError, struct.error) as exc:
                 dropped.append((i, log_time, exc))
                 continue

@@ -243,21 +243,18 @@ def finite_difference_twist(stamps_ns: np.ndarray, poses: ArrayF) -> ArrayF:
 
 # ---------------------------------------------------------------------------- reading
 def _recording_metadata(rec: McapRecording) -> tuple[dict[str, dict[str, str]], dict[str, str], Scenario | None, list[str]]:
-    notes: list[str] = []
     metadata = rec.metadata()
+    notes: list[str] = []
     topics: dict[str, str] = {}
     scenario = None
-    info = metadata.get("fkn_bench.recording", {})
-    if "topics" in info:
+    recording = metadata.get("fkn_bench.recording", {})
+    try:
+        topics = {str(k): str(v) for k, v in json.loads(recording.get("topics", "{}")).items()}
+    except (ValueError, AttributeError):
+        notes.append("the fkn_bench.recording metadata has an unreadable 'topics' entry; ignored")
+    if stored := metadata.get("fkn_bench.scenario"):
         try:
-            topics = {str(k): str(v) for k, v in json.loads(info["topics"]).items()}
-        except (ValueError, AttributeError):
-            notes.append("the fkn_bench.recording metadata has an unreadable 'topics' entry; ignored")
-    stored = metadata.get("fkn_bench.scenario")
-    if stored:
-        try:
-            fields = {k: json.loads(v) for k, v in stored.items() if k != "config_hash"}
-            scenario = Scenario.from_dict(fields)
+            scenario = Scenario.from_dict({k: json.loads(v) for k, v in stored.items() if k != "config_hash"})
         except (ValueError, TypeError) as exc:
             notes.append(f"the stored scenario cannot be read ({exc}); using ds1")
     return metadata, topics, scenario, notes
