@@ -36,14 +36,8 @@ from fkn_bench.recordings.schemas import canonical_type_name, ros2_schema_text
 from fkn_bench.types import ArrayF
 
 __all__ = [
-    "LAYOUTS",
-    "Layout",
-    "DecodeError",
-    "split_stamp",
-    "encode_ros2",
-    "decode_stamped",
-    "encode_pose_in_frame",
-    "decode_pose_in_frame",
+    "LAYOUTS", "Layout", "DecodeError", "split_stamp", "encode_ros2", "decode_stamped",
+    "encode_pose_in_frame", "decode_pose_in_frame"
 ]
 
 _NS = 1_000_000_000

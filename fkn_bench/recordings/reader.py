@@ -55,18 +55,9 @@ from fkn_bench.recordings.codecs import DecodeError, decode_stamped
 from fkn_bench.recordings.schemas import canonical_type_name
 
 __all__ = [
-    "RecordingError",
-    "TopicNotFoundError",
-    "RecordingRepairWarning",
-    "TopicInfo",
-    "PoseSeries",
-    "TwistSeries",
-    "McapRecording",
-    "POSE_TYPES",
-    "TWIST_TYPES",
-    "MCAP_MAGIC",
-    "read_metadata",
-    "list_topics",
+    "RecordingError", "TopicNotFoundError", "RecordingRepairWarning", "TopicInfo", "PoseSeries",
+    "TwistSeries", "McapRecording", "POSE_TYPES", "TWIST_TYPES", "MCAP_MAGIC", "read_metadata",
+    "list_topics"
 ]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"

@@ -71,13 +71,8 @@ from fkn_bench.scenarios import ConfigError, Scenario, get_scenario
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = [
-    "ASTROBEE_TRUTH_PATTERN",
-    "ReplayReport",
-    "RecordedTrajectory",
-    "read_recording",
-    "load_episodes",
-    "resample_truth",
-    "finite_difference_twist",
+    "ASTROBEE_TRUTH_PATTERN", "ReplayReport", "RecordedTrajectory", "read_recording",
+    "load_episodes", "resample_truth", "finite_difference_twist"
 ]
 
 ASTROBEE_TRUTH_PATTERN = re.compile(r"^(/[^/]+)*/loc/truth/pose$|^loc/truth/pose$")
@@ -315,9 +310,6 @@ def read_recording(
         quaternion_tolerance: largest accepted ``|norm - 1|`` of a recorded quaternion.
         warn: issue each repair as a :class:`RecordingRepairWarning`.
 
-    Returns:
-        A :class:`RecordedTrajectory`.
-
     Raises:
         RecordingError: (and its subclass ``TopicNotFoundError``) naming file, topic and message.
     """
@@ -481,10 +473,6 @@ def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float, notes: l
 
 
 def load_episodes(path: str | Path, *, seed: int = 0, **options: Any) -> Episodes:
-    """The recording at ``path`` as :class:`~fkn_bench.envs.Episodes` (batch 1).
-
-    ``options`` are those of :func:`read_recording`; ``seed`` seeds synthesised measurements.
-    Repairs are issued as :class:`RecordingRepairWarning`. Equivalent to
-    ``read_recording(path, **options).episodes(seed)``.
-    """
+    """``read_recording(path, **options).episodes(seed)``: the recording as
+    :class:`~fkn_bench.envs.Episodes` (batch 1); ``seed`` seeds synthesised measurements."""
     return read_recording(path, **options).episodes(seed)

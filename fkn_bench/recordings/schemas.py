@@ -17,12 +17,8 @@ from __future__ import annotations
 import json
 
 __all__ = [
-    "SEPARATOR",
-    "ROS2_DEFINITIONS",
-    "FOXGLOVE_POSE_IN_FRAME",
-    "FOXGLOVE_SCHEMAS",
-    "ros2_schema_text",
-    "canonical_type_name",
+    "SEPARATOR", "ROS2_DEFINITIONS", "FOXGLOVE_POSE_IN_FRAME", "FOXGLOVE_SCHEMAS",
+    "ros2_schema_text", "canonical_type_name"
 ]
 
 SEPARATOR = "=" * 80

@@ -77,17 +77,9 @@ from fkn_bench.recordings.schemas import FOXGLOVE_SCHEMAS, ros2_schema_text
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = [
-    "DEFAULT_START_EPOCH_NS",
-    "RECORDING_FORMAT",
-    "RECORDING_FORMAT_VERSION",
-    "COMPRESSIONS",
-    "RecordingTopics",
-    "RecordingSummary",
-    "ros_pose_covariance",
-    "write_recording",
-    "record_episode",
-    "provenance",
-    "episode_metadata",
+    "DEFAULT_START_EPOCH_NS", "RECORDING_FORMAT", "RECORDING_FORMAT_VERSION", "COMPRESSIONS",
+    "RecordingTopics", "RecordingSummary", "ros_pose_covariance", "write_recording",
+    "record_episode", "provenance", "episode_metadata"
 ]
 
 DEFAULT_START_EPOCH_NS = 1_735_689_600 * 1_000_000_000
@@ -251,9 +243,6 @@ def write_recording(
         foxglove: also write the ``foxglove.PoseInFrame`` channels.
         compression: chunk compression, ``"zstd"`` (default), ``"lz4"`` or ``"none"``.
         chunk_size: uncompressed bytes per chunk.
-
-    Returns:
-        A :class:`RecordingSummary`.
     """
     started = time.perf_counter()
     times = np.asarray(times, dtype=np.float64)
@@ -368,10 +357,8 @@ def episode_metadata(
     estimator: Any = None,
     extra: Mapping[str, Mapping[str, str]] | None = None,
 ) -> dict[str, Mapping[str, str]]:
-    """The metadata records of a recorded episode: ``fkn_bench.scenario`` (each field of a
-    :class:`~fkn_bench.scenarios.Scenario` JSON-encoded, plus ``config_hash``), ``fkn_bench.episode``,
-    ``fkn_bench.estimator`` (name, class, JSON config of an estimator; a mapping is taken as it
-    is), ``fkn_bench.provenance`` (:func:`provenance`), then ``extra``."""
+    """The metadata records of a recorded episode (see the module docstring), then ``extra``; an
+    ``estimator`` given as a mapping is taken as it is."""
     metadata: dict[str, Mapping[str, str]] = {}
     if scenario is not None:
         metadata["fkn_bench.scenario"] = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
@@ -406,8 +393,7 @@ def record_episode(
 
     Estimates are written where ``estimates.initialised`` is True. ``estimator`` (an
     :class:`~fkn_bench.estimators.Estimator`, or a mapping of strings) fills the
-    ``fkn_bench.estimator`` metadata. ``options`` go to :func:`write_recording` (``topics``,
-    ``namespace``, ``frame_id``, ``start_epoch_ns``, ``foxglove``, ``compression``, ``chunk_size``).
+    ``fkn_bench.estimator`` metadata; ``options`` go to :func:`write_recording`.
     """
     if not 0 <= index < episodes.batch_size:
         raise ValueError(f"index must be in [0, {episodes.batch_size}) (got {index})")
