@@ -361,8 +361,8 @@ def episode_metadata(
     ``estimator`` given as a mapping is taken as it is."""
     metadata: dict[str, Mapping[str, str]] = {}
     if scenario is not None:
-        metadata["fkn_bench.scenario"] = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
-        metadata["fkn_bench.scenario"]["config_hash"] = scenario.config_hash()
+        fields = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
+        metadata["fkn_bench.scenario"] = {**fields, "config_hash": scenario.config_hash()}
     metadata["fkn_bench.episode"] = dict(episode)
     if isinstance(estimator, Mapping):
         metadata["fkn_bench.estimator"] = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in estimator.items()}
