@@ -363,7 +363,8 @@ class McapRecording:
                     handle(item)
         self._linear = raw
 
-    def _read_indexed(self, topics: set[str]) -> dict[str, list[_Raw]]:
+    def _read_indexed(self, topics: set[str]) -> dict[int, _Raw]:
+        """Raw messages of the channels of ``topics``, read through the chunk index."""
         summary = self._summary
         assert summary is not None
         channels = {cid: ch for cid, ch in summary.channels.items() if ch.topic in topics}
@@ -408,11 +409,7 @@ class McapRecording:
                         f"{where} is corrupt: its records cannot be parsed ({exc}). Pass repair=True to skip damaged chunks",
                         f"{where}: stopped at a damaged record ({exc})",
                     )
-        out: dict[str, list[_Raw]] = {topic: [] for topic in topics}
-        for entry in raw.values():
-            if entry.messages:
-                out[entry.channel.topic].append(entry)
-        return out
+        return raw
 
     # ------------------------------------------------------------------ queries
     def topics(self) -> dict[str, TopicInfo]:
@@ -469,13 +466,10 @@ class McapRecording:
     def prefetch(self, topics: Iterable[str]) -> None:
         """Read the raw messages of several topics in one pass over the file (cached)."""
         wanted = [t for t in dict.fromkeys(topics) if t not in self._cache]
-        if not wanted:
-            return
-        if self._linear is not None:
+        if wanted:
+            raw = self._linear if self._linear is not None else self._read_indexed(set(wanted))
             for topic in wanted:
-                self._cache[topic] = [r for r in self._linear.values() if r.channel.topic == topic]
-        else:
-            self._cache.update(self._read_indexed(set(wanted)))
+                self._cache[topic] = [r for r in raw.values() if r.channel.topic == topic and r.messages]
 
     def _raw(self, topic: str) -> _Raw:
         """Raw messages of ``topic`` in log-time order (ties in file order)."""
