@@ -320,12 +320,12 @@ def write_recording(
             writer.add_metadata("fkn_bench.recording", recording_meta)
             for name, record in (metadata or {}).items():
                 writer.add_metadata(name, {str(k): str(v) for k, v in record.items()})
-            schema_ids = {
-                schema: writer.register_schema(schema, "jsonschema", FOXGLOVE_SCHEMAS[schema])
-                if schema == _FOXGLOVE_POSE
-                else writer.register_schema(schema, "ros2msg", ros2_schema_text(schema).encode())
-                for schema in dict.fromkeys(s[1] for s in streams)
-            }
+            schema_ids: dict[str, int] = {}
+            for schema in dict.fromkeys(s[1] for s in streams):
+                if schema == _FOXGLOVE_POSE:
+                    schema_ids[schema] = writer.register_schema(schema, "jsonschema", FOXGLOVE_SCHEMAS[schema])
+                else:
+                    schema_ids[schema] = writer.register_schema(schema, "ros2msg", ros2_schema_text(schema).encode())
             channels = [
                 writer.register_channel(topic, "json" if schema == _FOXGLOVE_POSE else "cdr", schema_ids[schema])
                 for topic, schema, _, _ in streams
