@@ -1,17 +1,12 @@
 """MCAP recordings: write episodes that ROS 2 tools and Foxglove open, and replay recordings.
 
-* :func:`record_episode` / :func:`write_recording` write one episode (truth, measurements,
-  estimates) as ROS 2 CDR ``PoseStamped`` / ``TwistStamped`` /
-  ``PoseWithCovarianceStamped`` messages plus ``foxglove.PoseInFrame`` channels and metadata
-  (:mod:`fkn_bench.recordings.writer` documents topics, frames and conventions);
-  :func:`fkn_bench.harness.recording.record` generates an episode and runs an estimator to record.
-* :class:`RecordMcap` records any Gymnasium loop of the Astrobee environments.
+* :func:`record_episode` / :func:`write_recording` write one episode, :class:`RecordMcap` a
+  Gymnasium loop (:mod:`~fkn_bench.recordings.writer` documents topics, frames and conventions).
 * :func:`load_episodes` / :func:`read_recording` turn a recording (fkn-bench, Astrobee simulation,
   any ROS 1 / ROS 2 / Foxglove JSON pose topic) into :class:`~fkn_bench.envs.Episodes`
-  (:mod:`fkn_bench.recordings.replay`); ``gym.make("AstrobeeReplay-v0", path=...)`` replays one
-  online.
+  (:mod:`~fkn_bench.recordings.replay`); ``gym.make("AstrobeeReplay-v0", path=...)`` replays one.
 * Bad files raise :class:`RecordingError` naming the file, topic and message, or are repaired
-  when asked (:mod:`fkn_bench.recordings.reader`).
+  when asked (:mod:`~fkn_bench.recordings.reader`).
 """
 
 from fkn_bench.recordings.reader import (
@@ -43,25 +38,9 @@ from fkn_bench.recordings.writer import (
 )
 
 __all__ = [
-    "ASTROBEE_TRUTH_PATTERN",
-    "DEFAULT_START_EPOCH_NS",
-    "McapRecording",
-    "PoseSeries",
-    "RecordMcap",
-    "RecordedTrajectory",
-    "RecordingError",
-    "RecordingRepairWarning",
-    "RecordingSummary",
-    "RecordingTopics",
-    "ReplayReport",
-    "TopicInfo",
-    "TopicNotFoundError",
-    "TwistSeries",
-    "list_topics",
-    "load_episodes",
-    "read_metadata",
-    "read_recording",
-    "record_episode",
-    "ros_pose_covariance",
-    "write_recording",
+    "ASTROBEE_TRUTH_PATTERN", "DEFAULT_START_EPOCH_NS", "McapRecording", "PoseSeries",
+    "RecordMcap", "RecordedTrajectory", "RecordingError", "RecordingRepairWarning",
+    "RecordingSummary", "RecordingTopics", "ReplayReport", "TopicInfo", "TopicNotFoundError",
+    "TwistSeries", "list_topics", "load_episodes", "read_metadata", "read_recording",
+    "record_episode", "ros_pose_covariance", "write_recording"
 ]

@@ -36,14 +36,8 @@ from fkn_bench.recordings.schemas import canonical_type_name, ros2_schema_text
 from fkn_bench.types import ArrayF
 
 __all__ = [
-    "LAYOUTS",
-    "Layout",
-    "DecodeError",
-    "split_stamp",
-    "encode_ros2",
-    "decode_stamped",
-    "encode_pose_in_frame",
-    "decode_pose_in_frame",
+    "LAYOUTS", "Layout", "DecodeError", "split_stamp", "encode_ros2", "decode_stamped",
+    "encode_pose_in_frame", "decode_pose_in_frame"
 ]
 
 _NS = 1_000_000_000
@@ -55,21 +49,39 @@ class DecodeError(ValueError):
 
 @dataclass(frozen=True)
 class Layout:
-    """Wire layout of a stamped ROS message: header, optional second string, ``n_doubles``."""
+    """Wire layout of a stamped ROS message: header, optional second string (``child_frame``) and
+    ``n_doubles`` float64 fields in ROS order; ``body`` makes the message below the header from
+    those fields and the child frame (for :func:`encode_ros2`)."""
 
     name: str
     child_frame: bool
     n_doubles: int
+    body: Callable[[list[float], str], dict]
+
+
+def _pose(v: list[float]) -> dict:
+    return {"position": dict(zip("xyz", v[0:3])), "orientation": dict(zip("xyzw", v[3:7]))}
+
+
+def _twist(v: list[float]) -> dict:
+    return {"linear": dict(zip("xyz", v[0:3])), "angular": dict(zip("xyz", v[3:6]))}
 
 
 LAYOUTS: dict[str, Layout] = {
     layout.name: layout
     for layout in (
-        Layout("geometry_msgs/PoseStamped", False, 7),  # position(3), orientation xyzw(4)
-        Layout("geometry_msgs/TwistStamped", False, 6),  # linear(3), angular(3)
-        Layout("geometry_msgs/PoseWithCovarianceStamped", False, 7 + 36),
+        # position(3), orientation xyzw(4)
+        Layout("geometry_msgs/PoseStamped", False, 7, lambda v, child: {"pose": _pose(v)}),
+        # linear(3), angular(3)
+        Layout("geometry_msgs/TwistStamped", False, 6, lambda v, child: {"twist": _twist(v)}),
+        Layout("geometry_msgs/PoseWithCovarianceStamped", False, 7 + 36,
+               lambda v, child: {"pose": {"pose": _pose(v), "covariance": v[7:43]}}),
         # pose(7), pose covariance(36), twist linear(3) angular(3), twist covariance(36)
-        Layout("nav_msgs/Odometry", True, 7 + 36 + 6 + 36),
+        Layout("nav_msgs/Odometry", True, 7 + 36 + 6 + 36, lambda v, child: {
+            "child_frame_id": child,
+            "pose": {"pose": _pose(v), "covariance": v[7:43]},
+            "twist": {"twist": _twist(v[43:49]), "covariance": v[49:85]},
+        }),
     )
 }
 """Canonical ROS type name (``package/Type``) -> :class:`Layout`."""
@@ -89,27 +101,6 @@ def _align(offset: int, size: int) -> int:
     """CDR alignment: offsets count from the end of the 4-byte encapsulation header."""
     body = offset - 4
     return 4 + (body + size - 1) // size * size
-
-
-def _pose(v: list[float]) -> dict:
-    return {"position": dict(zip("xyz", v[0:3])), "orientation": dict(zip("xyzw", v[3:7]))}
-
-
-def _twist(v: list[float]) -> dict:
-    return {"linear": dict(zip("xyz", v[0:3])), "angular": dict(zip("xyz", v[3:6]))}
-
-
-# the message below the header, from the float64 fields in ROS order (see LAYOUTS) and the child frame
-_BODIES: dict[str, Callable[[list[float], str], dict]] = {
-    "geometry_msgs/PoseStamped": lambda v, child: {"pose": _pose(v)},
-    "geometry_msgs/TwistStamped": lambda v, child: {"twist": _twist(v)},
-    "geometry_msgs/PoseWithCovarianceStamped": lambda v, child: {"pose": {"pose": _pose(v), "covariance": v[7:43]}},
-    "nav_msgs/Odometry": lambda v, child: {
-        "child_frame_id": child,
-        "pose": {"pose": _pose(v), "covariance": v[7:43]},
-        "twist": {"twist": _twist(v[43:49]), "covariance": v[49:85]},
-    },
-}
 
 
 @lru_cache(maxsize=None)
@@ -135,7 +126,7 @@ def encode_ros2(
     if values.shape != (len(stamps_ns), LAYOUTS[name].n_doubles):
         raise ValueError(f"values must have shape ({len(stamps_ns)}, {LAYOUTS[name].n_doubles}) (got {values.shape})")
     sec, nsec = split_stamp(stamps_ns)
-    encode, body = _ros2_encoder(name), _BODIES[name]
+    encode, body = _ros2_encoder(name), LAYOUTS[name].body
     return [
         encode({"header": {"stamp": {"sec": s, "nanosec": ns}, "frame_id": frame_id}, **body(v, child_frame_id)})
         for s, ns, v in zip(sec.tolist(), nsec.tolist(), values.tolist())
@@ -143,7 +134,8 @@ def encode_ros2(
 
 
 def decode_stamped(type_name: str, encoding: str, data: bytes) -> tuple[int, str, str, tuple[float, ...]]:
-    """Parse one message of a type in :data:`LAYOUTS`.
+    """Parse one message of a type in :data:`LAYOUTS`, or (``encoding="json"``) a
+    ``foxglove.PoseInFrame`` (:func:`decode_pose_in_frame`).
 
     Returns:
         ``(stamp_ns, frame_id, child_frame_id, values)`` with ``values`` the type's float64
@@ -152,6 +144,9 @@ def decode_stamped(type_name: str, encoding: str, data: bytes) -> tuple[int, str
     Raises:
         DecodeError: naming the field that could not be read.
     """
+    if encoding == "json":
+        stamp, frame_id, values = decode_pose_in_frame(data)
+        return stamp, frame_id, "", values
     layout = LAYOUTS[canonical_type_name(type_name)]
     size = len(data)
     if encoding == "cdr":

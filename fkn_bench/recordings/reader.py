@@ -34,10 +34,11 @@ missing topics (the message lists the topics and types found) are always errors.
 
 from __future__ import annotations
 
+import itertools
 import struct
 import zlib
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -50,22 +51,13 @@ from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 
 from fkn_bench.geometry.quaternion import xyzw_to_wxyz
-from fkn_bench.recordings.codecs import DecodeError, decode_pose_in_frame, decode_stamped
+from fkn_bench.recordings.codecs import DecodeError, decode_stamped
 from fkn_bench.recordings.schemas import canonical_type_name
 
 __all__ = [
-    "RecordingError",
-    "TopicNotFoundError",
-    "RecordingRepairWarning",
-    "TopicInfo",
-    "PoseSeries",
-    "TwistSeries",
-    "McapRecording",
-    "POSE_TYPES",
-    "TWIST_TYPES",
-    "MCAP_MAGIC",
-    "read_metadata",
-    "list_topics",
+    "RecordingError", "TopicNotFoundError", "RecordingRepairWarning", "TopicInfo", "PoseSeries",
+    "TwistSeries", "McapRecording", "POSE_TYPES", "TWIST_TYPES", "MCAP_MAGIC", "read_metadata",
+    "list_topics"
 ]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
@@ -81,11 +73,23 @@ POSE_TYPES: tuple[str, ...] = (
 TWIST_TYPES: tuple[str, ...] = ("geometry_msgs/TwistStamped", "nav_msgs/Odometry")
 """Canonical names of the types a twist topic may have."""
 
+_ODOMETRY = "nav_msgs/Odometry"
 _SUPPORTED = set(POSE_TYPES) | set(TWIST_TYPES)
 _ENCODINGS = {"cdr": "ROS 2 CDR", "ros1": "ROS 1", "json": "JSON"}
 _RECORD_HEAD = struct.Struct("<BQ")
 _MESSAGE_HEAD = struct.Struct("<HIQQ")
 _OPCODE_MESSAGE = 0x05
+_OTHER_FORMATS = {  # file start -> what the file is and how to convert it
+    b"#ROSBAG": "this is a ROS 1 bag (.bag), not MCAP; convert it with `mcap convert FILE.bag FILE.mcap` "
+    "(the mcap CLI) and replay the .mcap",
+    b"SQLite format 3": "this is a ROS 2 sqlite3 bag (.db3), not MCAP; convert it with `ros2 bag convert` "
+    "(storage 'mcap') or `mcap convert`, and replay the .mcap",
+}
+_DECOMPRESS = {
+    "zstd": lambda chunk: zstandard.decompress(chunk.data, max_output_size=chunk.uncompressed_size),
+    "lz4": lambda chunk: lz4.frame.decompress(chunk.data),
+    "": lambda chunk: chunk.data,
+}
 
 
 class RecordingError(ValueError):
@@ -180,21 +184,6 @@ class _Raw:
     messages: list[tuple[int, int, bytes]] = field(default_factory=list)
 
 
-@dataclass
-class _Decoded:
-    """Decoded messages of one topic, in log-time order (undecodable ones dropped)."""
-
-    type_name: str
-    encoding: str
-    indices: np.ndarray
-    log: np.ndarray
-    header: np.ndarray
-    frame_id: str
-    child_frame_id: str
-    values: np.ndarray
-    repairs: list[str]
-
-
 def _describe(exc: BaseException) -> str:
     text = str(exc).strip()
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
@@ -207,10 +196,8 @@ def _seconds(ns: int) -> str:
 class McapRecording:
     """An MCAP file opened for reading pose topics.
 
-    Opening checks that the file exists, is not empty and is MCAP (hints for ROS 1 ``.bag`` and
-    ROS 2 ``.db3`` files), and reads its summary. A file without a valid end (truncated, or a
-    writer that never finished) raises :class:`RecordingError` unless ``repair=True``, which reads
-    it front to back up to the damage.
+    Opening checks the file (see the module docstring for the errors and repairs) and reads its
+    summary.
 
     Args:
         path: the ``.mcap`` file.
@@ -242,6 +229,12 @@ class McapRecording:
             raise self._error(error, **where)
         (self.repairs if repairs is None else repairs).append(note)
 
+    def _skip_chunk(self, where: str, problem: str) -> None:
+        self._repair(
+            f"{where} {problem}. Pass repair=True to skip damaged chunks (their messages are lost)",
+            f"skipped {where}, which {problem}",
+        )
+
     def _check_file(self) -> None:
         path = self.path
         if not path.exists():
@@ -253,99 +246,103 @@ class McapRecording:
             raise self._error("the file is empty (0 bytes); it is not an MCAP recording")
         with path.open("rb") as fh:
             head = fh.read(16)
-        if head.startswith(b"#ROSBAG"):
-            raise self._error(
-                "this is a ROS 1 bag (.bag), not MCAP; convert it with `mcap convert FILE.bag FILE.mcap` "
-                "(the mcap CLI) and replay the .mcap"
-            )
-        if head.startswith(b"SQLite format 3"):
-            raise self._error(
-                "this is a ROS 2 sqlite3 bag (.db3), not MCAP; convert it with `ros2 bag convert` "
-                "(storage 'mcap') or `mcap convert`, and replay the .mcap"
-            )
-        if not head.startswith(MCAP_MAGIC[: len(head)]) or len(head) < len(MCAP_MAGIC):
-            if len(head) < len(MCAP_MAGIC) and MCAP_MAGIC.startswith(head):
+        for start, hint in _OTHER_FORMATS.items():
+            if head.startswith(start):
+                raise self._error(hint)
+        if not head.startswith(MCAP_MAGIC):
+            if MCAP_MAGIC.startswith(head):
                 raise self._error(f"the file is truncated: {self.size} bytes, fewer than the MCAP magic")
             raise self._error(f"not an MCAP file (it starts with bytes {head[:8].hex(' ')}, not the MCAP magic)")
 
     def _open_summary(self) -> None:
+        problem = None
         with self.path.open("rb") as fh:
             fh.seek(max(0, self.size - len(MCAP_MAGIC)))
-            tail = fh.read()
-            complete = self.size >= 2 * len(MCAP_MAGIC) and tail == MCAP_MAGIC
-            problem = None
-            if complete:
-                try:
-                    fh.seek(0)
-                    reader = SeekingReader(fh, validate_crcs=True)
-                    self._summary = reader.get_summary()
-                except Exception as exc:  # any failure here means a damaged end of file
-                    problem = f"its summary section cannot be read ({_describe(exc)})"
-            else:
+            if self.size < 2 * len(MCAP_MAGIC) or fh.read() != MCAP_MAGIC:
                 problem = (
                     f"the file is truncated or was not closed properly: it does not end with the MCAP magic "
                     f"bytes ({self.size} bytes)"
                 )
+            else:
+                try:
+                    fh.seek(0)
+                    self._summary = SeekingReader(fh, validate_crcs=True).get_summary()
+                except Exception as exc:  # any failure here means a damaged end of file
+                    problem = f"its summary section cannot be read ({_describe(exc)})"
         if problem is not None:
             self._repair(
                 f"{problem}. Pass repair=True to read the messages stored before the damage, or recover the "
                 "file with `mcap recover`",
                 f"{problem}; read the file front to back up to the damage",
             )
-            self._summary = None
-            self._scan_linear()
-        elif self._summary is None or not self._summary.chunk_indexes:
-            self._scan_linear()  # valid file without an index
+        if self._summary is None or not self._summary.chunk_indexes:
+            self._scan_linear()  # a damaged file, or a valid one without an index
 
     # ------------------------------------------------------------------ chunk and linear reading
-    def _chunk_records(self, chunk: Chunk, where: str) -> list[Any] | None:
-        """Records of ``chunk``; None if it is corrupt and repair is on."""
+    def _chunk_data(self, chunk: Chunk, where: str) -> bytes | None:
+        """Decompressed, CRC-checked data of ``chunk``; None if it is corrupt and repair is on."""
+        decompress = _DECOMPRESS.get(chunk.compression)
+        if decompress is None:
+            problem = (
+                f"it uses chunk compression {chunk.compression!r}, which this reader does not support "
+                "(zstd, lz4 or none)"
+            )
+        else:
+            try:
+                data = decompress(chunk)
+            except Exception as exc:
+                problem = f"its {chunk.compression} data cannot be decompressed ({_describe(exc)})"
+            else:
+                if len(data) != chunk.uncompressed_size:
+                    problem = f"{len(data)} bytes decompressed, {chunk.uncompressed_size} expected"
+                elif chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+                    problem = "its CRC does not match its data"
+                else:
+                    return data
+        self._skip_chunk(where, f"is corrupt: {problem}")
+        return None
+
+    def _chunk_records(self, chunk: Chunk, where: str) -> list[Any]:
+        """Records of ``chunk``; none if it is corrupt and repair is on."""
         data = self._chunk_data(chunk, where)
         if data is None:
-            return None
+            return []
         try:
-            return breakup_chunk(Chunk(compression="", data=data, message_start_time=chunk.message_start_time,
-                                       message_end_time=chunk.message_end_time, uncompressed_crc=0,
-                                       uncompressed_size=len(data)))
-        except Exception as exc:
-            self._repair(
-                f"{where} is corrupt ({_describe(exc)}). Pass repair=True to skip damaged chunks (their messages are lost)",
-                f"skipped {where}, which is corrupt ({_describe(exc)})",
+            return breakup_chunk(
+                replace(chunk, compression="", data=data, uncompressed_crc=0, uncompressed_size=len(data))
             )
-            return None
+        except Exception as exc:
+            self._skip_chunk(where, f"is corrupt ({_describe(exc)})")
+            return []
 
     def _scan_linear(self) -> None:
         """Read every record front to back (files without an index, or damaged ones)."""
         schemas: dict[int, Schema] = {}
         raw: dict[int, _Raw] = {}
-        position = 0
-
-        def message(record: Message) -> None:
-            nonlocal position
-            entry = self._linear_channels.get(record.channel_id)
-            if entry is None:
-                raise self._error(f"message at record {position} refers to unknown channel {record.channel_id}")
-            self._linear_counts[record.channel_id] = self._linear_counts.get(record.channel_id, 0) + 1
-            if canonical_type_name(entry[1].name if entry[1] else "") in _SUPPORTED:
-                raw.setdefault(record.channel_id, _Raw(entry[0], entry[1])).messages.append(
-                    (record.log_time, position, record.data)
-                )
-            position += 1
+        position = 0  # messages so far, in file order
 
         def handle(record: Any) -> None:
+            nonlocal position
             if isinstance(record, Schema):
                 schemas[record.id] = record
             elif isinstance(record, Channel):
                 self._linear_channels[record.id] = (record, schemas.get(record.schema_id))
-            elif isinstance(record, Message):
-                message(record)
             elif isinstance(record, Metadata):
                 self._linear_metadata.append(record)
+            elif isinstance(record, Message):
+                cid = record.channel_id
+                if cid not in self._linear_channels:
+                    raise self._error(f"message at record {position} refers to unknown channel {cid}")
+                self._linear_counts[cid] = self._linear_counts.get(cid, 0) + 1
+                channel, schema = self._linear_channels[cid]
+                if canonical_type_name(schema.name if schema else "") in _SUPPORTED:
+                    entry = raw.setdefault(cid, _Raw(channel, schema))
+                    entry.messages.append((record.log_time, position, record.data))
+                position += 1
 
-        count = 0
         with self.path.open("rb") as fh:
             records: Iterator[Any] = StreamReader(fh, emit_chunks=True, validate_crcs=False).records
-            while True:
+            for count in itertools.count():
                 try:
                     record = next(records)
                 except StopIteration:
@@ -358,14 +355,61 @@ class McapRecording:
                         f"stopped reading at {problem}",
                     )
                     break
-                count += 1
                 if isinstance(record, Chunk):
-                    inner = self._chunk_records(record, f"the chunk in record {count - 1} (ending at byte {fh.tell()})")
-                    for item in inner or ():
-                        handle(item)
+                    items = self._chunk_records(record, f"the chunk in record {count} (ending at byte {fh.tell()})")
                 else:
-                    handle(record)
+                    items = [record]
+                for item in items:
+                    handle(item)
         self._linear = raw
+
+    def _read_indexed(self, topics: set[str]) -> dict[int, _Raw]:
+        """Raw messages of the channels of ``topics``, read through the chunk index."""
+        summary = self._summary
+        assert summary is not None
+        channels = {cid: ch for cid, ch in summary.channels.items() if ch.topic in topics}
+        raw = {cid: _Raw(ch, summary.schemas.get(ch.schema_id)) for cid, ch in channels.items()}
+        ordered = sorted(enumerate(summary.chunk_indexes), key=lambda item: item[1].chunk_start_offset)
+        unpack = _MESSAGE_HEAD.unpack_from
+        with self.path.open("rb") as fh:
+            for number, index in ordered:
+                if index.message_index_offsets and not channels.keys() & index.message_index_offsets.keys():
+                    continue
+                start, stop = index.chunk_start_offset, index.chunk_start_offset + index.chunk_length
+                where = f"chunk {number} (bytes {start}-{stop})"
+                try:
+                    if stop > self.size:
+                        raise ValueError(f"it would end past the end of the file ({self.size} bytes)")
+                    fh.seek(start + 1 + 8)
+                    chunk = Chunk.read(ReadDataStream(fh))
+                except Exception as exc:
+                    self._skip_chunk(where, f"cannot be read ({_describe(exc)})")
+                    continue
+                data = self._chunk_data(chunk, where)
+                if data is None:
+                    continue
+                # walk the records: opcode u8, length u64; a message is channel u16, sequence u32,
+                # log_time u64, publish_time u64, payload
+                pos, end, serial = 0, len(data), start << 24
+                try:
+                    while pos < end:
+                        opcode, length = _RECORD_HEAD.unpack_from(data, pos)
+                        body = pos + 9
+                        pos = body + length
+                        if pos > end:
+                            raise ValueError(f"a record runs past the end of the chunk ({pos} > {end})")
+                        if opcode == _OPCODE_MESSAGE:
+                            channel_id, _, log_time, _ = unpack(data, body)
+                            entry = raw.get(channel_id)
+                            if entry is not None:
+                                entry.messages.append((log_time, serial, data[body + 22 : pos]))
+                        serial += 1
+                except (struct.error, ValueError) as exc:
+                    self._repair(
+                        f"{where} is corrupt: its records cannot be parsed ({exc}). Pass repair=True to skip damaged chunks",
+                        f"{where}: stopped at a damaged record ({exc})",
+                    )
+        return raw
 
     # ------------------------------------------------------------------ queries
     def topics(self) -> dict[str, TopicInfo]:
@@ -384,13 +428,8 @@ class McapRecording:
             previous = out.get(channel.topic)
             if previous is not None and n is not None and previous.message_count is not None:
                 n += previous.message_count
-            out[channel.topic] = TopicInfo(
-                channel.topic,
-                schema.name if schema else "",
-                schema.encoding if schema else "",
-                channel.message_encoding,
-                n,
-            )
+            name, encoding = (schema.name, schema.encoding) if schema else ("", "")
+            out[channel.topic] = TopicInfo(channel.topic, name, encoding, channel.message_encoding, n)
         return out
 
     def describe_topics(self) -> str:
@@ -403,10 +442,8 @@ class McapRecording:
 
     def metadata(self) -> dict[str, dict[str, str]]:
         """Metadata records ``{name: {key: value}}`` (later records of a name win)."""
-        records: list[Metadata] = []
-        if self._linear is not None:
-            records = self._linear_metadata
-        else:
+        records: list[Metadata] = self._linear_metadata
+        if self._linear is None:
             try:
                 with self.path.open("rb") as fh:
                     records = list(SeekingReader(fh).iter_metadata())
@@ -429,13 +466,10 @@ class McapRecording:
     def prefetch(self, topics: Iterable[str]) -> None:
         """Read the raw messages of several topics in one pass over the file (cached)."""
         wanted = [t for t in dict.fromkeys(topics) if t not in self._cache]
-        if not wanted:
-            return
-        if self._linear is not None:
+        if wanted:
+            raw = self._linear if self._linear is not None else self._read_indexed(set(wanted))
             for topic in wanted:
-                self._cache[topic] = [r for r in self._linear.values() if r.channel.topic == topic]
-        else:
-            self._cache.update(self._read_indexed(set(wanted)))
+                self._cache[topic] = [r for r in raw.values() if r.channel.topic == topic and r.messages]
 
     def _raw(self, topic: str) -> _Raw:
         """Raw messages of ``topic`` in log-time order (ties in file order)."""
@@ -450,90 +484,14 @@ class McapRecording:
         merged.messages.sort(key=lambda m: (m[0], m[1]))
         return merged
 
-    def _chunk_data(self, chunk: Chunk, where: str) -> bytes | None:
-        """Decompressed, CRC-checked data of ``chunk``; None if it is corrupt and repair is on."""
-        problem = None
-        data = b""
-        try:
-            if chunk.compression == "zstd":
-                data = zstandard.decompress(chunk.data, max_output_size=chunk.uncompressed_size)
-            elif chunk.compression == "lz4":
-                data = lz4.frame.decompress(chunk.data)
-            elif chunk.compression == "":
-                data = chunk.data
-            else:
-                problem = f"it uses chunk compression {chunk.compression!r}, which this reader does not support (zstd, lz4 or none)"
-        except Exception as exc:
-            problem = f"its {chunk.compression} data cannot be decompressed ({_describe(exc)})"
-        if problem is None:
-            if len(data) != chunk.uncompressed_size:
-                problem = f"{len(data)} bytes decompressed, {chunk.uncompressed_size} expected"
-            elif chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
-                problem = "its CRC does not match its data"
-        if problem is None:
-            return data
-        self._repair(
-            f"{where} is corrupt: {problem}. Pass repair=True to skip damaged chunks (their messages are lost)",
-            f"skipped {where}, which is corrupt: {problem}",
-        )
-        return None
-
-    def _read_indexed(self, topics: set[str]) -> dict[str, list[_Raw]]:
-        summary = self._summary
-        assert summary is not None
-        channels = {cid: ch for cid, ch in summary.channels.items() if ch.topic in topics}
-        raw = {cid: _Raw(ch, summary.schemas.get(ch.schema_id)) for cid, ch in channels.items()}
-        ordered = sorted(enumerate(summary.chunk_indexes), key=lambda item: item[1].chunk_start_offset)
-        unpack = _MESSAGE_HEAD.unpack_from
-        with self.path.open("rb") as fh:
-            for number, index in ordered:
-                if index.message_index_offsets and not channels.keys() & index.message_index_offsets.keys():
-                    continue
-                where = f"chunk {number} (bytes {index.chunk_start_offset}-{index.chunk_start_offset + index.chunk_length})"
-                try:
-                    if index.chunk_start_offset + index.chunk_length > self.size:
-                        raise ValueError(f"it would end past the end of the file ({self.size} bytes)")
-                    fh.seek(index.chunk_start_offset + 1 + 8)
-                    chunk = Chunk.read(ReadDataStream(fh))
-                except Exception as exc:
-                    self._repair(
-                        f"{where} cannot be read ({_describe(exc)}); the file is corrupt. Pass repair=True to skip "
-                        "damaged chunks",
-                        f"skipped {where}, which cannot be read ({_describe(exc)})",
-                    )
-                    continue
-                data = self._chunk_data(chunk, where)
-                if data is None:
-                    continue
-                # walk the records: opcode u8, length u64; a message is channel u16, sequence u32,
-                # log_time u64, publish_time u64, payload
-                pos, end, serial = 0, len(data), index.chunk_start_offset << 24
-                try:
-                    while pos < end:
-                        opcode, length = _RECORD_HEAD.unpack_from(data, pos)
-                        body = pos + 9
-                        pos = body + length
-                        if pos > end:
-                            raise ValueError(f"a record runs past the end of the chunk ({pos} > {end})")
-                        if opcode == _OPCODE_MESSAGE:
-                            channel_id, _, log_time, _ = unpack(data, body)
-                            entry = raw.get(channel_id)
-                            if entry is not None:
-                                entry.messages.append((log_time, serial, data[body + 22 : pos]))
-                        serial += 1
-                except (struct.error, ValueError) as exc:
-                    self._repair(
-                        f"{where} is corrupt: its records cannot be parsed ({exc}). Pass repair=True to skip damaged chunks",
-                        f"{where}: stopped at a damaged record ({exc})",
-                    )
-        out: dict[str, list[_Raw]] = {topic: [] for topic in topics}
-        for entry in raw.values():
-            if entry.messages:
-                out[entry.channel.topic].append(entry)
-        return out
-
-    # ------------------------------------------------------------------ decoding
-    def _decode(self, topic: str, role: str, allowed: tuple[str, ...]) -> _Decoded:
+    # ------------------------------------------------------------------ decoding and checks
+    def _series(
+        self, topic: str, role: str, allowed: tuple[str, ...], time_source: str, with_poses: bool,
+        quaternion_tolerance: float = 1e-6,
+    ) -> dict[str, Any]:
+        """The fields of a :class:`PoseSeries` of ``topic`` (``poses`` None unless ``with_poses``,
+        ``twists`` None unless the type has a twist): the messages that pass the checks of the
+        module docstring (or are repaired), in stamp order."""
         info = self.require_topic(topic, role)
         type_name, encoding = info.type_name, info.message_encoding
         if encoding not in _ENCODINGS:
@@ -549,120 +507,85 @@ class McapRecording:
                 f"must be one of {', '.join(allowed)} (JSON only for foxglove.PoseInFrame)",
                 topic=topic,
             )
+        repairs: list[str] = []
+        notes: list[str] = []
+
+        def refuse(i: int, error: str, note: str) -> None:
+            """Raise ``error`` about message #i unless repairing; else record ``note``."""
+            self._repair(f"{role} topic {topic!r}: message #{i} {error}", f"{topic}: {note}", repairs,
+                         topic=topic, index=i)
+
+        # decode, in log-time order
         rows: list[tuple[int, int, int, str, str, tuple[float, ...]]] = []
-        dropped: list[int] = []
+        dropped: list[tuple[int, int, BaseException]] = []
         for i, (log_time, _, data) in enumerate(self._raw(topic).messages):
             try:
-                if encoding == "json":
-                    stamp, frame, values = decode_pose_in_frame(data)
-                    child = ""
-                else:
-                    stamp, frame, child, values = decode_stamped(type_name, encoding, data)
+                stamp, frame, child, values = decode_stamped(type_name, encoding, data)
             except (DecodeError, struct.error) as exc:
-                if not self.repair:
-                    raise self._error(
-                        f"{role} topic {topic!r}: message #{i} (log time {_seconds(log_time)}) cannot be decoded as "
-                        f"{info.schema_name} ({_ENCODINGS[encoding]}): {exc}. Pass repair=True to drop undecodable "
-                        "messages",
-                        topic=topic,
-                        index=i,
-                    ) from None
-                dropped.append(i)
+                dropped.append((i, log_time, exc))
                 continue
             rows.append((i, log_time, stamp, frame, child, values))
+        if dropped:
+            i, log_time, exc = dropped[0]
+            refuse(
+                i,
+                f"(log time {_seconds(log_time)}) cannot be decoded as {info.schema_name} ({_ENCODINGS[encoding]}): "
+                f"{exc}. Pass repair=True to drop undecodable messages",
+                f"dropped {len(dropped)} undecodable message(s) (first: #{i})",
+            )
         if not rows:
             raise self._error(f"{role} topic {topic!r} has no decodable messages", topic=topic)
-        indices, log, header, frames, children, values = zip(*rows)
-        return _Decoded(
-            type_name=type_name,
-            encoding=encoding,
-            indices=np.array(indices, dtype=np.int64),
-            log=np.array(log, dtype=np.int64),
-            header=np.array(header, dtype=np.int64),
-            frame_id=frames[0],
-            child_frame_id=children[0],
-            values=np.array(values, dtype=np.float64),
-            repairs=[f"{topic}: dropped {len(dropped)} undecodable message(s) (first: #{dropped[0]})"] if dropped else [],
-        )
+        numbers, log, header, frames, children, columns = zip(*rows)
+        indices = np.array(numbers, dtype=np.int64)
+        values = np.array(columns, dtype=np.float64)
+        keep = np.ones(len(indices), dtype=bool)
 
-    def _stamps(self, topic: str, role: str, d: _Decoded, time_source: str, notes: list[str]) -> tuple[np.ndarray, np.ndarray, str]:
-        """Stamps per ``time_source``; returns (stamps, rows to keep, source used)."""
-        keep = np.ones(len(d.indices), dtype=bool)
-        if time_source == "log":
-            return d.log.copy(), keep, "log"
-        if time_source not in ("auto", "header"):
+        # time stamps
+        if time_source not in ("auto", "header", "log"):
             raise ValueError(f"time_source must be 'auto', 'header' or 'log' (got {time_source!r})")
-        zero = d.header == 0
-        if zero.all():
+        zero = np.array(header) == 0
+        if time_source == "log" or (time_source == "auto" and zero.all()):
             if time_source == "auto":
                 notes.append(f"{topic}: every header stamp is zero; used the MCAP log times instead")
-                return d.log.copy(), keep, "log"
+            stamps, source = np.array(log, dtype=np.int64), "log"
+        elif zero.all():
             raise self._error(
                 f"{role} topic {topic!r}: every header stamp is zero; use time_source='log' (or 'auto')",
-                topic=topic, index=int(d.indices[0]),
+                topic=topic, index=int(indices[0]),
             )
-        if zero.any():
-            first = int(d.indices[np.argmax(zero)])
-            self._repair(
-                f"{role} topic {topic!r}: message #{first} has a zero header stamp while others do not. "
-                "Pass repair=True to drop such messages, or time_source='log'",
-                f"{topic}: dropped {int(zero.sum())} message(s) with a zero header stamp (first: #{first})",
-                d.repairs, topic=topic, index=first,
-            )
-            keep &= ~zero
-        return d.header.copy(), keep, "header"
+        else:
+            if zero.any():
+                first = int(indices[np.argmax(zero)])
+                refuse(
+                    first,
+                    "has a zero header stamp while others do not. Pass repair=True to drop such messages, or "
+                    "time_source='log'",
+                    f"dropped {int(zero.sum())} message(s) with a zero header stamp (first: #{first})",
+                )
+                keep &= ~zero
+            stamps, source = np.array(header, dtype=np.int64), "header"
 
-    def _order(self, topic: str, role: str, stamps: np.ndarray, indices: np.ndarray, repairs: list[str]) -> np.ndarray:
-        """Positions making ``stamps`` strictly increasing (sort, drop duplicates) or raise."""
-        order = np.arange(len(stamps))
-        back = np.flatnonzero(np.diff(stamps) < 0) + 1
-        if len(back):
-            i = int(back[0])
-            self._repair(
-                f"{role} topic {topic!r}: message #{int(indices[i])} has stamp {_seconds(int(stamps[i]))}, earlier than "
-                f"message #{int(indices[i - 1])} ({_seconds(int(stamps[i - 1]))}): the time stamps are not monotonic. "
-                "Pass repair=True to sort the messages by stamp",
-                f"{topic}: sorted the messages by stamp ({len(back)} went backwards; first: #{int(indices[i])})",
-                repairs, topic=topic, index=int(indices[i]),
-            )
-            order = np.argsort(stamps, kind="stable")
-        same = np.flatnonzero(np.diff(stamps[order]) == 0) + 1
-        if len(same):
-            i = int(same[0])
-            this, before = int(indices[order[i]]), int(indices[order[i - 1]])
-            self._repair(
-                f"{role} topic {topic!r}: message #{this} has the same stamp {_seconds(int(stamps[order[i]]))} as "
-                f"message #{before} (duplicate time stamps). Pass repair=True to keep only the first message of each stamp",
-                f"{topic}: dropped {len(same)} message(s) with a duplicate stamp, keeping the first of each "
-                f"(first dropped: #{this})",
-                repairs, topic=topic, index=this,
-            )
-            order = np.delete(order, same)
-        return order
-
-    def _rows(self, topic: str, role: str, d: _Decoded, time_source: str, poses: np.ndarray | None,
-              twists: np.ndarray | None, quaternion_tolerance: float = 1e-6) -> tuple[np.ndarray, dict[str, Any]]:
-        """The usable rows of ``d`` in stamp order and the :class:`_Series` fields they make: drops
-        (or refuses) non-finite values and zero quaternions, renormalises ``poses`` in place."""
-        notes: list[str] = []
-        stamps, keep, source = self._stamps(topic, role, d, time_source, notes)
-        ok = np.ones(len(d.indices), dtype=bool)
-        for array in (poses, twists):
-            if array is not None:
-                ok &= np.isfinite(array).all(axis=1)
-        zero_q = np.zeros(len(d.indices), dtype=bool)
+        # values: ROS order position(3), orientation xyzw(4) [, pose cov(36), twist linear(3) angular(3), ...]
+        poses = twists = None
+        if with_poses:
+            poses = np.concatenate([xyzw_to_wxyz(values[:, 3:7]), values[:, 0:3]], axis=1)
+        if type_name in TWIST_TYPES:
+            linear = 43 if type_name == _ODOMETRY else 0
+            twists = np.concatenate([values[:, linear + 3 : linear + 6], values[:, linear : linear + 3]], axis=1)
+        ok = np.isfinite(np.concatenate([a for a in (poses, twists) if a is not None], axis=1)).all(axis=1)
+        zero_q = np.zeros_like(ok)
         if poses is not None:
             zero_q = ok & (np.linalg.norm(np.nan_to_num(poses[:, :4]), axis=1) < 1e-9)
-            ok &= ~zero_q
+        ok &= ~zero_q
         bad = keep & ~ok
         if bad.any():
             i = int(np.argmax(bad))
             what = "a zero quaternion" if zero_q[i] else "a non-finite value (NaN or infinity)"
-            self._repair(
-                f"{role} topic {topic!r}: message #{int(d.indices[i])} has {what}; pass repair=True to drop such messages",
-                f"{topic}: dropped {int(bad.sum())} message(s) with non-finite values or zero quaternions "
-                f"(first: #{int(d.indices[i])})",
-                d.repairs, topic=topic, index=int(d.indices[i]),
+            refuse(
+                int(indices[i]),
+                f"has {what}; pass repair=True to drop such messages",
+                f"dropped {int(bad.sum())} message(s) with non-finite values or zero quaternions "
+                f"(first: #{int(indices[i])})",
             )
         keep &= ok
         if poses is not None:
@@ -670,50 +593,66 @@ class McapRecording:
             bad_norm = keep & (np.abs(norms - 1.0) > quaternion_tolerance)
             if bad_norm.any():
                 i = int(np.argmax(bad_norm))
-                self._repair(
-                    f"{role} topic {topic!r}: message #{int(d.indices[i])} has a quaternion of norm {norms[i]:.9g}, not 1 "
-                    f"(tolerance {quaternion_tolerance:g}); pass repair=True to renormalise such quaternions, or a "
-                    "larger quaternion_tolerance",
-                    f"{topic}: renormalised {int(bad_norm.sum())} quaternion(s) with a norm off 1 by more than "
-                    f"{quaternion_tolerance:g} (first: #{int(d.indices[i])}, norm {norms[i]:.9g})",
-                    d.repairs, topic=topic, index=int(d.indices[i]),
+                refuse(
+                    int(indices[i]),
+                    f"has a quaternion of norm {norms[i]:.9g}, not 1 (tolerance {quaternion_tolerance:g}); pass "
+                    "repair=True to renormalise such quaternions, or a larger quaternion_tolerance",
+                    f"renormalised {int(bad_norm.sum())} quaternion(s) with a norm off 1 by more than "
+                    f"{quaternion_tolerance:g} (first: #{int(indices[i])}, norm {norms[i]:.9g})",
                 )
                 poses[bad_norm, :4] /= norms[bad_norm, None]
-        rows = np.flatnonzero(keep)
-        order = rows[self._order(topic, role, stamps[rows], d.indices[rows], d.repairs)]
+
+        # order: sort by stamp, drop duplicate stamps
+        rows_kept = np.flatnonzero(keep)
+        kept_stamps, kept_indices = stamps[rows_kept], indices[rows_kept]
+        order = np.arange(len(rows_kept))
+        back = np.flatnonzero(np.diff(kept_stamps) < 0) + 1
+        if len(back):
+            i = int(back[0])
+            refuse(
+                int(kept_indices[i]),
+                f"has stamp {_seconds(int(kept_stamps[i]))}, earlier than message #{int(kept_indices[i - 1])} "
+                f"({_seconds(int(kept_stamps[i - 1]))}): the time stamps are not monotonic. Pass repair=True to "
+                "sort the messages by stamp",
+                f"sorted the messages by stamp ({len(back)} went backwards; first: #{int(kept_indices[i])})",
+            )
+            order = np.argsort(kept_stamps, kind="stable")
+        same = np.flatnonzero(np.diff(kept_stamps[order]) == 0) + 1
+        if len(same):
+            i = int(same[0])
+            this, before = int(kept_indices[order[i]]), int(kept_indices[order[i - 1]])
+            refuse(
+                this,
+                f"has the same stamp {_seconds(int(kept_stamps[order[i]]))} as message #{before} (duplicate time "
+                "stamps). Pass repair=True to keep only the first message of each stamp",
+                f"dropped {len(same)} message(s) with a duplicate stamp, keeping the first of each "
+                f"(first dropped: #{this})",
+            )
+            order = np.delete(order, same)
+        order = rows_kept[order]
         if len(order) == 0:
             raise self._error(f"{role} topic {topic!r} has no usable messages", topic=topic)
-        return order, dict(topic=topic, type_name=d.type_name, encoding=d.encoding, stamps_ns=stamps[order],
-                           indices=d.indices[order], time_source=source, repairs=tuple(d.repairs), notes=tuple(notes))
+        return dict(
+            topic=topic, type_name=type_name, encoding=encoding, stamps_ns=stamps[order], indices=indices[order],
+            time_source=source, repairs=tuple(repairs), notes=tuple(notes), frame_id=frames[0],
+            child_frame_id=children[0], poses=None if poses is None else poses[order],
+            twists=None if twists is None else twists[order],
+        )
 
     def read_poses(
-        self,
-        topic: str,
-        *,
-        role: str = "pose",
-        time_source: str = "auto",
-        quaternion_tolerance: float = 1e-6,
+        self, topic: str, *, role: str = "pose", time_source: str = "auto", quaternion_tolerance: float = 1e-6
     ) -> PoseSeries:
         """Validated poses of ``topic`` (see module docstring for the checks and repairs)."""
-        d = self._decode(topic, role, POSE_TYPES)
-        values = d.values
-        # ROS order: position(3), orientation xyzw(4) [, pose cov(36), twist linear(3), angular(3), ...]
-        poses = np.concatenate([xyzw_to_wxyz(values[:, 3:7]), values[:, 0:3]], axis=1)
-        twists = None
-        if d.type_name == "nav_msgs/Odometry":
-            twists = np.concatenate([values[:, 46:49], values[:, 43:46]], axis=1)
-        order, common = self._rows(topic, role, d, time_source, poses, twists, quaternion_tolerance)
-        return PoseSeries(**common, poses=poses[order], frame_id=d.frame_id, child_frame_id=d.child_frame_id,
-                          twists=None if twists is None else twists[order])
+        return PoseSeries(**self._series(topic, role, POSE_TYPES, time_source, True, quaternion_tolerance))
 
     def read_twists(self, topic: str, *, role: str = "twist", time_source: str = "auto") -> TwistSeries:
         """Validated twists of ``topic`` (``TwistStamped``, or the twist part of ``Odometry``)."""
-        d = self._decode(topic, role, TWIST_TYPES)
-        values = d.values[:, 43:49] if d.type_name == "nav_msgs/Odometry" else d.values
-        twists = np.concatenate([values[:, 3:6], values[:, 0:3]], axis=1)  # angular, linear
-        order, common = self._rows(topic, role, d, time_source, None, twists)
-        frame_id = d.child_frame_id if d.type_name == "nav_msgs/Odometry" else d.frame_id
-        return TwistSeries(**common, twists=twists[order], frame_id=frame_id)
+        fields = self._series(topic, role, TWIST_TYPES, time_source, False)
+        del fields["poses"]
+        child_frame_id = fields.pop("child_frame_id")
+        if fields["type_name"] == _ODOMETRY:
+            fields["frame_id"] = child_frame_id
+        return TwistSeries(**fields)
 
 
 def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:

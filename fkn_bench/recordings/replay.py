@@ -71,13 +71,8 @@ from fkn_bench.scenarios import ConfigError, Scenario, get_scenario
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = [
-    "ASTROBEE_TRUTH_PATTERN",
-    "ReplayReport",
-    "RecordedTrajectory",
-    "read_recording",
-    "load_episodes",
-    "resample_truth",
-    "finite_difference_twist",
+    "ASTROBEE_TRUTH_PATTERN", "ReplayReport", "RecordedTrajectory", "read_recording",
+    "load_episodes", "resample_truth", "finite_difference_twist"
 ]
 
 ASTROBEE_TRUTH_PATTERN = re.compile(r"^(/[^/]+)*/loc/truth/pose$|^loc/truth/pose$")
@@ -200,11 +195,11 @@ def _locate(stamps: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return exact, lo, hi, frac
 
 
-def resample_truth(stamps_ns: np.ndarray, poses: ArrayF, twists: ArrayF | None, grid_ns: np.ndarray) -> tuple[ArrayF, ArrayF | None, int]:
-    """Poses ``(N, 7)`` (and twists ``(N, 6)``) at ``grid_ns``: samples where the stamps match
-    exactly, slerp / linear interpolation between neighbours elsewhere (clamped at the ends).
+def resample_truth(stamps_ns: np.ndarray, poses: ArrayF, grid_ns: np.ndarray) -> tuple[ArrayF, int]:
+    """Poses ``(N, 7)`` at ``grid_ns``: samples where the stamps match exactly, slerp / linear
+    interpolation between neighbours elsewhere (clamped at the ends).
 
-    Returns ``(poses (T, 7), twists (T, 6) or None, number of interpolated grid steps)``.
+    Returns ``(poses (T, 7), number of interpolated grid steps)``.
     """
     exact, lo, hi, frac = _locate(stamps_ns, grid_ns)
     interp = exact < 0
@@ -213,8 +208,7 @@ def resample_truth(stamps_ns: np.ndarray, poses: ArrayF, twists: ArrayF | None, 
     if interp.any():
         out[interp, :4] = quat.slerp(poses[lo[interp], :4], poses[hi[interp], :4], frac[interp])
     out[:, 4:] = _resample_linear(stamps_ns, poses[:, 4:], grid_ns)
-    tw = None if twists is None else _resample_linear(stamps_ns, twists, grid_ns)
-    return out, tw, int(interp.sum())
+    return out, int(interp.sum())
 
 
 def _resample_linear(stamps_ns: np.ndarray, values: ArrayF, grid_ns: np.ndarray) -> ArrayF:
@@ -244,21 +238,18 @@ def finite_difference_twist(stamps_ns: np.ndarray, poses: ArrayF) -> ArrayF:
 
 # ---------------------------------------------------------------------------- reading
 def _recording_metadata(rec: McapRecording) -> tuple[dict[str, dict[str, str]], dict[str, str], Scenario | None, list[str]]:
-    notes: list[str] = []
     metadata = rec.metadata()
+    notes: list[str] = []
     topics: dict[str, str] = {}
     scenario = None
-    info = metadata.get("fkn_bench.recording", {})
-    if "topics" in info:
+    recording = metadata.get("fkn_bench.recording", {})
+    try:
+        topics = {str(k): str(v) for k, v in json.loads(recording.get("topics", "{}")).items()}
+    except (ValueError, AttributeError):
+        notes.append("the fkn_bench.recording metadata has an unreadable 'topics' entry; ignored")
+    if stored := metadata.get("fkn_bench.scenario"):
         try:
-            topics = {str(k): str(v) for k, v in json.loads(info["topics"]).items()}
-        except (ValueError, AttributeError):
-            notes.append("the fkn_bench.recording metadata has an unreadable 'topics' entry; ignored")
-    stored = metadata.get("fkn_bench.scenario")
-    if stored:
-        try:
-            fields = {k: json.loads(v) for k, v in stored.items() if k != "config_hash"}
-            scenario = Scenario.from_dict(fields)
+            scenario = Scenario.from_dict({k: json.loads(v) for k, v in stored.items() if k != "config_hash"})
         except (ValueError, TypeError) as exc:
             notes.append(f"the stored scenario cannot be read ({exc}); using ds1")
     return metadata, topics, scenario, notes
@@ -282,17 +273,6 @@ def _pick_truth_topic(rec: McapRecording, recorded_topics: Mapping[str, str]) ->
         f"pose type; pass truth_topic=. {rec.describe_topics()}",
         path=rec.path,
     )
-
-
-def _twist_topic_for(rec: McapRecording, truth_topic: str) -> str | None:
-    """The TwistStamped topic next to the truth topic (``.../pose`` -> ``.../twist``), if any."""
-    if not truth_topic.endswith("pose"):
-        return None
-    candidate = truth_topic[: -len("pose")] + "twist"
-    info = rec.topics().get(candidate)
-    if info is not None and info.type_name == "geometry_msgs/TwistStamped" and info.message_count != 0:
-        return candidate
-    return None
 
 
 def _grid(first: int, last: int, dt: float) -> np.ndarray:
@@ -330,9 +310,6 @@ def read_recording(
         quaternion_tolerance: largest accepted ``|norm - 1|`` of a recorded quaternion.
         warn: issue each repair as a :class:`RecordingRepairWarning`.
 
-    Returns:
-        A :class:`RecordedTrajectory`.
-
     Raises:
         RecordingError: (and its subclass ``TopicNotFoundError``) naming file, topic and message.
     """
@@ -344,20 +321,26 @@ def read_recording(
 
     truth_name = truth_topic if truth_topic is not None else _pick_truth_topic(rec, recorded_topics)
     truth_info = rec.require_topic(truth_name, "truth")
-    twist_name: str | None = None
-    if twist_topic == "auto":
-        if truth_info.type_name != "nav_msgs/Odometry":
-            twist_name = _twist_topic_for(rec, truth_name)
-    elif twist_topic is not None:
-        twist_name = twist_topic
+    twist_name = None if twist_topic == "auto" else twist_topic
+    if twist_topic == "auto" and truth_info.type_name != "nav_msgs/Odometry" and truth_name.endswith("pose"):
+        twist_name = truth_name[: -len("pose")] + "twist"  # the TwistStamped topic next to the truth, if any
+        info = rec.topics().get(twist_name)
+        if info is None or info.type_name != "geometry_msgs/TwistStamped" or info.message_count == 0:
+            twist_name = None
+    elif twist_name is not None:
         rec.require_topic(twist_name, "twist")
     rec.prefetch([t for t in (truth_name, twist_name, measurement_topic) if t])
+    repairs = list(rec.repairs)
 
-    truth = rec.read_poses(truth_name, role="truth", time_source=time_source, quaternion_tolerance=quaternion_tolerance)
+    def read(series: Any) -> Any:
+        repairs.extend(series.repairs)
+        notes.extend(series.notes)
+        return series
+
+    truth = read(rec.read_poses(truth_name, role="truth", time_source=time_source,
+                                quaternion_tolerance=quaternion_tolerance))
     if len(truth.stamps_ns) < 2:
         raise RecordingError(f"{rec.path}: truth topic {truth_name!r} has fewer than 2 usable messages", path=rec.path, topic=truth_name)
-    repairs = list(rec.repairs) + list(truth.repairs)
-    notes += list(truth.notes)
     intervals = np.diff(truth.stamps_ns)
     rate = 1e9 / float(np.median(intervals))
 
@@ -383,42 +366,26 @@ def read_recording(
     if largest_gap > 5 * max(step, float(np.median(intervals)) / 1e9):
         notes.append(f"{truth_name}: the truth has gaps of up to {largest_gap:.6g} s; interpolated across them")
 
-    # twist
-    twists_raw: ArrayF | None = None
-    twist_stamps = truth.stamps_ns
-    frame = "world"
-    if twist_topic is None:
-        source = "finite differences"
-    elif twist_name is None and truth.twists is not None:
+    # twist: a topic, the truth's Odometry twist, or finite differences (see the module docstring)
+    source, frame, twist_stamps = "finite differences", "world", truth.stamps_ns
+    if twist_name is not None:
+        tw = read(rec.read_twists(twist_name, role="twist", time_source=time_source))
+        twists_raw, twist_stamps, source = tw.twists, tw.stamps_ns, f"topic {twist_name}"
+        world = ("",) if tw.type_name == "nav_msgs/Odometry" else _WORLD_FRAMES
+        frame = "world" if tw.frame_id in (*world, truth.frame_id) else "body"
+    elif twist_topic is not None and truth.twists is not None:
         twists_raw, source = truth.twists, f"odometry {truth_name}"
         frame = "world" if truth.child_frame_id in ("", truth.frame_id) else "body"
-    elif twist_name is not None:
-        tw = rec.read_twists(twist_name, role="twist", time_source=time_source)
-        repairs += list(tw.repairs)
-        notes += list(tw.notes)
-        twists_raw, twist_stamps, source = tw.twists, tw.stamps_ns, f"topic {twist_name}"
-        if tw.type_name == "nav_msgs/Odometry":
-            frame = "world" if tw.frame_id in ("", truth.frame_id) else "body"
-        else:
-            frame = "world" if tw.frame_id in (*_WORLD_FRAMES, truth.frame_id) else "body"
     else:
-        source = "finite differences"
-    if twist_frame != "auto":
-        frame = twist_frame
-    if twists_raw is None:
         twists_raw = finite_difference_twist(truth.stamps_ns, truth.poses)
-        twist_stamps = truth.stamps_ns
-        frame = "world"
+    if twist_frame != "auto" and source != "finite differences":
+        frame = twist_frame
 
-    if twist_stamps is truth.stamps_ns:
-        poses, twists, interpolated = resample_truth(truth.stamps_ns, truth.poses, twists_raw, grid)
-    else:
-        poses, _, interpolated = resample_truth(truth.stamps_ns, truth.poses, None, grid)
-        twists = _resample_linear(twist_stamps, twists_raw, grid)
-        beyond = int(np.sum((grid < twist_stamps[0]) | (grid > twist_stamps[-1])))
-        if beyond:
-            notes.append(f"{twist_name}: {beyond} step(s) lie outside the twist messages; held their first/last value")
-    assert twists is not None
+    poses, interpolated = resample_truth(truth.stamps_ns, truth.poses, grid)
+    twists = _resample_linear(twist_stamps, twists_raw, grid)
+    beyond = int(np.sum((grid < twist_stamps[0]) | (grid > twist_stamps[-1])))
+    if beyond and twist_stamps is not truth.stamps_ns:
+        notes.append(f"{twist_name}: {beyond} step(s) lie outside the twist messages; held their first/last value")
     if frame == "body":
         twists = np.concatenate([quat.rotate(poses[:, :4], twists[:, :3]), quat.rotate(poses[:, :4], twists[:, 3:])], axis=1)
     states = np.concatenate([poses, twists], axis=1)
@@ -426,11 +393,9 @@ def read_recording(
     # measurements
     measurements = valid = None
     if measurement_topic is not None:
-        meas = rec.read_poses(measurement_topic, role="measurement", time_source=time_source, quaternion_tolerance=quaternion_tolerance)
-        repairs += list(meas.repairs)
-        notes += list(meas.notes)
-        measurements, valid, more = _snap_measurements(meas, grid, step)
-        notes += more
+        meas = read(rec.read_poses(measurement_topic, role="measurement", time_source=time_source,
+                                   quaternion_tolerance=quaternion_tolerance))
+        measurements, valid = _snap_measurements(meas, grid, step, notes)
         measurement_source = f"topic {measurement_topic}"
     else:
         measurement_source = f"synthesised ({base.name} noise model)"
@@ -484,9 +449,8 @@ def read_recording(
     )
 
 
-def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float) -> tuple[ArrayF, ArrayB, list[str]]:
-    """Assign each measurement to the nearest grid step (the last one wins a step)."""
-    notes: list[str] = []
+def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float, notes: list[str]) -> tuple[ArrayF, ArrayB]:
+    """Assign each measurement to the nearest grid step (the last one wins a step); remarks go to ``notes``."""
     n = len(grid)
     k = np.floor((series.stamps_ns - grid[0]).astype(np.float64) / (dt * 1e9) + 0.5).astype(np.int64)
     inside = (k >= 0) & (k < n)
@@ -505,14 +469,10 @@ def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float) -> tuple
         offset = np.abs(series.stamps_ns[inside] - grid[k_in]).max() / 1e9
         if offset > 1e-6:
             notes.append(f"{series.topic}: measurements moved to the nearest step (up to {offset * 1e3:.4g} ms)")
-    return measurements, valid, notes
+    return measurements, valid
 
 
 def load_episodes(path: str | Path, *, seed: int = 0, **options: Any) -> Episodes:
-    """The recording at ``path`` as :class:`~fkn_bench.envs.Episodes` (batch 1).
-
-    ``options`` are those of :func:`read_recording`; ``seed`` seeds synthesised measurements.
-    Repairs are issued as :class:`RecordingRepairWarning`. Equivalent to
-    ``read_recording(path, **options).episodes(seed)``.
-    """
+    """``read_recording(path, **options).episodes(seed)``: the recording as
+    :class:`~fkn_bench.envs.Episodes` (batch 1); ``seed`` seeds synthesised measurements."""
     return read_recording(path, **options).episodes(seed)

@@ -17,63 +17,56 @@ from __future__ import annotations
 import json
 
 __all__ = [
-    "SEPARATOR",
-    "ROS2_DEFINITIONS",
-    "FOXGLOVE_POSE_IN_FRAME",
-    "FOXGLOVE_SCHEMAS",
-    "ros2_schema_text",
-    "canonical_type_name",
+    "SEPARATOR", "ROS2_DEFINITIONS", "FOXGLOVE_POSE_IN_FRAME", "FOXGLOVE_SCHEMAS",
+    "ros2_schema_text", "canonical_type_name"
 ]
 
 SEPARATOR = "=" * 80
 
 # Standalone ROS 2 definitions, keyed by the name used in "MSG:" lines (package/Type).
-_ROS2_BASE: dict[str, tuple[str, tuple[str, ...]]] = {
-    # name: (definition text, direct dependencies)
-    "builtin_interfaces/Time": ("int32 sec\nuint32 nanosec\n", ()),
-    "std_msgs/Header": ("builtin_interfaces/Time stamp\nstring frame_id\n", ("builtin_interfaces/Time",)),
-    "geometry_msgs/Point": ("float64 x\nfloat64 y\nfloat64 z\n", ()),
-    "geometry_msgs/Vector3": ("float64 x\nfloat64 y\nfloat64 z\n", ()),
-    "geometry_msgs/Quaternion": ("float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n", ()),
-    "geometry_msgs/Pose": (
-        "Point position\nQuaternion orientation\n",
-        ("geometry_msgs/Point", "geometry_msgs/Quaternion"),
-    ),
-    "geometry_msgs/Twist": ("Vector3 linear\nVector3 angular\n", ("geometry_msgs/Vector3",)),
-    "geometry_msgs/PoseStamped": ("std_msgs/Header header\nPose pose\n", ("std_msgs/Header", "geometry_msgs/Pose")),
-    "geometry_msgs/TwistStamped": ("std_msgs/Header header\nTwist twist\n", ("std_msgs/Header", "geometry_msgs/Twist")),
+_ROS2_BASE: dict[str, str] = {
+    "builtin_interfaces/Time": "int32 sec\nuint32 nanosec\n",
+    "std_msgs/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
+    "geometry_msgs/Point": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Vector3": "float64 x\nfloat64 y\nfloat64 z\n",
+    "geometry_msgs/Quaternion": "float64 x 0\nfloat64 y 0\nfloat64 z 0\nfloat64 w 1\n",
+    "geometry_msgs/Pose": "Point position\nQuaternion orientation\n",
+    "geometry_msgs/Twist": "Vector3 linear\nVector3 angular\n",
+    "geometry_msgs/PoseStamped": "std_msgs/Header header\nPose pose\n",
+    "geometry_msgs/TwistStamped": "std_msgs/Header header\nTwist twist\n",
     "geometry_msgs/PoseWithCovariance": (
         "# Row-major 6x6 covariance of (x, y, z, rotation about X, rotation about Y, rotation about Z)\n"
-        "Pose pose\nfloat64[36] covariance\n",
-        ("geometry_msgs/Pose",),
+        "Pose pose\nfloat64[36] covariance\n"
     ),
-    "geometry_msgs/TwistWithCovariance": (
-        "Twist twist\nfloat64[36] covariance\n",
-        ("geometry_msgs/Twist",),
-    ),
-    "geometry_msgs/PoseWithCovarianceStamped": (
-        "std_msgs/Header header\nPoseWithCovariance pose\n",
-        ("std_msgs/Header", "geometry_msgs/PoseWithCovariance"),
-    ),
+    "geometry_msgs/TwistWithCovariance": "Twist twist\nfloat64[36] covariance\n",
+    "geometry_msgs/PoseWithCovarianceStamped": "std_msgs/Header header\nPoseWithCovariance pose\n",
     "nav_msgs/Odometry": (
         "std_msgs/Header header\nstring child_frame_id\n"
-        "geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n",
-        ("std_msgs/Header", "geometry_msgs/PoseWithCovariance", "geometry_msgs/TwistWithCovariance"),
+        "geometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n"
     ),
 }
+
+
+def _dependencies(name: str) -> list[str]:
+    """The message types of the fields of ``name``, in field order (primitive types are lower case;
+    a type without a package is in the package of ``name``)."""
+    types = [line.split()[0] for line in _ROS2_BASE[name].splitlines() if not line.startswith("#")]
+    package = name.split("/")[0]
+    return [t if "/" in t else f"{package}/{t}" for t in types if "/" in t or t[0].isupper()]
+
 
 def _concatenate(name: str) -> str:
     """The definition of ``name`` and, in first-use (depth-first) order, of its dependencies."""
     order: list[str] = []
 
     def visit(n: str) -> None:
-        for dep in _ROS2_BASE[n][1]:
+        for dep in _dependencies(n):
             if dep not in order:
                 order.append(dep)
                 visit(dep)
 
     visit(name)
-    return "".join([_ROS2_BASE[name][0], *(f"{SEPARATOR}\nMSG: {dep}\n{_ROS2_BASE[dep][0]}" for dep in order)])
+    return "".join([_ROS2_BASE[name], *(f"{SEPARATOR}\nMSG: {dep}\n{_ROS2_BASE[dep]}" for dep in order)])
 
 
 def canonical_type_name(name: str) -> str:

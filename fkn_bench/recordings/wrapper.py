@@ -33,7 +33,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fkn_bench.recordings.writer import DEFAULT_START_EPOCH_NS, episode_metadata, write_recording
+from fkn_bench.recordings.writer import episode_metadata, write_recording
 
 __all__ = ["RecordMcap"]
 
@@ -70,26 +70,15 @@ class RecordMcap(gym.Wrapper):
         scenario = getattr(env.unwrapped, "scenario", None)
         self._dt = float(dt) if dt is not None else getattr(scenario, "dt", None)
         self._metadata = dict(metadata or {})
-        self._writer_options = {"start_epoch_ns": DEFAULT_START_EPOCH_NS, **writer_options}
+        self._writer_options = writer_options
         self.recorded_paths: list[Path] = []
         self._episode = -1
-        self._buffer: dict[str, Any] | None = None
-
-    # ------------------------------------------------------------------ buffering
-    def _start(self, obs: Any, info: Mapping[str, Any]) -> None:
-        self._episode += 1
-        self._buffer = {
-            "times": [],
-            "measurements": [],
-            "truth": [],
-            "estimates": [],
-            "seed": info.get("episode_seed"),
-        }
-        self._observe(obs, info)
+        self._seed: Any = None
+        self._observations: list[tuple[float, np.ndarray, np.ndarray | None]] | None = None  # time, pose, truth
+        self._estimates: list[np.ndarray] = []
 
     def _observe(self, obs: Any, info: Mapping[str, Any]) -> None:
-        buffer = self._buffer
-        assert buffer is not None
+        assert self._observations is not None
         if isinstance(obs, Mapping):  # a Gymnasium observation dict, or a bare (7,) pose (NaN when missing)
             pose, valid, time = obs["pose"], obs.get("valid", True), obs.get("time")
         else:
@@ -100,55 +89,47 @@ class RecordMcap(gym.Wrapper):
                 raise ValueError(
                     "the observations carry no 'time' and the environment has no scenario.dt; pass dt= to RecordMcap"
                 )
-            time = len(buffer["times"]) * self._dt
-        buffer["times"].append(float(time))
-        buffer["measurements"].append(pose if valid else np.full(7, np.nan))
+            time = len(self._observations) * self._dt
         truth = info.get("truth")
-        buffer["truth"].append(None if truth is None else np.array(truth, dtype=float).reshape(13))
+        truth = None if truth is None else np.array(truth, dtype=float).reshape(13)
+        self._observations.append((float(time), pose if valid else np.full(7, np.nan), truth))
 
-    def _output_path(self, seed: Any) -> Path:
+    def _output_path(self) -> Path:
         template = self.path_template
         if "{episode" in template or "{seed" in template:
-            return Path(template.format(episode=self._episode, seed=self._episode if seed is None else seed))
+            seed = self._episode if self._seed is None else self._seed
+            return Path(template.format(episode=self._episode, seed=seed))
         path = Path(template)
         return path if self._episode == 0 else path.with_name(f"{path.stem}-{self._episode}{path.suffix}")
 
     def _flush(self) -> None:
-        buffer, self._buffer = self._buffer, None
-        if buffer is None or not buffer["estimates"]:
+        observations, self._observations = self._observations, None
+        if not observations or not self._estimates:
             return
-        path = self._output_path(buffer["seed"])
-        n = len(buffer["times"])
-        measurements = np.array(buffer["measurements"])
-        valid = ~np.isnan(measurements).any(axis=1)
-        truth = None
-        if all(t is not None for t in buffer["truth"]):
-            truth = np.array(buffer["truth"])
+        path = self._output_path()
+        times, measurements, truth = zip(*observations)
+        n, k = len(times), len(self._estimates)
         estimates = np.full((n, 13), np.nan)
-        estimates[: len(buffer["estimates"])] = np.array(buffer["estimates"])
-        mask = np.zeros(n, dtype=bool)
-        mask[: len(buffer["estimates"])] = True
+        estimates[:k] = self._estimates
         scenario = getattr(self.env.unwrapped, "scenario", None)
         if not (hasattr(scenario, "to_dict") and hasattr(scenario, "config_hash")):
             scenario = None
         spec = getattr(self.env, "spec", None)
         episode = {
-            "seed": "" if buffer["seed"] is None else str(buffer["seed"]),
+            "seed": "" if self._seed is None else str(self._seed),
             "episode": str(self._episode),
             "n_steps": str(n),
             "environment": spec.id if spec is not None else type(self.env.unwrapped).__name__,
             "source": "fkn_bench.recordings.RecordMcap",
         }
-        metadata = episode_metadata(episode, scenario=scenario, estimator=self.estimator, extra=self._metadata)
         write_recording(
             path,
-            times=np.array(buffer["times"]),
-            truth=truth,
-            measurements=measurements,
-            valid=valid,
+            times=np.array(times),
+            truth=None if any(t is None for t in truth) else np.array(truth),
+            measurements=np.array(measurements),  # written where not NaN
             estimates=estimates,
-            estimate_mask=mask,
-            metadata=metadata,
+            estimate_mask=np.arange(n) < k,
+            metadata=episode_metadata(episode, scenario=scenario, estimator=self.estimator, extra=self._metadata),
             **self._writer_options,
         )
         self.recorded_paths.append(path)
@@ -157,14 +138,16 @@ class RecordMcap(gym.Wrapper):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         self._flush()
         obs, info = self.env.reset(seed=seed, options=options)
-        self._start(obs, info)
+        self._episode += 1
+        self._seed, self._observations, self._estimates = info.get("episode_seed"), [], []
+        self._observe(obs, info)
         return obs, info
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
-        if self._buffer is None:
+        if self._observations is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         obs, reward, terminated, truncated, info = self.env.step(action)
-        self._buffer["estimates"].append(np.array(action, dtype=float).reshape(13))
+        self._estimates.append(np.array(action, dtype=float).reshape(13))
         self._observe(obs, info)
         if terminated or truncated:
             self._flush()

@@ -77,18 +77,9 @@ from fkn_bench.recordings.schemas import FOXGLOVE_SCHEMAS, ros2_schema_text
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = [
-    "DEFAULT_START_EPOCH_NS",
-    "RECORDING_FORMAT",
-    "RECORDING_FORMAT_VERSION",
-    "COMPRESSIONS",
-    "RecordingTopics",
-    "RecordingSummary",
-    "ros_pose_covariance",
-    "stamps_from_times",
-    "write_recording",
-    "record_episode",
-    "provenance",
-    "episode_metadata",
+    "DEFAULT_START_EPOCH_NS", "RECORDING_FORMAT", "RECORDING_FORMAT_VERSION", "COMPRESSIONS",
+    "RecordingTopics", "RecordingSummary", "ros_pose_covariance", "write_recording",
+    "record_episode", "provenance", "episode_metadata"
 ]
 
 DEFAULT_START_EPOCH_NS = 1_735_689_600 * 1_000_000_000
@@ -97,11 +88,7 @@ DEFAULT_START_EPOCH_NS = 1_735_689_600 * 1_000_000_000
 RECORDING_FORMAT = "fkn-bench-recording"
 RECORDING_FORMAT_VERSION = 1
 
-COMPRESSIONS: dict[str, CompressionType] = {
-    "zstd": CompressionType.ZSTD,
-    "lz4": CompressionType.LZ4,
-    "none": CompressionType.NONE,
-}
+COMPRESSIONS: dict[str, CompressionType] = {name: CompressionType[name.upper()] for name in ("zstd", "lz4", "none")}
 
 _POSE = "geometry_msgs/msg/PoseStamped"
 _TWIST = "geometry_msgs/msg/TwistStamped"
@@ -110,11 +97,6 @@ _FOXGLOVE_POSE = "foxglove.PoseInFrame"
 
 # position-first order of the ROS 6x6 pose covariance, as indices into [dtheta, dr, ...]
 _ROS_POSE_ORDER = np.array([3, 4, 5, 0, 1, 2])
-
-
-def _join(namespace: str, name: str) -> str:
-    namespace = namespace.strip("/")
-    return f"/{namespace}{name}" if namespace else name
 
 
 @dataclass(frozen=True)
@@ -136,7 +118,8 @@ class RecordingTopics:
         """The default names under ``namespace`` (``"honey"`` -> ``/honey/loc/truth/pose``)."""
         if not isinstance(namespace, str) or any(c.isspace() for c in namespace):
             raise ValueError(f"namespace must be a string without spaces (got {namespace!r})")
-        return cls(**{f.name: _join(namespace, f.default) for f in fields(cls)})  # type: ignore[arg-type]
+        prefix = "/" + namespace.strip("/") if namespace.strip("/") else ""
+        return cls(**{f.name: prefix + f.default for f in fields(cls)})  # type: ignore[operator]
 
 
 @dataclass(frozen=True)
@@ -177,13 +160,7 @@ def ros_pose_covariance(error_covariance: ArrayF) -> ArrayF:
     return block.reshape(*P.shape[:-2], 36)
 
 
-def stamps_from_times(times: ArrayF, start_epoch_ns: int = DEFAULT_START_EPOCH_NS) -> np.ndarray:
-    """Integer ns stamps ``start_epoch_ns + round(times * 1e9)`` of times in s."""
-    times = np.asarray(times, dtype=np.float64)
-    return int(start_epoch_ns) + np.round(times * 1e9).astype(np.int64)
-
-
-def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
+def provenance() -> dict[str, str]:
     """The ``fkn_bench.provenance`` metadata (MCAP metadata values are strings): the versions,
     machine and git commit of :func:`fkn_bench.provenance.environment`, the mcap packages'
     versions, the command line and the time."""
@@ -195,7 +172,7 @@ def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
             return ""
 
     env = environment()
-    record = {
+    return {
         "fkn_bench_version": str(env["fkn_bench"]),
         "python": str(env["python"]),
         "platform": str(env["machine"]["platform"]),
@@ -206,9 +183,6 @@ def provenance(extra: Mapping[str, Any] | None = None) -> dict[str, str]:
         "git_commit": env["git_commit"] or "",
         "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
-    for key, value in (extra or {}).items():
-        record[str(key)] = value if isinstance(value, str) else json.dumps(value)
-    return record
 
 
 def _checked(name: str, array: Any, shape: tuple[int, ...], dtype: type = np.float64) -> Any:
@@ -269,9 +243,6 @@ def write_recording(
         foxglove: also write the ``foxglove.PoseInFrame`` channels.
         compression: chunk compression, ``"zstd"`` (default), ``"lz4"`` or ``"none"``.
         chunk_size: uncompressed bytes per chunk.
-
-    Returns:
-        A :class:`RecordingSummary`.
     """
     started = time.perf_counter()
     times = np.asarray(times, dtype=np.float64)
@@ -289,7 +260,7 @@ def write_recording(
     if compression not in COMPRESSIONS:
         raise ValueError(f"compression must be one of {', '.join(COMPRESSIONS)} (got {compression!r})")
     topics = topics if topics is not None else RecordingTopics.with_namespace(namespace)
-    stamps = stamps_from_times(times, start_epoch_ns)
+    stamps = int(start_epoch_ns) + np.round(times * 1e9).astype(np.int64)  # see the module docstring
     if np.any(np.diff(stamps) <= 0):
         raise ValueError("times closer than 1 ns cannot be stamped apart")
 
@@ -385,16 +356,13 @@ def episode_metadata(
     scenario: Any = None,
     estimator: Any = None,
     extra: Mapping[str, Mapping[str, str]] | None = None,
-    provenance_extra: Mapping[str, Any] | None = None,
 ) -> dict[str, Mapping[str, str]]:
-    """The metadata records of a recorded episode: ``fkn_bench.scenario`` (each field of a
-    :class:`~fkn_bench.scenarios.Scenario` JSON-encoded, plus ``config_hash``), ``fkn_bench.episode``,
-    ``fkn_bench.estimator`` (name, class, JSON config of an estimator; a mapping is taken as it
-    is), ``fkn_bench.provenance`` (:func:`provenance`), then ``extra``."""
+    """The metadata records of a recorded episode (see the module docstring), then ``extra``; an
+    ``estimator`` given as a mapping is taken as it is."""
     metadata: dict[str, Mapping[str, str]] = {}
     if scenario is not None:
-        metadata["fkn_bench.scenario"] = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
-        metadata["fkn_bench.scenario"]["config_hash"] = scenario.config_hash()
+        fields = {key: json.dumps(value) for key, value in scenario.to_dict().items()}
+        metadata["fkn_bench.scenario"] = {**fields, "config_hash": scenario.config_hash()}
     metadata["fkn_bench.episode"] = dict(episode)
     if isinstance(estimator, Mapping):
         metadata["fkn_bench.estimator"] = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in estimator.items()}
@@ -404,7 +372,7 @@ def episode_metadata(
         if callable(getattr(estimator, "to_config", None)):
             record["config"] = json.dumps(to_jsonable(estimator.to_config()))
         metadata["fkn_bench.estimator"] = record
-    metadata["fkn_bench.provenance"] = provenance(provenance_extra)
+    metadata["fkn_bench.provenance"] = provenance()
     metadata.update(extra or {})
     return metadata
 
@@ -418,7 +386,6 @@ def record_episode(
     estimator: Any = None,
     split: str | None = None,
     extra_metadata: Mapping[str, Mapping[str, str]] | None = None,
-    provenance_extra: Mapping[str, Any] | None = None,
     **options: Any,
 ) -> RecordingSummary:
     """Record row ``index`` of ``episodes`` (an :class:`~fkn_bench.envs.Episodes`) and, when
@@ -426,8 +393,7 @@ def record_episode(
 
     Estimates are written where ``estimates.initialised`` is True. ``estimator`` (an
     :class:`~fkn_bench.estimators.Estimator`, or a mapping of strings) fills the
-    ``fkn_bench.estimator`` metadata. ``options`` go to :func:`write_recording` (``topics``,
-    ``namespace``, ``frame_id``, ``start_epoch_ns``, ``foxglove``, ``compression``, ``chunk_size``).
+    ``fkn_bench.estimator`` metadata; ``options`` go to :func:`write_recording`.
     """
     if not 0 <= index < episodes.batch_size:
         raise ValueError(f"index must be in [0, {episodes.batch_size}) (got {index})")
@@ -437,11 +403,8 @@ def record_episode(
             raise ValueError(
                 f"estimates cover {estimates.means.shape[:2]} (batch, steps); the episodes {episodes.truth.shape[:2]}"
             )
-        means = estimates.means[index]
-        if estimates.error_covariances is not None:
-            covariances = estimates.error_covariances[index]
-        if estimates.initialised is not None:
-            mask = estimates.initialised[index]
+        arrays = (estimates.means, estimates.error_covariances, estimates.initialised)
+        means, covariances, mask = (None if a is None else a[index] for a in arrays)
     episode = {
         "seed": str(episodes.seeds[index]),
         "split": split or ("full" if episodes.start == 0 and episodes.n_steps == episodes.scenario.n_steps else "window"),
@@ -449,9 +412,7 @@ def record_episode(
         "n_steps": str(episodes.n_steps),
         "dt": repr(episodes.scenario.dt),
     }
-    metadata = episode_metadata(
-        episode, scenario=episodes.scenario, estimator=estimator, extra=extra_metadata, provenance_extra=provenance_extra
-    )
+    metadata = episode_metadata(episode, scenario=episodes.scenario, estimator=estimator, extra=extra_metadata)
     return write_recording(
         path,
         times=episodes.times,

@@ -109,6 +109,7 @@ def test_foxglove_json_round_trip_is_exact() -> None:
         assert document["timestamp"] == {"sec": stamp // 10**9, "nsec": stamp % 10**9}
         got_stamp, frame, got = decode_pose_in_frame(raw)
         assert got_stamp == stamp and frame == "world" and np.array_equal(got, row)  # exact: JSON float repr round trip
+        assert decode_stamped("foxglove.PoseInFrame", "json", raw) == (got_stamp, frame, "", got)
 
 
 def test_foxglove_json_non_finite_becomes_null_and_decodes_to_nan() -> None:
