@@ -31,19 +31,14 @@ workloads are CPU-bound; a regression that adds threads shows up in it too), and
 garbage collector is paused inside each timed call, as :mod:`timeit` does. Interference that
 remains (caches, memory bandwidth, a sibling hyperthread) varies from moment to moment; the two
 calls of one round run back to back under nearly the same interference, so the gated ratio is
-the *median of the per-round ratios*. (The ratio of the two minimum times, used before, pairs the
-luckiest reference round with the luckiest candidate round from different moments: with the test
-suite running on both cores, one lucky round carried implementations made twice as slow over
-their thresholds; the per-round median kept them below. The minimum times still give the
-throughputs.)
+the *median of the per-round ratios* (the ratio of the two minimum times would pair the luckiest
+rounds of either side, from different moments, and let a doubled implementation pass).
 
 Gate (:func:`evaluate`): a check passes when its ratio is at least ``min_ratio``. A check below it
 is measured again, up to ``attempts`` times in all, and fails only when every attempt is below: a
-real slowdown is below on every attempt, a burst of interference rarely is. ``min_ratio`` is set
-per check from ratios measured on the project's 2-core CI machine (about 0.7 of the
-typical ratio, below the lowest seen; the numbers are in :data:`MEASURED`), so that noise does not
-cross it while a 2x slowdown of the candidate, which halves the ratio, does. Every threshold is a
-ratio, never a time. ``tests/gates/test_speed_gate.py`` shows both: the real code passes two
+real slowdown is below on every attempt, a burst of interference rarely is. ``min_ratio`` is about
+0.7 of the ratio measured on the project's 2-core CI machine (:data:`MEASURED`), so that noise
+does not cross it while a 2x slowdown of the candidate, which halves the ratio, does. ``tests/gates/test_speed_gate.py`` shows both: the real code passes two
 evaluations in a row, and the same code made to do its work twice (:func:`doubled` on
 :attr:`RatioCheck.hotspot`) fails.
 
@@ -53,7 +48,6 @@ CPUs and builds): on another machine, print them with ``fkn-bench bench gate`` a
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import gc
 import importlib
@@ -117,7 +111,6 @@ class RatioCheck:
         description: what is timed against what.
         setup: builds the :class:`Workloads` (not timed).
         min_ratio: the gate: ``reference time / candidate time`` must be at least this.
-        steps: filter steps (sequences x steps) of one candidate call, for throughputs (0: n/a).
         hotspot: ``"module:Class.method"`` or ``"module:function"`` that carries the candidate's
             work: :func:`doubled` makes it run twice, a deliberately slowed implementation.
         combine: how the doubled hotspot combines its two results (default: the second; the
@@ -129,7 +122,6 @@ class RatioCheck:
     description: str
     setup: Callable[[], Workloads]
     min_ratio: float
-    steps: int = 0
     hotspot: str = ""
     combine: Callable[[Any, Any], Any] = _second
     repeats: int = 7
@@ -212,14 +204,12 @@ def measure_ratio(check: RatioCheck, *, repeats: int | None = None, workloads: W
         built.reference()  # warm-up: caches, allocator, lazy imports
         built.candidate()
         gc.collect()
-        reference_times, candidate_times = [], []
-        for index in range(rounds):
-            if index % 2 == 0:
-                reference_times.append(_cpu_seconds(built.reference))
-                candidate_times.append(_cpu_seconds(built.candidate))
-            else:
-                candidate_times.append(_cpu_seconds(built.candidate))
-                reference_times.append(_cpu_seconds(built.reference))
+        reference_times: list[float] = []
+        candidate_times: list[float] = []
+        sides = ((reference_times, built.reference), (candidate_times, built.candidate))
+        for index in range(rounds):  # alternating which goes first
+            for times, work in sides if index % 2 == 0 else sides[::-1]:
+                times.append(_cpu_seconds(work))
     scale = built.reference_scale
     return RatioMeasurement(
         check=check.name,
@@ -229,16 +219,19 @@ def measure_ratio(check: RatioCheck, *, repeats: int | None = None, workloads: W
     )
 
 
+def _build(check: RatioCheck) -> Workloads:
+    from fkn_bench.runtime import torch_threads
+
+    with torch_threads():
+        return check.setup()
+
+
 def evaluate(check: RatioCheck, *, attempts: int = 3, repeats: int | None = None, workloads: Workloads | None = None) -> GateOutcome:
     """Measure ``check`` until its ratio reaches ``min_ratio``, at most ``attempts`` times (the
     workloads are built once); the outcome holds every measurement."""
-    from fkn_bench.runtime import torch_threads
-
     if attempts < 1:
         raise ValueError(f"attempts must be >= 1 (got {attempts})")
-    if workloads is None:
-        with torch_threads():
-            workloads = check.setup()
+    workloads = workloads if workloads is not None else _build(check)
     done: list[RatioMeasurement] = []
     for _ in range(attempts):
         done.append(measure_ratio(check, repeats=repeats, workloads=workloads))
@@ -247,7 +240,11 @@ def evaluate(check: RatioCheck, *, attempts: int = 3, repeats: int | None = None
     return GateOutcome(check, tuple(done))
 
 
-def _resolve(hotspot: str) -> tuple[Any, str]:
+@contextmanager
+def doubled(hotspot: str, combine: Callable[[Any, Any], Any] = _second) -> Iterator[None]:
+    """Within the block, ``hotspot`` (``"module:Class.method"`` or ``"module:function"``) does its
+    work twice and returns ``combine(first, second)``: a deliberately slowed implementation, to
+    show that the gate trips. A method inherited by ``Class`` is shadowed on ``Class`` only."""
     module_name, _, qualified = hotspot.partition(":")
     if not module_name or not qualified:
         raise ValueError(f"hotspot must be 'module:name' or 'module:Class.method' (got {hotspot!r})")
@@ -255,15 +252,6 @@ def _resolve(hotspot: str) -> tuple[Any, str]:
     *path, attribute = qualified.split(".")
     for part in path:
         owner = getattr(owner, part)
-    return owner, attribute
-
-
-@contextmanager
-def doubled(hotspot: str, combine: Callable[[Any, Any], Any] = _second) -> Iterator[None]:
-    """Within the block, ``hotspot`` (``"module:Class.method"`` or ``"module:function"``) does its
-    work twice and returns ``combine(first, second)``: a deliberately slowed implementation, to
-    show that the gate trips. A method inherited by ``Class`` is shadowed on ``Class`` only."""
-    owner, attribute = _resolve(hotspot)
     own = attribute in vars(owner)
     original = vars(owner)[attribute] if own else getattr(owner, attribute)
     if isinstance(original, (staticmethod, classmethod)):
@@ -294,10 +282,7 @@ def calibrate(check: RatioCheck, *, runs: int = 10, doubled_runs: int = 4) -> di
     a :data:`MEASURED` entry plus ``suggested_min_ratio`` (0.7 of the median, rounded to two
     significant digits). Run it on the machine the gate runs on, as the gate sees it (the test
     run gives timed tests the CPU to themselves)."""
-    from fkn_bench.runtime import torch_threads
-
-    with torch_threads():
-        workloads = check.setup()
+    workloads = _build(check)
     normal = [measure_ratio(check, workloads=workloads).ratio for _ in range(runs)]
     slow: list[float] = []
     if check.hotspot and doubled_runs:
@@ -462,40 +447,24 @@ TRAIN_REFERENCE_WINDOWS = 1
 
 
 def _train_setup() -> Workloads:
-    from fkn_bench.filters import make_filter
-    from fkn_bench.flexkalmannet.checkpoint import build_model
+    from fkn_bench.flexkalmannet.benchmark import training_benchmark
     from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
-    from fkn_bench.flexkalmannet.reference import sequential_reference_epoch
     from fkn_bench.scenarios import get_scenario
-    from fkn_bench.training import Trainer, TrainingData
 
     # pinned (not the defaults, which follow the tuning), with a small network: the gate is about
     # the training loop, not about matrix products
     config = FlexKalmanNetConfig(window=TRAIN_WINDOW, stride=None, train_measurement_every=1, episodes=1, hidden=64,
                                  layers=3, samples_per_window=16, windows_per_batch=32, lr=1e-5, loss_cut=100)
-    data = TrainingData(get_scenario("ds1", n_steps=TRAIN_STEPS), window=config.window, stride=config.stride,
-                        train_measurement_every=config.train_measurement_every, episodes=config.episodes)
-    fresh = build_model(config, data)
-    trainer = Trainer(copy.deepcopy(fresh), make_filter(config.variant), data, config.train_config())
-    reference_model = copy.deepcopy(fresh)
-
-    def reference() -> None:
-        sequential_reference_epoch(reference_model, data, lr=config.lr, loss_cut=config.loss_cut,
-                                   max_windows=TRAIN_REFERENCE_WINDOWS)
-
-    def candidate() -> float:
-        return trainer.run_epoch()  # looked up at each call, so that a patched Trainer.run_epoch applies
-
-    return Workloads(reference, candidate, data.n_windows / TRAIN_REFERENCE_WINDOWS)
+    data, trainer, reference = training_benchmark(get_scenario("ds1", n_steps=TRAIN_STEPS), config,
+                                                  reference_windows=TRAIN_REFERENCE_WINDOWS)
+    # run_epoch looked up at each call, so that a patched Trainer.run_epoch applies
+    return Workloads(reference, lambda: trainer.run_epoch(), data.n_windows / TRAIN_REFERENCE_WINDOWS)
 
 
 MEASURED: dict[str, dict[str, float]] = {
-    # Re-measured after issue 14 (one model and one step for numpy and torch: the online steps of
-    # the UKF and MEKF run on numpy now, and the numpy reference loop is self-contained) with the
-    # gate's statistic, the median of the per-round ratios: `fkn-bench bench gate --calibrate 6` on
-    # the 2-core AMD EPYC CI machine, quiet (the default test run gives the timed tests the CPU to
-    # themselves, tests/conftest.py); 6 measurements and 3 doubled per check.
-    # Thresholds: 0.7 of the median, rounded to two significant digits.
+    # `fkn-bench bench gate --calibrate 6` on the 2-core AMD EPYC CI machine, quiet (the default
+    # test run gives the timed tests the CPU to themselves, tests/conftest.py); 6 measurements and
+    # 3 doubled per check. Thresholds: 0.7 of the median, rounded to two significant digits.
     "ekf-forward": {"median": 1.4064, "min": 1.3743, "max": 1.4241, "doubled_median": 0.6831, "doubled_max": 0.6964, "n": 6},
     "ukf-forward": {"median": 0.5176, "min": 0.5096, "max": 0.535, "doubled_median": 0.2605, "doubled_max": 0.2632, "n": 6},
     "mekf-forward": {"median": 0.6544, "min": 0.6489, "max": 0.6633, "doubled_median": 0.3309, "doubled_max": 0.3345, "n": 6},
@@ -514,31 +483,27 @@ MEASURED: dict[str, dict[str, float]] = {
 }
 """Ratios measured when the thresholds were set (see module docstring and the comment inside).
 
-Rounds per measurement (:attr:`RatioCheck.repeats`): 7, online checks 9, train-epoch 3 (it
-was 4: its ratios spread less than 10% around a median 1.4x its threshold and its doubled ones sit
-below 0.6 of the median). Five rounds were tried for the online checks and were not enough: the
-ratio of the two minimum times then let one lucky candidate round carry a doubled
-``online-step:manual-ekf`` to 0.43 over its 0.40 threshold."""
+Rounds per measurement (:attr:`RatioCheck.repeats`): 7, online checks 9 (five were not enough),
+train-epoch 3 (its ratios spread less than 10% around a median 1.4x its threshold)."""
 
 
 def builtin_checks() -> list[RatioCheck]:
     """The filter and training checks."""
-    steps = FILTER_BATCH * FILTER_STEPS
     return [
         RatioCheck("ekf-forward", "batched torch EKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("ekf"), min_ratio=0.98, steps=steps,
+                   _filter_setup("ekf"), min_ratio=0.98,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run"),
         RatioCheck("ukf-forward", "batched torch UKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("ukf"), min_ratio=0.36, steps=steps,
+                   _filter_setup("ukf"), min_ratio=0.36,
                    hotspot="fkn_bench.filters.ukf:UnscentedKalmanFilter.run"),
         RatioCheck("mekf-forward", "batched torch multiplicative EKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("mekf"), min_ratio=0.46, steps=steps,
+                   _filter_setup("mekf"), min_ratio=0.46,
                    hotspot="fkn_bench.filters.mekf:MultiplicativeEKF.run"),
         RatioCheck("ekf-forward-backward", "batched EKF forward + gradient vs the per-step numpy EKF loop",
-                   _filter_setup("ekf", backward=True), min_ratio=0.36, steps=steps,
+                   _filter_setup("ekf", backward=True), min_ratio=0.36,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run", combine=average_filter_results),
         RatioCheck("train-epoch", "FlexKalmanNet Trainer epoch vs the sequential reference trainer",
-                   _train_setup, min_ratio=7.1, steps=0,
+                   _train_setup, min_ratio=7.1,
                    hotspot="fkn_bench.training.trainer:Trainer.run_epoch", repeats=3),
     ]
 
@@ -593,7 +558,7 @@ def online_step_check(name: str, *, min_ratio: float | None = None) -> RatioChec
 
     threshold = min_ratio if min_ratio is not None else ONLINE_STEP_MIN_RATIOS.get(name, DEFAULT_ONLINE_STEP_MIN_RATIO)
     return RatioCheck(f"online-step:{name}", f"{name} reset() + step() vs the per-step numpy EKF loop", setup,
-                      min_ratio=threshold, steps=ONLINE_STEPS, hotspot=f"{cls.__module__}:{cls.__qualname__}.step",
+                      min_ratio=threshold, hotspot=f"{cls.__module__}:{cls.__qualname__}.step",
                       repeats=ONLINE_REPEATS)
 
 
