@@ -4,23 +4,14 @@ Absolute timings on shared machines vary by tens of percent between identical ru
 so this gate never compares a time with a stored one. Each :class:`RatioCheck` times the code
 under test (the *candidate*) and a fixed *reference* that does the same work the plain way, in
 the same process, interleaved, and gates on ``ratio = reference time / candidate time`` (how many
-times faster the candidate is than its reference; higher is better):
-
-============================  ==============================================  ===========================================
-check                         candidate                                       reference
-============================  ==============================================  ===========================================
-``ekf-forward``               batched torch EKF ``run()``, 16 sequences x     :func:`numpy_ekf_loop`: the paper's EKF in
-                              100 steps of ds1                                numpy, one sequence and one step at a time
-``ukf-forward``               batched torch UKF ``run()``, same data          the same numpy loop
-``mekf-forward``              batched torch multiplicative EKF, same data     the same numpy loop
-``ekf-forward-backward``      batched EKF ``run()`` and the gradient of a     the same numpy loop (forward only)
-                              loss with respect to ``log sigma_Q``
-``train-epoch``               one :class:`~fkn_bench.training.Trainer` epoch  the sequential reference trainer
-                              of a small FlexKalmanNet (8 windows of 150)     (:mod:`fkn_bench.flexkalmannet.reference`),
-                                                                              one window, scaled to the epoch
-``online-step:<estimator>``   ``reset()`` + 200 ``step()`` calls of a         the numpy loop on that sequence
-                              registered estimator
-============================  ==============================================  ===========================================
+times faster the candidate is than its reference; higher is better). The reference of
+``ekf-forward``, ``ukf-forward``, ``mekf-forward`` (a batched torch filter's ``run()`` on 16
+sequences x 100 steps of ds1), ``ekf-forward-backward`` (the EKF's ``run()`` and the gradient of a
+loss with respect to ``log sigma_Q``) and ``online-step:<estimator>`` (``reset()`` + 200 ``step()``
+calls of a registered estimator) is :func:`numpy_ekf_loop`, the paper's EKF in numpy, one sequence
+and one step at a time, forward only; ``train-epoch`` times one :class:`~fkn_bench.training.Trainer`
+epoch of a small FlexKalmanNet (8 windows of 150) against one window of the sequential reference
+trainer (:mod:`fkn_bench.flexkalmannet.reference`), scaled to the epoch.
 
 Measurement (:func:`measure_ratio`): both workloads are built once (data generation and model
 construction are not timed) and run once untimed; then ``repeats`` rounds each time the reference
@@ -38,9 +29,9 @@ Gate (:func:`evaluate`): a check passes when its ratio is at least ``min_ratio``
 is measured again, up to ``attempts`` times in all, and fails only when every attempt is below: a
 real slowdown is below on every attempt, a burst of interference rarely is. ``min_ratio`` is about
 0.7 of the ratio measured on the project's 2-core CI machine (:data:`MEASURED`), so that noise
-does not cross it while a 2x slowdown of the candidate, which halves the ratio, does. ``tests/gates/test_speed_gate.py`` shows both: the real code passes two
-evaluations in a row, and the same code made to do its work twice (:func:`doubled` on
-:attr:`RatioCheck.hotspot`) fails.
+does not cross it while a 2x slowdown of the candidate, which halves the ratio, does.
+``tests/gates/test_speed_gate.py`` shows both: the real code passes two evaluations in a row, and
+the same code made to do its work twice (:func:`doubled` on :attr:`RatioCheck.hotspot`) fails.
 
 Ratios depend somewhat on the machine (numpy's and torch's per-call overheads differ between
 CPUs and builds): on another machine, print them with ``fkn-bench bench gate`` and adjust.
@@ -143,13 +134,9 @@ class RatioMeasurement:
         return float(statistics.median(self.round_ratios))
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "check": self.check,
-            "reference_seconds": self.reference_seconds,
-            "candidate_seconds": self.candidate_seconds,
-            "ratio": self.ratio,
-            "round_ratios": list(self.round_ratios),
-        }
+        return {"check": self.check, "reference_seconds": self.reference_seconds,
+                "candidate_seconds": self.candidate_seconds, "ratio": self.ratio,
+                "round_ratios": list(self.round_ratios)}
 
 
 @dataclass(frozen=True)
@@ -169,12 +156,8 @@ class GateOutcome:
         return bool(self.attempts) and self.ratio >= self.check.min_ratio
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "check": self.check.name,
-            "min_ratio": self.check.min_ratio,
-            "passed": self.passed,
-            "attempts": [a.to_dict() for a in self.attempts],
-        }
+        return {"check": self.check.name, "min_ratio": self.check.min_ratio, "passed": self.passed,
+                "attempts": [a.to_dict() for a in self.attempts]}
 
 
 # ---------------------------------------------------------------------------------- measuring
