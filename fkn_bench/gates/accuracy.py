@@ -209,9 +209,7 @@ class AccuracyReport:
 
     def message(self, estimator: str | None = None) -> str:
         """Readable failure text: problems, the difference table and what to do."""
-        parts: list[str] = []
-        for problem in self.problems_of(estimator):
-            parts.append(f"{problem.kind}: {problem.estimator} on {problem.scenario}: {problem.detail}")
+        parts = [f"{p.kind}: {p.estimator} on {p.scenario}: {p.detail}" for p in self.problems_of(estimator)]
         differences = self.differences_of(estimator)
         if differences:
             pairs = sorted({(d.estimator, d.scenario) for d in differences})

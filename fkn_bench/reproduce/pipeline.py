@@ -4,8 +4,7 @@ Steps (:func:`run_reproduction`), all deterministic for a given seed:
 
 1. **Train** FlexKalmanNet on ds1 and on ds2 (:func:`fkn_bench.flexkalmannet.train_flexkalmannet`)
    with :class:`~fkn_bench.flexkalmannet.FlexKalmanNetConfig`'s defaults (or ``--config``), into
-   ``OUT/training/<data set>/`` (checkpoint, history, the two training figures, the learned
-   parameters).
+   ``OUT/training/<data set>/`` (checkpoint, history, the learned parameters).
 2. **Evaluate** the learned filters, the paper's manual tuning (``manual-<variant>``) and the
    oracle EKF (the simulation's true noise) on the test split of ``eval_seeds`` seeds, the paper's
    protocol (a measurement every 10 steps, scored from step 100): ds1 and ds2 with both learned
@@ -174,10 +173,6 @@ class Reproduction:
     figures: list[FigureRef]
     differences: list[str]
     seconds: dict[str, float] = field(default_factory=dict)
-
-    @property
-    def index(self) -> Path:
-        return self.out / "index.md"
 
 
 def named_std(estimator: Any, variant: str) -> dict[str, float]:
