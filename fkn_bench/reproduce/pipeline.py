@@ -130,10 +130,7 @@ class ReproduceSettings:
 
     def training_config(self) -> FlexKalmanNetConfig:
         base = self.config if self.config is not None else FlexKalmanNetConfig()
-        changes: dict[str, Any] = {"seed": self.seed}
-        if self.quick:
-            changes.update(QUICK_OVERRIDES)
-        return base.replace(**changes)
+        return base.replace(seed=self.seed, **(QUICK_OVERRIDES if self.quick else {}))
 
 
 @dataclass(frozen=True)
@@ -312,12 +309,9 @@ def run_reproduction(
     # 3. figures (the DS1 trace also feeds the differences section, so it is computed either way)
     say("[reproduce] drawing figures" if settings.figures else "[reproduce] no figures (--no-figures)")
     t0 = time.perf_counter()
-    figure_list: list[FigureRef] = []
     fig_dir = out / "figures"
     quick_tag = " [QUICK RUN]" if settings.quick else ""
-    seed = settings.figure_seed
-    ds1 = get_scenario("ds1")
-    ds1_trace = run_trace(constant["learned-ds1"], "learned DS1", ds1, seed)
+    ds1_trace = run_trace(constant["learned-ds1"], "learned DS1", get_scenario("ds1"), settings.figure_seed)
     uncertainty_steps = _uncertainty_steps(ds1_trace, settings.uncertainty_steps)
     if settings.figures:
         _draw_figures(settings, trained, constant, ds1_trace, fig_dir, quick_tag)
@@ -336,9 +330,8 @@ def run_reproduction(
         "states_ds1_params_on_ds2": "Cross-data-set: DS1 parameters on DS2 (the paper describes it in words only).",
         "states_ds2_params_on_ds1": "Cross-data-set: DS2 parameters on DS1 (the paper describes it in words only).",
     }
-    for stem, caption in captions.items():
-        if (fig_dir / f"{stem}.png").is_file():
-            figure_list.append(FigureRef(f"figures/{stem}.png", caption + quick_tag))
+    figure_list = [FigureRef(f"figures/{stem}.png", caption + quick_tag) for stem, caption in captions.items()
+                   if (fig_dir / f"{stem}.png").is_file()]
     seconds["figures"] = time.perf_counter() - t0
 
     # 4. tables and differences
@@ -438,8 +431,7 @@ def _blocks(r: Reproduction) -> list[Block]:
 def _write(r: Reproduction) -> None:
     from fkn_bench.training.artifacts import run_provenance
 
-    blocks = _blocks(r)
-    write_report(r.out, blocks, title="FlexKalmanNet reproduction" + (" (quick)" if r.settings.quick else ""))
+    write_report(r.out, _blocks(r), title="FlexKalmanNet reproduction" + (" (quick)" if r.settings.quick else ""))
     write_json_atomic(r.out / "results.json", {
         "quick": r.settings.quick,
         "seed": r.settings.seed,
