@@ -334,8 +334,9 @@ def run_accuracy_gate(
                     report.skipped.append((name, scenario_name, resolved.error or "unavailable"))
                 continue
             if not records:
-                problem(name, scenario_name, "missing", f"no committed results in {results_dir}; add them with "
-                        f"`{ADD_COMMAND}` and commit leaderboards/ (or exclude the estimator from the gate on purpose)")
+                problem(name, scenario_name, "missing",
+                        f"no committed results in {results_dir}; add them with `{ADD_COMMAND}` and commit "
+                        "leaderboards/ (or exclude the estimator from the gate on purpose)")
                 continue
             first = records[0]
             source = SimulatedSource(scenario, first.source.get("split", "test"))

@@ -10,9 +10,8 @@ Steps (:func:`run_reproduction`), all deterministic for a given seed:
    protocol (a measurement every 10 steps, scored from step 100): ds1 and ds2 with both learned
    parameter sets (the matched and the cross-data-set runs), and the robustness runs ds1-noise5x
    and ds1-gap100 with the DS1 parameters (:mod:`fkn_bench.reproduce.evaluation`).
-3. **Figures** from seed ``figure_seed``: the training loss and the 20 parameters over epochs
-   (DS2, as the paper, and DS1), the DS1 state plot, the angular-rate 2-sigma uncertainty over
-   the first 500 samples, the 5x-noise and 100-step-gap runs, and the cross-data-set runs.
+3. **Figures** from seed ``figure_seed``: the paper's Figs. 3-8, the training figures of DS1 and
+   the cross-data-set runs.
 4. **Tables** with the paper's quoted values beside ours (:mod:`fkn_bench.reproduce.tables`) and
    the **differences from the paper** generated from the numbers
    (:mod:`fkn_bench.reproduce.differences`).
