@@ -11,19 +11,20 @@ from __future__ import annotations
 
 import copy
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
 from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet.checkpoint import build_model
 from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
-from fkn_bench.flexkalmannet.reference import sequential_reference_epoch
+from fkn_bench.flexkalmannet.reference import ReferenceEpoch, sequential_reference_epoch
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.training import Trainer
-from fkn_bench.training.data import training_data
+from fkn_bench.training.data import TrainingData, training_data
 
-__all__ = ["TrainingSpeed", "measure_training_speed"]
+__all__ = ["TrainingSpeed", "measure_training_speed", "training_benchmark"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,24 @@ class TrainingSpeed:
         return {**asdict(self), "ratio": self.ratio}
 
 
+def training_benchmark(
+    scenario: Scenario, config: FlexKalmanNetConfig, *, reference_windows: int | None = None
+) -> tuple[TrainingData, Trainer, Callable[[], ReferenceEpoch]]:
+    """``(data, trainer, reference)``: the batched trainer and a call running the sequential
+    reference epoch (its first ``reference_windows`` windows), each on its own copy of one freshly
+    built model (:func:`measure_training_speed` and the speed gate's ``train-epoch`` check)."""
+    data = training_data(scenario, config)
+    fresh = build_model(config, data)
+    trainer = Trainer(copy.deepcopy(fresh), make_filter(config.variant), data, config.train_config())
+    reference_model = copy.deepcopy(fresh)
+
+    def reference() -> ReferenceEpoch:
+        return sequential_reference_epoch(reference_model, data, lr=config.lr, loss_cut=config.loss_cut,
+                                          max_windows=reference_windows)
+
+    return data, trainer, reference
+
+
 def measure_training_speed(
     scenario: str | Scenario = "ds1",
     config: FlexKalmanNetConfig | None = None,
@@ -58,28 +77,22 @@ def measure_training_speed(
     and the median of ``trainer_epochs`` trainer epochs."""
     scenario = get_scenario(scenario)
     config = config if config is not None else FlexKalmanNetConfig()
-    data = training_data(scenario, config)
-    fresh = build_model(config, data)
+    data, trainer, run_reference = training_benchmark(scenario, config, reference_windows=reference_windows)
     with torch_threads(config.threads):
-        trainer = Trainer(copy.deepcopy(fresh), make_filter(config.variant), data, config.train_config())
         durations = []
         for _ in range(trainer_epochs):
             began = time.perf_counter()
             trainer.run_epoch()
             durations.append(time.perf_counter() - began)
-        reference = sequential_reference_epoch(
-            copy.deepcopy(fresh), data, lr=config.lr, loss_cut=config.loss_cut, max_windows=reference_windows
-        )
+        reference = run_reference()
     durations.sort()
-    trainer_seconds = durations[len(durations) // 2]
-    reference_seconds = reference.seconds * data.n_windows / reference.windows
     return TrainingSpeed(
         scenario=scenario.name,
         window=data.window,
         train_measurement_every=data.train_measurement_every,
         windows=data.n_windows,
         reference_windows_timed=reference.windows,
-        reference_seconds_per_epoch=reference_seconds,
-        trainer_seconds_per_epoch=trainer_seconds,
+        reference_seconds_per_epoch=reference.seconds * data.n_windows / reference.windows,
+        trainer_seconds_per_epoch=durations[len(durations) // 2],
         trainer_epochs_timed=trainer_epochs,
     )

@@ -7,17 +7,11 @@ per-cell results in ``leaderboards/results`` are a regression baseline as they s
 committed cell of every (estimator, scenario) pair (seeds 0 and 1 by default: about a minute for
 the built-in estimators on the eight named scenarios) with the committed metric settings, and
 compares every deterministic metric with the committed value of the same seed, within the
-per-metric tolerance of :data:`TOLERANCES`:
-
-=====================================================  ==============================  ===========================
-metrics (``group/metric``)                             tolerance                       why
-=====================================================  ==============================  ===========================
-``stability/*`` (divergence flags, ``failed``),        exact                           0/1 flags and counts
-``*/settled``, ``consistency/nis_count``
-everything else: RMSEs (13-state, per component, per   ``|now - committed| <=          float64 results differ
-group), median/p95/max errors, settling times and      1e-12 + 1e-6 |committed|``      only by rounding between
-bands, NEES/NIS means                                  (NaN equals NaN only)           machines and libraries
-=====================================================  ==============================  ===========================
+per-metric tolerance of :data:`TOLERANCES`: exact for the values that are integers stored as
+floats (the 0/1 flags ``stability/*`` and ``*/settled``, the count ``consistency/nis_count``),
+``|now - committed| <= 1e-12 + 1e-6 |committed|`` for every computed float metric (RMSEs, error
+percentiles, settling times, NEES/NIS means: float64 results differ only by rounding between
+machines and libraries); NaN equals NaN only.
 
 A change in either direction fails: an improvement also means the committed leaderboard no
 longer describes the code. The failure message is a table (estimator, scenario, seed, metric,
@@ -96,9 +90,6 @@ class Tolerance:
 EXACT = Tolerance(0.0, 0.0)
 FLOAT = Tolerance(1e-6, 1e-12)
 
-# EXACT applies only to values that are integers stored as floats: the 0/1 flags stability/diverged,
-# stability/<reason>, stability/failed and */settled, and the count consistency/nis_count
-# (harness/rows.py); every computed float metric falls to FLOAT.
 TOLERANCES: tuple[tuple[str, Tolerance], ...] = (
     ("stability/*", EXACT),
     ("*/settled", EXACT),
@@ -218,9 +209,7 @@ class AccuracyReport:
 
     def message(self, estimator: str | None = None) -> str:
         """Readable failure text: problems, the difference table and what to do."""
-        parts: list[str] = []
-        for problem in self.problems_of(estimator):
-            parts.append(f"{problem.kind}: {problem.estimator} on {problem.scenario}: {problem.detail}")
+        parts = [f"{p.kind}: {p.estimator} on {p.scenario}: {p.detail}" for p in self.problems_of(estimator)]
         differences = self.differences_of(estimator)
         if differences:
             pairs = sorted({(d.estimator, d.scenario) for d in differences})
@@ -322,13 +311,13 @@ def run_accuracy_gate(
     scenario_list = list(scenarios) if scenarios is not None else list(scenario_names())
     report = AccuracyReport(results_dir=str(results_dir), seeds=seeds, excluded=exclude)
 
+    def problem(name: str, scenario: str, kind: str, detail: str) -> None:
+        report.problems.append(PairProblem(name, scenario, kind, detail))
+
     if estimators is None:
         for name in sorted(set(committed.estimators()) - set(registered) - set(exclude)):
-            report.problems.append(PairProblem(
-                name, "*", "orphaned",
-                f"committed cells but no such estimator is registered: remove {results_dir}/cells/{name} "
-                "and rebuild the leaderboards (fkn-bench leaderboard)",
-            ))
+            problem(name, "*", "orphaned", f"committed cells but no such estimator is registered: remove "
+                    f"{results_dir}/cells/{name} and rebuild the leaderboards (fkn-bench leaderboard)")
 
     cells: list[CellSpec] = []
     wanted: dict[tuple[str, str], tuple[int, ...]] = {}
@@ -339,31 +328,26 @@ def run_accuracy_gate(
             resolved = resolve_estimator(name, scenario)
             if not resolved.available:
                 if records:
-                    report.problems.append(PairProblem(
-                        name, scenario_name, "stale",
-                        f"committed cells exist but the estimator no longer builds ({resolved.error})"))
+                    problem(name, scenario_name, "stale",
+                            f"committed cells exist but the estimator no longer builds ({resolved.error})")
                 else:
                     report.skipped.append((name, scenario_name, resolved.error or "unavailable"))
                 continue
             if not records:
-                report.problems.append(PairProblem(
-                    name, scenario_name, "missing",
-                    f"no committed results in {results_dir}; add them with `{ADD_COMMAND}` and commit leaderboards/ "
-                    "(or exclude the estimator from the gate on purpose)"))
+                problem(name, scenario_name, "missing",
+                        f"no committed results in {results_dir}; add them with `{ADD_COMMAND}` and commit "
+                        "leaderboards/ (or exclude the estimator from the gate on purpose)")
                 continue
             first = records[0]
             source = SimulatedSource(scenario, first.source.get("split", "test"))
             key = first.key
             if key.get("estimator_fingerprint") != resolved.fingerprint:
-                report.problems.append(PairProblem(
-                    name, scenario_name, "stale",
-                    f"the estimator's configuration changed (fingerprint {key.get('estimator_fingerprint')} committed, "
-                    f"{resolved.fingerprint} now): accept with `{ACCEPT_COMMAND}`"))
+                problem(name, scenario_name, "stale", "the estimator's configuration changed (fingerprint "
+                        f"{key.get('estimator_fingerprint')} committed, {resolved.fingerprint} now): accept with "
+                        f"`{ACCEPT_COMMAND}`")
             if key.get("source") != source.key():
-                report.problems.append(PairProblem(
-                    name, scenario_name, "stale",
-                    f"the scenario changed ({key.get('source')} committed, {source.key()} now): accept with "
-                    f"`{ACCEPT_COMMAND}`"))
+                problem(name, scenario_name, "stale", f"the scenario changed ({key.get('source')} committed, "
+                        f"{source.key()} now): accept with `{ACCEPT_COMMAND}`")
             gate_seeds = tuple(first.seeds[:seeds])
             wanted[(name, scenario_name)] = gate_seeds
             cells.append(CellSpec(resolved, source, gate_seeds, MetricSettings.from_dict(key["settings"]),
@@ -376,8 +360,7 @@ def run_accuracy_gate(
             if record.status != "ok":
                 committed_failed = any(r.status != "ok" for r in committed.cells(record.estimator, record.scenario))
                 if not committed_failed:
-                    report.problems.append(PairProblem(record.estimator, record.scenario, "failed",
-                                                       f"the estimator raised: {record.error}"))
+                    problem(record.estimator, record.scenario, "failed", f"the estimator raised: {record.error}")
         now_rows = _committed_rows(outcome.results.records, wanted)
         then_rows = _committed_rows(committed.records, wanted)
         report.differences, report.compared_values = _compare(then_rows, now_rows, tolerances)

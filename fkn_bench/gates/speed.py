@@ -4,23 +4,14 @@ Absolute timings on shared machines vary by tens of percent between identical ru
 so this gate never compares a time with a stored one. Each :class:`RatioCheck` times the code
 under test (the *candidate*) and a fixed *reference* that does the same work the plain way, in
 the same process, interleaved, and gates on ``ratio = reference time / candidate time`` (how many
-times faster the candidate is than its reference; higher is better):
-
-============================  ==============================================  ===========================================
-check                         candidate                                       reference
-============================  ==============================================  ===========================================
-``ekf-forward``               batched torch EKF ``run()``, 16 sequences x     :func:`numpy_ekf_loop`: the paper's EKF in
-                              100 steps of ds1                                numpy, one sequence and one step at a time
-``ukf-forward``               batched torch UKF ``run()``, same data          the same numpy loop
-``mekf-forward``              batched torch multiplicative EKF, same data     the same numpy loop
-``ekf-forward-backward``      batched EKF ``run()`` and the gradient of a     the same numpy loop (forward only)
-                              loss with respect to ``log sigma_Q``
-``train-epoch``               one :class:`~fkn_bench.training.Trainer` epoch  the sequential reference trainer
-                              of a small FlexKalmanNet (8 windows of 150)     (:mod:`fkn_bench.flexkalmannet.reference`),
-                                                                              one window, scaled to the epoch
-``online-step:<estimator>``   ``reset()`` + 200 ``step()`` calls of a         the numpy loop on that sequence
-                              registered estimator
-============================  ==============================================  ===========================================
+times faster the candidate is than its reference; higher is better). The reference of
+``ekf-forward``, ``ukf-forward``, ``mekf-forward`` (a batched torch filter's ``run()`` on 16
+sequences x 100 steps of ds1), ``ekf-forward-backward`` (the EKF's ``run()`` and the gradient of a
+loss with respect to ``log sigma_Q``) and ``online-step:<estimator>`` (``reset()`` + 200 ``step()``
+calls of a registered estimator) is :func:`numpy_ekf_loop`, the paper's EKF in numpy, one sequence
+and one step at a time, forward only; ``train-epoch`` times one :class:`~fkn_bench.training.Trainer`
+epoch of a small FlexKalmanNet (8 windows of 150) against one window of the sequential reference
+trainer (:mod:`fkn_bench.flexkalmannet.reference`), scaled to the epoch.
 
 Measurement (:func:`measure_ratio`): both workloads are built once (data generation and model
 construction are not timed) and run once untimed; then ``repeats`` rounds each time the reference
@@ -31,21 +22,16 @@ workloads are CPU-bound; a regression that adds threads shows up in it too), and
 garbage collector is paused inside each timed call, as :mod:`timeit` does. Interference that
 remains (caches, memory bandwidth, a sibling hyperthread) varies from moment to moment; the two
 calls of one round run back to back under nearly the same interference, so the gated ratio is
-the *median of the per-round ratios*. (The ratio of the two minimum times, used before, pairs the
-luckiest reference round with the luckiest candidate round from different moments: with the test
-suite running on both cores, one lucky round carried implementations made twice as slow over
-their thresholds; the per-round median kept them below. The minimum times still give the
-throughputs.)
+the *median of the per-round ratios* (the ratio of the two minimum times would pair the luckiest
+rounds of either side, from different moments, and let a doubled implementation pass).
 
 Gate (:func:`evaluate`): a check passes when its ratio is at least ``min_ratio``. A check below it
 is measured again, up to ``attempts`` times in all, and fails only when every attempt is below: a
-real slowdown is below on every attempt, a burst of interference rarely is. ``min_ratio`` is set
-per check from ratios measured on the project's 2-core CI machine (about 0.7 of the
-typical ratio, below the lowest seen; the numbers are in :data:`MEASURED`), so that noise does not
-cross it while a 2x slowdown of the candidate, which halves the ratio, does. Every threshold is a
-ratio, never a time. ``tests/gates/test_speed_gate.py`` shows both: the real code passes two
-evaluations in a row, and the same code made to do its work twice (:func:`doubled` on
-:attr:`RatioCheck.hotspot`) fails.
+real slowdown is below on every attempt, a burst of interference rarely is. ``min_ratio`` is about
+0.7 of the ratio measured on the project's 2-core CI machine (:data:`MEASURED`), so that noise
+does not cross it while a 2x slowdown of the candidate, which halves the ratio, does.
+``tests/gates/test_speed_gate.py`` shows both: the real code passes two evaluations in a row, and
+the same code made to do its work twice (:func:`doubled` on :attr:`RatioCheck.hotspot`) fails.
 
 Ratios depend somewhat on the machine (numpy's and torch's per-call overheads differ between
 CPUs and builds): on another machine, print them with ``fkn-bench bench gate`` and adjust.
@@ -53,7 +39,6 @@ CPUs and builds): on another machine, print them with ``fkn-bench bench gate`` a
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import gc
 import importlib
@@ -117,7 +102,6 @@ class RatioCheck:
         description: what is timed against what.
         setup: builds the :class:`Workloads` (not timed).
         min_ratio: the gate: ``reference time / candidate time`` must be at least this.
-        steps: filter steps (sequences x steps) of one candidate call, for throughputs (0: n/a).
         hotspot: ``"module:Class.method"`` or ``"module:function"`` that carries the candidate's
             work: :func:`doubled` makes it run twice, a deliberately slowed implementation.
         combine: how the doubled hotspot combines its two results (default: the second; the
@@ -129,7 +113,6 @@ class RatioCheck:
     description: str
     setup: Callable[[], Workloads]
     min_ratio: float
-    steps: int = 0
     hotspot: str = ""
     combine: Callable[[Any, Any], Any] = _second
     repeats: int = 7
@@ -151,13 +134,9 @@ class RatioMeasurement:
         return float(statistics.median(self.round_ratios))
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "check": self.check,
-            "reference_seconds": self.reference_seconds,
-            "candidate_seconds": self.candidate_seconds,
-            "ratio": self.ratio,
-            "round_ratios": list(self.round_ratios),
-        }
+        return {"check": self.check, "reference_seconds": self.reference_seconds,
+                "candidate_seconds": self.candidate_seconds, "ratio": self.ratio,
+                "round_ratios": list(self.round_ratios)}
 
 
 @dataclass(frozen=True)
@@ -177,12 +156,8 @@ class GateOutcome:
         return bool(self.attempts) and self.ratio >= self.check.min_ratio
 
     def to_dict(self) -> dict[str, Any]:
-        return {
-            "check": self.check.name,
-            "min_ratio": self.check.min_ratio,
-            "passed": self.passed,
-            "attempts": [a.to_dict() for a in self.attempts],
-        }
+        return {"check": self.check.name, "min_ratio": self.check.min_ratio, "passed": self.passed,
+                "attempts": [a.to_dict() for a in self.attempts]}
 
 
 # ---------------------------------------------------------------------------------- measuring
@@ -212,14 +187,12 @@ def measure_ratio(check: RatioCheck, *, repeats: int | None = None, workloads: W
         built.reference()  # warm-up: caches, allocator, lazy imports
         built.candidate()
         gc.collect()
-        reference_times, candidate_times = [], []
-        for index in range(rounds):
-            if index % 2 == 0:
-                reference_times.append(_cpu_seconds(built.reference))
-                candidate_times.append(_cpu_seconds(built.candidate))
-            else:
-                candidate_times.append(_cpu_seconds(built.candidate))
-                reference_times.append(_cpu_seconds(built.reference))
+        reference_times: list[float] = []
+        candidate_times: list[float] = []
+        sides = ((reference_times, built.reference), (candidate_times, built.candidate))
+        for index in range(rounds):  # alternating which goes first
+            for times, work in sides if index % 2 == 0 else sides[::-1]:
+                times.append(_cpu_seconds(work))
     scale = built.reference_scale
     return RatioMeasurement(
         check=check.name,
@@ -229,16 +202,19 @@ def measure_ratio(check: RatioCheck, *, repeats: int | None = None, workloads: W
     )
 
 
+def _build(check: RatioCheck) -> Workloads:
+    from fkn_bench.runtime import torch_threads
+
+    with torch_threads():
+        return check.setup()
+
+
 def evaluate(check: RatioCheck, *, attempts: int = 3, repeats: int | None = None, workloads: Workloads | None = None) -> GateOutcome:
     """Measure ``check`` until its ratio reaches ``min_ratio``, at most ``attempts`` times (the
     workloads are built once); the outcome holds every measurement."""
-    from fkn_bench.runtime import torch_threads
-
     if attempts < 1:
         raise ValueError(f"attempts must be >= 1 (got {attempts})")
-    if workloads is None:
-        with torch_threads():
-            workloads = check.setup()
+    workloads = workloads if workloads is not None else _build(check)
     done: list[RatioMeasurement] = []
     for _ in range(attempts):
         done.append(measure_ratio(check, repeats=repeats, workloads=workloads))
@@ -247,7 +223,11 @@ def evaluate(check: RatioCheck, *, attempts: int = 3, repeats: int | None = None
     return GateOutcome(check, tuple(done))
 
 
-def _resolve(hotspot: str) -> tuple[Any, str]:
+@contextmanager
+def doubled(hotspot: str, combine: Callable[[Any, Any], Any] = _second) -> Iterator[None]:
+    """Within the block, ``hotspot`` (``"module:Class.method"`` or ``"module:function"``) does its
+    work twice and returns ``combine(first, second)``: a deliberately slowed implementation, to
+    show that the gate trips. A method inherited by ``Class`` is shadowed on ``Class`` only."""
     module_name, _, qualified = hotspot.partition(":")
     if not module_name or not qualified:
         raise ValueError(f"hotspot must be 'module:name' or 'module:Class.method' (got {hotspot!r})")
@@ -255,15 +235,6 @@ def _resolve(hotspot: str) -> tuple[Any, str]:
     *path, attribute = qualified.split(".")
     for part in path:
         owner = getattr(owner, part)
-    return owner, attribute
-
-
-@contextmanager
-def doubled(hotspot: str, combine: Callable[[Any, Any], Any] = _second) -> Iterator[None]:
-    """Within the block, ``hotspot`` (``"module:Class.method"`` or ``"module:function"``) does its
-    work twice and returns ``combine(first, second)``: a deliberately slowed implementation, to
-    show that the gate trips. A method inherited by ``Class`` is shadowed on ``Class`` only."""
-    owner, attribute = _resolve(hotspot)
     own = attribute in vars(owner)
     original = vars(owner)[attribute] if own else getattr(owner, attribute)
     if isinstance(original, (staticmethod, classmethod)):
@@ -294,10 +265,7 @@ def calibrate(check: RatioCheck, *, runs: int = 10, doubled_runs: int = 4) -> di
     a :data:`MEASURED` entry plus ``suggested_min_ratio`` (0.7 of the median, rounded to two
     significant digits). Run it on the machine the gate runs on, as the gate sees it (the test
     run gives timed tests the CPU to themselves)."""
-    from fkn_bench.runtime import torch_threads
-
-    with torch_threads():
-        workloads = check.setup()
+    workloads = _build(check)
     normal = [measure_ratio(check, workloads=workloads).ratio for _ in range(runs)]
     slow: list[float] = []
     if check.hotspot and doubled_runs:
@@ -462,40 +430,24 @@ TRAIN_REFERENCE_WINDOWS = 1
 
 
 def _train_setup() -> Workloads:
-    from fkn_bench.filters import make_filter
-    from fkn_bench.flexkalmannet.checkpoint import build_model
+    from fkn_bench.flexkalmannet.benchmark import training_benchmark
     from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
-    from fkn_bench.flexkalmannet.reference import sequential_reference_epoch
     from fkn_bench.scenarios import get_scenario
-    from fkn_bench.training import Trainer, TrainingData
 
     # pinned (not the defaults, which follow the tuning), with a small network: the gate is about
     # the training loop, not about matrix products
     config = FlexKalmanNetConfig(window=TRAIN_WINDOW, stride=None, train_measurement_every=1, episodes=1, hidden=64,
                                  layers=3, samples_per_window=16, windows_per_batch=32, lr=1e-5, loss_cut=100)
-    data = TrainingData(get_scenario("ds1", n_steps=TRAIN_STEPS), window=config.window, stride=config.stride,
-                        train_measurement_every=config.train_measurement_every, episodes=config.episodes)
-    fresh = build_model(config, data)
-    trainer = Trainer(copy.deepcopy(fresh), make_filter(config.variant), data, config.train_config())
-    reference_model = copy.deepcopy(fresh)
-
-    def reference() -> None:
-        sequential_reference_epoch(reference_model, data, lr=config.lr, loss_cut=config.loss_cut,
-                                   max_windows=TRAIN_REFERENCE_WINDOWS)
-
-    def candidate() -> float:
-        return trainer.run_epoch()  # looked up at each call, so that a patched Trainer.run_epoch applies
-
-    return Workloads(reference, candidate, data.n_windows / TRAIN_REFERENCE_WINDOWS)
+    data, trainer, reference = training_benchmark(get_scenario("ds1", n_steps=TRAIN_STEPS), config,
+                                                  reference_windows=TRAIN_REFERENCE_WINDOWS)
+    # run_epoch looked up at each call, so that a patched Trainer.run_epoch applies
+    return Workloads(reference, lambda: trainer.run_epoch(), data.n_windows / TRAIN_REFERENCE_WINDOWS)
 
 
 MEASURED: dict[str, dict[str, float]] = {
-    # Re-measured after issue 14 (one model and one step for numpy and torch: the online steps of
-    # the UKF and MEKF run on numpy now, and the numpy reference loop is self-contained) with the
-    # gate's statistic, the median of the per-round ratios: `fkn-bench bench gate --calibrate 6` on
-    # the 2-core AMD EPYC CI machine, quiet (the default test run gives the timed tests the CPU to
-    # themselves, tests/conftest.py); 6 measurements and 3 doubled per check.
-    # Thresholds: 0.7 of the median, rounded to two significant digits.
+    # `fkn-bench bench gate --calibrate 6` on the 2-core AMD EPYC CI machine, quiet (the default
+    # test run gives the timed tests the CPU to themselves, tests/conftest.py); 6 measurements and
+    # 3 doubled per check. Thresholds: 0.7 of the median, rounded to two significant digits.
     "ekf-forward": {"median": 1.4064, "min": 1.3743, "max": 1.4241, "doubled_median": 0.6831, "doubled_max": 0.6964, "n": 6},
     "ukf-forward": {"median": 0.5176, "min": 0.5096, "max": 0.535, "doubled_median": 0.2605, "doubled_max": 0.2632, "n": 6},
     "mekf-forward": {"median": 0.6544, "min": 0.6489, "max": 0.6633, "doubled_median": 0.3309, "doubled_max": 0.3345, "n": 6},
@@ -514,31 +466,27 @@ MEASURED: dict[str, dict[str, float]] = {
 }
 """Ratios measured when the thresholds were set (see module docstring and the comment inside).
 
-Rounds per measurement (:attr:`RatioCheck.repeats`): 7, online checks 9, train-epoch 3 (it
-was 4: its ratios spread less than 10% around a median 1.4x its threshold and its doubled ones sit
-below 0.6 of the median). Five rounds were tried for the online checks and were not enough: the
-ratio of the two minimum times then let one lucky candidate round carry a doubled
-``online-step:manual-ekf`` to 0.43 over its 0.40 threshold."""
+Rounds per measurement (:attr:`RatioCheck.repeats`): 7, online checks 9 (five were not enough),
+train-epoch 3 (its ratios spread less than 10% around a median 1.4x its threshold)."""
 
 
 def builtin_checks() -> list[RatioCheck]:
     """The filter and training checks."""
-    steps = FILTER_BATCH * FILTER_STEPS
     return [
         RatioCheck("ekf-forward", "batched torch EKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("ekf"), min_ratio=0.98, steps=steps,
+                   _filter_setup("ekf"), min_ratio=0.98,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run"),
         RatioCheck("ukf-forward", "batched torch UKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("ukf"), min_ratio=0.36, steps=steps,
+                   _filter_setup("ukf"), min_ratio=0.36,
                    hotspot="fkn_bench.filters.ukf:UnscentedKalmanFilter.run"),
         RatioCheck("mekf-forward", "batched torch multiplicative EKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("mekf"), min_ratio=0.46, steps=steps,
+                   _filter_setup("mekf"), min_ratio=0.46,
                    hotspot="fkn_bench.filters.mekf:MultiplicativeEKF.run"),
         RatioCheck("ekf-forward-backward", "batched EKF forward + gradient vs the per-step numpy EKF loop",
-                   _filter_setup("ekf", backward=True), min_ratio=0.36, steps=steps,
+                   _filter_setup("ekf", backward=True), min_ratio=0.36,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run", combine=average_filter_results),
         RatioCheck("train-epoch", "FlexKalmanNet Trainer epoch vs the sequential reference trainer",
-                   _train_setup, min_ratio=7.1, steps=0,
+                   _train_setup, min_ratio=7.1,
                    hotspot="fkn_bench.training.trainer:Trainer.run_epoch", repeats=3),
     ]
 
@@ -593,7 +541,7 @@ def online_step_check(name: str, *, min_ratio: float | None = None) -> RatioChec
 
     threshold = min_ratio if min_ratio is not None else ONLINE_STEP_MIN_RATIOS.get(name, DEFAULT_ONLINE_STEP_MIN_RATIO)
     return RatioCheck(f"online-step:{name}", f"{name} reset() + step() vs the per-step numpy EKF loop", setup,
-                      min_ratio=threshold, steps=ONLINE_STEPS, hotspot=f"{cls.__module__}:{cls.__qualname__}.step",
+                      min_ratio=threshold, hotspot=f"{cls.__module__}:{cls.__qualname__}.step",
                       repeats=ONLINE_REPEATS)
 
 

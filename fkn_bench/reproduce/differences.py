@@ -106,12 +106,12 @@ def _learned_vs_manual(ctx: Context) -> list[str]:
         f"{learned.state_rmse:.4f} learned vs {manual.state_rmse:.4f} manual ({_pct(learned.state_rmse, manual.state_rmse)}). "
         + verdict
     ]
-    w_l = sum(learned.component_rmse[n] for n in ("wx", "wy", "wz")) / 3
-    w_m = sum(manual.component_rmse[n] for n in ("wx", "wy", "wz")) / 3
     rates = ("wx", "wy", "wz")
+    w_l = sum(learned.component_rmse[n] for n in rates) / 3
+    w_m = sum(manual.component_rmse[n] for n in rates) / 3
     paper_ratio = sum(PAPER_MANUAL.rmse[n] for n in rates) / sum(PAPER_LEARNED.rmse[n] for n in rates)
     ratio = w_m / w_l if w_l > 0 else math.inf
-    paper_w_manual = sum(PAPER_MANUAL.rmse[n] for n in ("wx", "wy", "wz")) / 3
+    paper_w_manual = sum(PAPER_MANUAL.rmse[n] for n in rates) / 3
     manual_match = abs(w_m / paper_w_manual - 1) <= 0.25
     out.append(
         f"**Angular rate.** The paper's largest gain is the angular rate: RMSE {PAPER_LEARNED.rmse['wx']:.3f} learned "
@@ -213,17 +213,15 @@ def _parameters(ctx: Context) -> list[str]:
     if not all(n in d1 and n in d2 for n in _Q_NAMES + _R_NAMES):
         return ["**Learned parameters.** The configuration does not learn the paper's 20 diagonal standard "
                 "deviations, so Table II is not compared."]
-    pos = [d1[f"sigma_R_{a}"] for a in ("rx", "ry", "rz")]
-    paper_pos = [PAPER_LEARNED_STD["ds1"][f"sigma_R_{a}"] for a in ("rx", "ry", "rz")]
-    quat = [d1[f"sigma_R_{a}"] for a in ("qw", "qx", "qy", "qz")]
-    true_quat = [ctx.true_std.get(f"sigma_R_{a}", math.nan) for a in ("qw", "qx", "qy", "qz")]
+    def span(stds: Mapping[str, float], axes: tuple[str, ...]) -> str:
+        values = [stds.get(f"sigma_R_{a}", math.nan) for a in axes]
+        return f"{min(values):.3f}-{max(values):.3f}"
+
+    pos, quat, paper = ("rx", "ry", "rz"), ("qw", "qx", "qy", "qz"), PAPER_LEARNED_STD["ds1"]
     out.append(
         f"**Measurement noise (Table II).** The true position noise is 0.1 m; the paper learned "
-        f"{min(paper_pos):.3f}-{max(paper_pos):.3f} m from DS1, this run {min(pos):.3f}-{max(pos):.3f} m. Quaternion "
-        f"components: true {min(true_quat):.3f}-{max(true_quat):.3f}, the paper "
-        f"{min(PAPER_LEARNED_STD['ds1'][f'sigma_R_{a}'] for a in ('qw', 'qx', 'qy', 'qz')):.3f}-"
-        f"{max(PAPER_LEARNED_STD['ds1'][f'sigma_R_{a}'] for a in ('qw', 'qx', 'qy', 'qz')):.3f}, this run "
-        f"{min(quat):.3f}-{max(quat):.3f}."
+        f"{span(paper, pos)} m from DS1, this run {span(d1, pos)} m. Quaternion components: true "
+        f"{span(ctx.true_std, quat)}, the paper {span(paper, quat)}, this run {span(d1, quat)}."
     )
     r_diff = max(abs(d2[n] / d1[n] - 1) for n in _R_NAMES)
     paper_r_diff = max(abs(PAPER_LEARNED_STD["ds2"][n] / PAPER_LEARNED_STD["ds1"][n] - 1) for n in _R_NAMES)
@@ -311,12 +309,7 @@ def differences(ctx: Context) -> list[str]:
             "so the learned parameters "
             "below are barely trained; these numbers test the pipeline, they are not a reproduction."
         )
-    out += _learned_vs_manual(ctx)
-    out += _manual_vs_paper(ctx)
-    out += _learned_vs_oracle(ctx)
-    out += _training(ctx)
-    out += _parameters(ctx)
-    out += _cross(ctx)
-    out += _robustness(ctx)
-    out += _settling(ctx)
+    for section in (_learned_vs_manual, _manual_vs_paper, _learned_vs_oracle, _training, _parameters, _cross,
+                    _robustness, _settling):
+        out += section(ctx)
     return out

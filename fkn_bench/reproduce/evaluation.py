@@ -73,10 +73,6 @@ class Evaluation:
         return {**asdict(self), "seeds": list(self.seeds), "per_seed_state_rmse": list(self.per_seed_state_rmse)}
 
 
-def _finite_mean(values: np.ndarray) -> float:
-    return summarize(values).mean
-
-
 def evaluate(
     estimator: Estimator,
     label: str,
@@ -92,21 +88,16 @@ def evaluate(
     dt = float(scenario.dt)
     with torch_threads():
         estimates = estimator.estimate(np.array(episodes.measurements), np.array(episodes.valid), dt)
-    scores = score_run(
-        episodes.truth,
-        estimates.means,
-        dt,
-        error_covariances=estimates.error_covariances,
-        settings=settings,
-    )
+    scores = score_run(episodes.truth, estimates.means, dt, error_covariances=estimates.error_covariances,
+                       settings=settings)
     return Evaluation(
         estimator=label,
         scenario=scenario.name,
         seeds=tuple(int(s) for s in seeds),
-        state_rmse=_finite_mean(scores.state_rmse),
-        component_rmse={name: _finite_mean(scores.component_rmse[:, i]) for i, name in enumerate(STATE_NAMES)},
-        group_rmse={g: _finite_mean(scores.group_statistics[g]["rmse"]) for g in GROUPS},
-        settling_time_s=_finite_mean(scores.settling_time),
+        state_rmse=summarize(scores.state_rmse).mean,
+        component_rmse={name: summarize(scores.component_rmse[:, i]).mean for i, name in enumerate(STATE_NAMES)},
+        group_rmse={g: summarize(scores.group_statistics[g]["rmse"]).mean for g in GROUPS},
+        settling_time_s=summarize(scores.settling_time).mean,
         settled_fraction=float(np.mean(scores.settled)),
         diverged_fraction=float(np.mean(scores.divergence.diverged)),
         divergence_reasons={k: float(np.mean(v)) for k, v in scores.divergence.as_dict().items() if k != "diverged"},

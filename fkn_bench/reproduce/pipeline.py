@@ -4,16 +4,14 @@ Steps (:func:`run_reproduction`), all deterministic for a given seed:
 
 1. **Train** FlexKalmanNet on ds1 and on ds2 (:func:`fkn_bench.flexkalmannet.train_flexkalmannet`)
    with :class:`~fkn_bench.flexkalmannet.FlexKalmanNetConfig`'s defaults (or ``--config``), into
-   ``OUT/training/<data set>/`` (checkpoint, history, the two training figures, the learned
-   parameters).
+   ``OUT/training/<data set>/`` (checkpoint, history, the learned parameters).
 2. **Evaluate** the learned filters, the paper's manual tuning (``manual-<variant>``) and the
    oracle EKF (the simulation's true noise) on the test split of ``eval_seeds`` seeds, the paper's
    protocol (a measurement every 10 steps, scored from step 100): ds1 and ds2 with both learned
    parameter sets (the matched and the cross-data-set runs), and the robustness runs ds1-noise5x
    and ds1-gap100 with the DS1 parameters (:mod:`fkn_bench.reproduce.evaluation`).
-3. **Figures** from seed ``figure_seed``: the training loss and the 20 parameters over epochs
-   (DS2, as the paper, and DS1), the DS1 state plot, the angular-rate 2-sigma uncertainty over
-   the first 500 samples, the 5x-noise and 100-step-gap runs, and the cross-data-set runs.
+3. **Figures** from seed ``figure_seed``: the paper's Figs. 3-8, the training figures of DS1 and
+   the cross-data-set runs.
 4. **Tables** with the paper's quoted values beside ours (:mod:`fkn_bench.reproduce.tables`) and
    the **differences from the paper** generated from the numbers
    (:mod:`fkn_bench.reproduce.differences`).
@@ -131,10 +129,7 @@ class ReproduceSettings:
 
     def training_config(self) -> FlexKalmanNetConfig:
         base = self.config if self.config is not None else FlexKalmanNetConfig()
-        changes: dict[str, Any] = {"seed": self.seed}
-        if self.quick:
-            changes.update(QUICK_OVERRIDES)
-        return base.replace(**changes)
+        return base.replace(seed=self.seed, **(QUICK_OVERRIDES if self.quick else {}))
 
 
 @dataclass(frozen=True)
@@ -174,10 +169,6 @@ class Reproduction:
     figures: list[FigureRef]
     differences: list[str]
     seconds: dict[str, float] = field(default_factory=dict)
-
-    @property
-    def index(self) -> Path:
-        return self.out / "index.md"
 
 
 def named_std(estimator: Any, variant: str) -> dict[str, float]:
@@ -317,12 +308,9 @@ def run_reproduction(
     # 3. figures (the DS1 trace also feeds the differences section, so it is computed either way)
     say("[reproduce] drawing figures" if settings.figures else "[reproduce] no figures (--no-figures)")
     t0 = time.perf_counter()
-    figure_list: list[FigureRef] = []
     fig_dir = out / "figures"
     quick_tag = " [QUICK RUN]" if settings.quick else ""
-    seed = settings.figure_seed
-    ds1 = get_scenario("ds1")
-    ds1_trace = run_trace(constant["learned-ds1"], "learned DS1", ds1, seed)
+    ds1_trace = run_trace(constant["learned-ds1"], "learned DS1", get_scenario("ds1"), settings.figure_seed)
     uncertainty_steps = _uncertainty_steps(ds1_trace, settings.uncertainty_steps)
     if settings.figures:
         _draw_figures(settings, trained, constant, ds1_trace, fig_dir, quick_tag)
@@ -341,9 +329,8 @@ def run_reproduction(
         "states_ds1_params_on_ds2": "Cross-data-set: DS1 parameters on DS2 (the paper describes it in words only).",
         "states_ds2_params_on_ds1": "Cross-data-set: DS2 parameters on DS1 (the paper describes it in words only).",
     }
-    for stem, caption in captions.items():
-        if (fig_dir / f"{stem}.png").is_file():
-            figure_list.append(FigureRef(f"figures/{stem}.png", caption + quick_tag))
+    figure_list = [FigureRef(f"figures/{stem}.png", caption + quick_tag) for stem, caption in captions.items()
+                   if (fig_dir / f"{stem}.png").is_file()]
     seconds["figures"] = time.perf_counter() - t0
 
     # 4. tables and differences
@@ -443,8 +430,7 @@ def _blocks(r: Reproduction) -> list[Block]:
 def _write(r: Reproduction) -> None:
     from fkn_bench.training.artifacts import run_provenance
 
-    blocks = _blocks(r)
-    write_report(r.out, blocks, title="FlexKalmanNet reproduction" + (" (quick)" if r.settings.quick else ""))
+    write_report(r.out, _blocks(r), title="FlexKalmanNet reproduction" + (" (quick)" if r.settings.quick else ""))
     write_json_atomic(r.out / "results.json", {
         "quick": r.settings.quick,
         "seed": r.settings.seed,

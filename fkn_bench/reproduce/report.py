@@ -12,10 +12,10 @@ from __future__ import annotations
 import html
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fkn_bench.harness.tables import Table, markdown_grid
+from fkn_bench.harness.tables import Table, markdown_table
 from fkn_bench.io import write_text_atomic
 
 __all__ = ["Heading", "Paragraph", "Bullets", "Table", "FigureRef", "Block", "render_markdown", "render_html", "write_report"]
@@ -58,12 +58,9 @@ def render_markdown(blocks: Sequence[Block]) -> str:
             out.append(f"{block.text}\n")
         elif isinstance(block, Bullets):
             out.append("\n".join(f"- {item}" for item in block.items) + "\n")
-        elif isinstance(block, Table):
-            lines = [f"**{block.title}**", "", *markdown_grid(block)]
-            for note in block.notes:  # plain paragraphs: notes may hold '*' of their own
-                lines += ["", note]
-            lines.append(f"\n(CSV: [`tables/{block.name}.csv`](tables/{block.name}.csv))")
-            out.append("\n".join(lines) + "\n")
+        elif isinstance(block, Table):  # the title in bold, not as a heading; notes as plain paragraphs
+            out.append(f"**{block.title}**\n\n{markdown_table(replace(block, title=''))}"
+                       f"\n(CSV: [`tables/{block.name}.csv`](tables/{block.name}.csv))\n")
         elif isinstance(block, FigureRef):
             out.append(f"![{block.caption}]({block.path})\n\n*{block.caption}*\n")
         else:  # pragma: no cover - the union is closed

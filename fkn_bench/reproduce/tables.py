@@ -47,41 +47,35 @@ def fmt(value: float | None, digits: int = 4) -> str:
 
 def fmt_std(value: float | None) -> str:
     """A standard deviation as the paper prints them (six decimals), scientific below 1e-5."""
-    if value is None or not math.isfinite(float(value)):
-        return DASH
-    value = float(value)
-    return f"{value:.6f}" if value >= 1e-5 else f"{value:.2e}"
+    text = fmt(value, 6)
+    return text if text == DASH or float(value) >= 1e-5 else f"{float(value):.2e}"  # type: ignore[arg-type]
 
 
 # ---------------------------------------------------------------------------------------------
 def hyperparameter_table(config: FlexKalmanNetConfig, output_size: int, *, quick: bool) -> Table:
     """Table "best hyperparameter set": the paper's Table I beside the configuration used here."""
-    ours: dict[str, str] = {
-        "seed": str(config.seed),
-        "input_size": "7 (pose measurement)",
-        "output_size": f"{output_size} ({' + '.join(config.learn)})",
-        "batch_size": f"window of {config.window} consecutive samples, {config.windows_per_batch} windows per step",
-        "hidden": str(config.hidden),
-        "layers": str(config.layers),
-        "lr": f"{config.lr:g}",
-        "dropout": f"{config.dropout:g}",
-        "weight_decay": f"{config.weight_decay:g}",
-        "loss": "MSE vs all 13 true states" if config.objective == "supervised" else f"{config.objective} (innovation NLL)",
-        "scheduler": f"ReduceLROnPlateau (factor {config.scheduler_factor:g}, patience {config.scheduler_patience})",
-        "loss_cut": str(config.loss_cut),
-        "optimizer": "Adam",
-        "activation": config.activation,
-        "epochs": str(config.epochs),
-        "patience": str(config.patience),
+    loss = "MSE vs all 13 true states" if config.objective == "supervised" else f"{config.objective} (innovation NLL)"
+    ours: dict[str, tuple[str, str]] = {  # key of PAPER_TABLE: (row label, the value used here)
+        "seed": ("Random seed", str(config.seed)),
+        "input_size": ("Input size", "7 (pose measurement)"),
+        "output_size": ("Output size", f"{output_size} ({' + '.join(config.learn)})"),
+        "batch_size": ("Batch size", f"window of {config.window} consecutive samples, "
+                                     f"{config.windows_per_batch} windows per step"),
+        "hidden": ("Hidden size", str(config.hidden)),
+        "layers": ("Number of layers", str(config.layers)),
+        "lr": ("Learning rate", f"{config.lr:g}"),
+        "dropout": ("Dropout probability", f"{config.dropout:g}"),
+        "weight_decay": ("Weight decay penalty term", f"{config.weight_decay:g}"),
+        "loss": ("Loss function", loss),
+        "scheduler": ("Loss scheduler", f"ReduceLROnPlateau (factor {config.scheduler_factor:g}, "
+                                        f"patience {config.scheduler_patience})"),
+        "loss_cut": ("Loss cut", str(config.loss_cut)),
+        "optimizer": ("Optimizer", "Adam"),
+        "activation": ("Activation function", config.activation),
+        "epochs": ("Number of epochs", str(config.epochs)),
+        "patience": ("Early stopping after epochs", str(config.patience)),
     }
-    names = {
-        "seed": "Random seed", "input_size": "Input size", "output_size": "Output size", "batch_size": "Batch size",
-        "hidden": "Hidden size", "layers": "Number of layers", "lr": "Learning rate", "dropout": "Dropout probability",
-        "weight_decay": "Weight decay penalty term", "loss": "Loss function", "scheduler": "Loss scheduler",
-        "loss_cut": "Loss cut", "optimizer": "Optimizer", "activation": "Activation function",
-        "epochs": "Number of epochs", "patience": "Early stopping after epochs",
-    }
-    rows = [(names[key], str(PAPER_TABLE[key]), ours[key]) for key in PAPER_TABLE]
+    rows = [(ours[key][0], str(PAPER_TABLE[key]), ours[key][1]) for key in PAPER_TABLE]
     covered = {"seed", "hidden", "layers", "lr", "dropout", "weight_decay", "loss_cut", "activation", "epochs",
                "patience", "window", "windows_per_batch", "objective", "scheduler_factor", "scheduler_patience", "learn"}
     for key, value in config.to_dict().items():
@@ -127,18 +121,9 @@ def training_table(trained: Mapping[str, TrainedModel]) -> Table:
 def learned_std_table(trained: Mapping[str, TrainedModel], manual: Mapping[str, float], oracle: Mapping[str, float]) -> Table:
     """Table "learned standard deviations": ours and the paper's for DS1 and DS2, with the
     manual tuning and the simulation's true noise for reference."""
-    names = list(trained["ds1"].learned_std)
-    rows = []
-    for name in names:
-        rows.append((
-            name,
-            fmt_std(trained["ds1"].learned_std.get(name)),
-            fmt_std(PAPER_LEARNED_STD["ds1"].get(name)),
-            fmt_std(trained["ds2"].learned_std.get(name)),
-            fmt_std(PAPER_LEARNED_STD["ds2"].get(name)),
-            fmt_std(manual.get(name)),
-            fmt_std(oracle.get(name)),
-        ))
+    columns = (trained["ds1"].learned_std, PAPER_LEARNED_STD["ds1"], trained["ds2"].learned_std,
+               PAPER_LEARNED_STD["ds2"], manual, oracle)
+    rows = [(name, *(fmt_std(column.get(name)) for column in columns)) for name in trained["ds1"].learned_std]
     notes = (
         "sigma_R_*: measurement noise, sigma_Q_*: process noise per step (quaternion components, m, rad/s, m/s).",
         "Manual: the paper's manual tuning (section 4.3). True noise: the oracle's values for ds1 (RMS of the "
@@ -152,24 +137,11 @@ def learned_std_table(trained: Mapping[str, TrainedModel], manual: Mapping[str, 
 
 def rmse_table(learned: Evaluation, manual: Evaluation, oracle: Evaluation | None) -> Table:
     """Table "RMSE learned vs manual" on ds1, per state variable, with the quoted paper values."""
-    rows = []
-    for name in STATE_NAMES:
-        rows.append((
-            name,
-            fmt(learned.component_rmse[name]),
-            fmt(manual.component_rmse[name]),
-            fmt(PAPER_LEARNED.rmse[name], 3),
-            fmt(PAPER_MANUAL.rmse[name], 3),
-            fmt(oracle.component_rmse[name]) if oracle else DASH,
-        ))
-    rows.append((
-        "13-state",
-        fmt(learned.state_rmse),
-        fmt(manual.state_rmse),
-        fmt(PAPER_LEARNED.state_rmse) + "*",
-        fmt(PAPER_MANUAL.state_rmse) + "*",
-        fmt(oracle.state_rmse) if oracle else DASH,
-    ))
+    rows = [(name, fmt(learned.component_rmse[name]), fmt(manual.component_rmse[name]),
+             fmt(PAPER_LEARNED.rmse[name], 3), fmt(PAPER_MANUAL.rmse[name], 3),
+             fmt(oracle.component_rmse[name]) if oracle else DASH) for name in STATE_NAMES]
+    rows.append(("13-state", fmt(learned.state_rmse), fmt(manual.state_rmse), fmt(PAPER_LEARNED.state_rmse) + "*",
+                 fmt(PAPER_MANUAL.state_rmse) + "*", fmt(oracle.state_rmse) if oracle else DASH))
     seeds = len(learned.seeds)
     notes = (
         f"Ours: mean over {seeds} seeds (test split, 1600 steps each at the default length, a measurement every 10 "
@@ -186,18 +158,9 @@ def rmse_table(learned: Evaluation, manual: Evaluation, oracle: Evaluation | Non
 
 def _run_row(label: str, evaluation: Evaluation) -> tuple[str, ...]:
     g = evaluation.group_rmse
-    return (
-        label,
-        evaluation.scenario,
-        fmt(evaluation.state_rmse),
-        f"{g['attitude']:.2f}" if math.isfinite(g["attitude"]) else DASH,
-        fmt(g["position"]),
-        fmt(g["omega"], 5),
-        fmt(g["velocity"], 5),
-        f"{evaluation.settling_time_s:.1f}" if math.isfinite(evaluation.settling_time_s) else DASH,
-        f"{100 * evaluation.settled_fraction:.0f}%",
-        _diverged(evaluation),
-    )
+    return (label, evaluation.scenario, fmt(evaluation.state_rmse), fmt(g["attitude"], 2), fmt(g["position"]),
+            fmt(g["omega"], 5), fmt(g["velocity"], 5), fmt(evaluation.settling_time_s, 1),
+            f"{100 * evaluation.settled_fraction:.0f}%", _diverged(evaluation))
 
 
 _REASON_NAMES = {"non_finite": "NaN", "cholesky_failed": "Cholesky", "error_growth": "error growth", "nees_high": "NEES"}
