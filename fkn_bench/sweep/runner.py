@@ -209,21 +209,32 @@ def _prepare_study(storage: Any, name: str, settings: SweepSettings, stage: str)
     return study
 
 
-def _started(study: optuna.Study) -> int:
-    return sum(1 for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING)
-
-
-def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, target: int,
-           grid: dict[str, list[Any]] | None, verbose: bool, log: Log, workers: ProcessPoolExecutor | None) -> None:
+def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, first: str, verbose: bool, log: Log,
+           workers: ProcessPoolExecutor | None) -> dict[str, list[Any]] | None:
+    """Run the trials still missing from ``stage`` (study ``name``; ``first``: the random stage's
+    study of ``random-grid``); returns the stage's grid (None but for the grid stage)."""
+    grid = settings.space.grid() if settings.sampler == "grid" else None
+    target = settings.trials if grid is None else min(settings.trials, math.prod(len(v) for v in grid.values()))
     storage = open_storage(settings.storage_spec)
     study = _prepare_study(storage, name, settings, stage)
-    if grid is not None:
+    if stage == "grid":
         stored = study.user_attrs.get("fkn_bench_grid")
+        if settings.sampler == "random-grid":
+            grid = stored
+            if grid is None:
+                random_study = optuna.load_study(study_name=first, storage=storage)
+                try:
+                    grid = reduced_grid(random_study.get_trials(deepcopy=False), settings.space,
+                                        top_k=settings.top_k, budget=settings.grid_trials or settings.trials)
+                except ValueError as exc:
+                    raise SweepError(f"cannot derive the grid stage: {exc}") from None
+            log(f"[sweep] reduced grid from the best {settings.top_k} random trials: {json.dumps(grid)}")
+            target = math.prod(len(v) for v in grid.values())
         if stored is None:
             study.set_user_attr("fkn_bench_grid", grid)
         elif stored != grid:
             raise SweepError(f"study {name!r} already runs another grid ({stored}); choose another --study-name")
-    remaining = target - _started(study)
+    remaining = target - sum(1 for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING)
     split = shares(remaining, settings.workers)
     log(f"[sweep] stage {stage} ({name}): {target} trials, {max(remaining, 0)} to run on {len(split)} worker(s)")
     jobs = [
@@ -231,6 +242,7 @@ def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, targ
         for i, n in enumerate(split)
     ]
     _run_jobs(jobs, workers)
+    return grid
 
 
 def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None = None) -> SweepResult:
@@ -242,28 +254,10 @@ def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None
     out.mkdir(parents=True, exist_ok=True)
     task = SweepTask(settings.estimator, settings.scenario, settings.space)
     stages = stage_names(settings.name, settings.sampler)
-    grid: dict[str, list[Any]] | None = None
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(settings.workers, mp_context=spawn) if settings.workers > 1 else nullcontext() as workers:
         for stage, name in stages:
-            target = settings.trials
-            if stage == "grid" and settings.sampler == "random-grid":
-                storage = open_storage(settings.storage_spec)
-                grid_study = _prepare_study(storage, name, settings, stage)
-                grid = grid_study.user_attrs.get("fkn_bench_grid")
-                if grid is None:
-                    random_study = optuna.load_study(study_name=stages[0][1], storage=storage)
-                    try:
-                        grid = reduced_grid(random_study.get_trials(deepcopy=False), settings.space,
-                                            top_k=settings.top_k, budget=settings.grid_trials or settings.trials)
-                    except ValueError as exc:
-                        raise SweepError(f"cannot derive the grid stage: {exc}") from None
-                say(f"[sweep] reduced grid from the best {settings.top_k} random trials: {json.dumps(grid)}")
-                target = math.prod(len(v) for v in grid.values())
-            elif stage == "grid":
-                grid = settings.space.grid()
-                target = min(settings.trials, math.prod(len(v) for v in grid.values()))
-            _stage(settings, task, stage, name, target, grid, progress, say, workers)
+            grid = _stage(settings, task, stage, name, stages[0][1], progress, say, workers)
     result = write_outputs(settings, stages, grid)
     result.seconds = time.perf_counter() - began
     say(f"[sweep] best validation RMSE {result.best_value:.5g} ({result.best_stage} trial {result.best_number}); "
@@ -296,15 +290,9 @@ def write_toml(path: str | Path, values: dict[str, Any], *, table: str | None = 
     """Write a flat mapping of scalars and lists as TOML (``None`` values become comments: TOML
     has no null, and leaving the key out keeps the reader's default)."""
     lines = [f"# {line}" if line else "#" for line in header.splitlines()]
-    if lines:
-        lines.append("")
-    if table:
-        lines.append(f"[{table}]")
-    for key, value in values.items():
-        if value is None:
-            lines.append(f"# {key}: None (the default when left out)")
-        else:
-            lines.append(f"{key} = {_toml_value(value)}")
+    lines += ([""] if lines else []) + ([f"[{table}]"] if table else [])
+    lines += [f"# {key}: None (the default when left out)" if value is None else f"{key} = {_toml_value(value)}"
+              for key, value in values.items()]
     return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
@@ -317,8 +305,7 @@ def _trials_frame(study: optuna.Study, stage: str) -> Any:
     frame = study.trials_dataframe(attrs=("number", "value", "state", "params", "user_attrs", "duration"))
     frame.insert(0, "stage", stage)
     frame.insert(1, "study", study.study_name)
-    last = {t.number: t.last_step for t in trials}
-    frame["last_epoch_reported"] = frame["number"].map(last)
+    frame["last_epoch_reported"] = frame["number"].map({t.number: t.last_step for t in trials})
     if "duration" in frame:
         frame["seconds"] = frame.pop("duration").dt.total_seconds()
     return frame
