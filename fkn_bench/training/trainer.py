@@ -209,14 +209,8 @@ class Trainer:
         truth is used (None for ``nll``)."""
         noise = self.model.parameter_set.to_noise(raw)
         nll = self.config.objective == "nll"
-        result = self.variant.run(
-            noise,
-            sequences.measurements,
-            sequences.mask,
-            dt=self.data.scenario.dt,
-            store_covariances=False,
-            store_innovations=nll,
-        )
+        result = self.variant.run(noise, sequences.measurements, sequences.mask, dt=self.data.scenario.dt,
+                                  store_covariances=False, store_innovations=nll)
         mse = state_mse(result.means, sequences.truth, self.config.loss_cut)
         if nll:
             return innovation_nll(result, self.config.loss_cut), mse
@@ -228,8 +222,7 @@ class Trainer:
 
     def validate(self) -> tuple[float, float]:
         """``(validation loss, validation 13-state RMSE)`` with the deployed parameters; the loss
-        is the optimised objective (square root of the MSE, or the NLL) and
-        selects the best epoch."""
+        (square root of the MSE, or the NLL) selects the best epoch."""
         with torch.no_grad():
             raw = self.model.deployed_raw().expand(self.data.val.batch_size, -1)
             loss, mse = self.loss(self.data.val, raw)
@@ -282,19 +275,13 @@ class Trainer:
         """The deployed standard deviations by name (e.g. ``sigma_Q_qw``)."""
         with torch.no_grad():
             raw = self.model.deployed_raw()
-        values = self.model.parameter_set.to_dict(raw)
-        out: dict[str, float] = {}
-        for name, entry in values["entries"].items():
-            tag = name.split("_")[0].upper()
-            if "std" in entry:
-                out.update({f"sigma_{tag}_{label}": float(v) for label, v in zip(entry["labels"], entry["std"])})
-        return out
+        entries = self.model.parameter_set.to_dict(raw)["entries"]
+        return {f"sigma_{name.split('_')[0].upper()}_{label}": float(v) for name, entry in entries.items()
+                if "std" in entry for label, v in zip(entry["labels"], entry["std"])}
 
     def fit(self, *, on_epoch: OnEpoch | None = None, progress: bool = True) -> list[EpochRecord]:
-        """Train until ``epochs``, early stopping or ``on_epoch`` asks to stop; restores the best
-        weights. Resumable: a trainer restored with :meth:`load_state_dict` continues from its
-        last epoch. ``on_epoch(epoch, history)`` is called after every epoch (see
-        :data:`OnEpoch`)."""
+        """Train until ``epochs``, early stopping or ``on_epoch`` (:data:`OnEpoch`) asks to stop;
+        restores the best weights. A trainer restored with :meth:`load_state_dict` resumes."""
         from tqdm.auto import tqdm
 
         start = len(self.history) + 1
@@ -308,15 +295,8 @@ class Trainer:
                 train_loss = self.run_epoch()
                 val_loss, val_rmse = self.validate()
                 self.scheduler.step(val_loss)
-                record = EpochRecord(
-                    epoch=epoch,
-                    train_loss=train_loss,
-                    val_loss=val_loss,
-                    val_rmse=val_rmse,
-                    lr=self.optimizer.param_groups[0]["lr"],
-                    seconds=time.perf_counter() - began,
-                    parameters=self.deployed_parameters(),
-                )
+                record = EpochRecord(epoch, train_loss, val_loss, val_rmse, self.optimizer.param_groups[0]["lr"],
+                                     time.perf_counter() - began, self.deployed_parameters())
                 self.history.append(record)
                 margin = self.config.min_improvement * abs(self.best_loss) if math.isfinite(self.best_loss) else 0.0
                 if val_loss < self.best_loss - margin:
