@@ -27,13 +27,12 @@ import json
 import math
 import multiprocessing
 import sys
-import time
 import warnings
 from collections.abc import Callable
 from contextlib import nullcontext
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -103,7 +102,6 @@ class SweepSettings:
 class SweepResult:
     """What a sweep produced."""
 
-    out: Path
     best_value: float
     best_params: dict[str, Any]
     best_stage: str
@@ -112,9 +110,6 @@ class SweepResult:
     trials_csv: Path
     figure: Path | None
     counts: dict[str, dict[str, int]]
-    grid: dict[str, list[Any]] | None = None
-    seconds: float = 0.0
-    stages: list[tuple[str, str]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -248,7 +243,6 @@ def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, firs
 def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None = None) -> SweepResult:
     """Run (or resume) the sweep and write its outputs (module docstring)."""
     say = log or (lambda message: None)
-    began = time.perf_counter()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     out = Path(settings.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -259,7 +253,6 @@ def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None
         for stage, name in stages:
             grid = _stage(settings, task, stage, name, stages[0][1], progress, say, workers)
     result = write_outputs(settings, stages, grid)
-    result.seconds = time.perf_counter() - began
     say(f"[sweep] best validation RMSE {result.best_value:.5g} ({result.best_stage} trial {result.best_number}); "
         f"outputs in {out}")
     return result
@@ -273,11 +266,7 @@ def _toml_value(value: Any) -> str:
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        text = repr(value)
+        text = repr(value)  # nan, inf and -inf are TOML floats as they are
         return text if any(c in text for c in ".en") else text + ".0"
     if isinstance(value, str):
         return json.dumps(value)
@@ -313,10 +302,7 @@ def _trials_frame(study: optuna.Study, stage: str) -> Any:
 
 def parallel_coordinates(trials: list[FrozenTrial], space: SearchSpace, path: Path, title: str) -> Path | None:
     """Parallel-coordinates figure of the completed ``trials`` (None when there are none)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from fkn_bench.training.plots import save_png  # headless: matplotlib's Agg backend
 
     done = completed(trials)
     if not done:
@@ -330,10 +316,7 @@ def parallel_coordinates(trials: list[FrozenTrial], space: SearchSpace, path: Pa
     figure = axes.figure
     figure.set_size_inches(max(7.0, 1.6 * (len(params) + 1)), 5.0)
     axes.set_title(title)
-    with atomic_path(path, suffix=".png") as tmp:
-        figure.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
-    plt.close(figure)
-    return path
+    return save_png(figure, path, dpi=120)
 
 
 def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: dict[str, list[Any]] | None) -> SweepResult:
@@ -378,9 +361,8 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         f"{len(completed(everything))} completed trials)",
     )
     result = SweepResult(
-        out=out, best_value=float(trial.value), best_params=dict(trial.params), best_stage=stage,  # type: ignore[arg-type]
+        best_value=float(trial.value), best_params=dict(trial.params), best_stage=stage,  # type: ignore[arg-type]
         best_number=trial.number, best_config=best_config, trials_csv=trials_csv, figure=figure, counts=counts,
-        grid=grid, stages=stages,
     )
     write_json_atomic(out / "sweep.json", {
         "study_name": settings.name,

@@ -56,11 +56,8 @@ def _split(scenario: Scenario, split: str, every: int, dtype: torch.dtype, episo
 
     seeds = [scenario.dataset_seed + i for i in range(episodes)]
     episode = generate_episodes(scenario.replace(measurement_every=every), seeds, split=split)
-    return Sequences(
-        torch.as_tensor(episode.measurements, dtype=dtype),
-        torch.as_tensor(episode.valid),
-        torch.as_tensor(episode.truth, dtype=dtype),
-    )
+    return Sequences(torch.as_tensor(episode.measurements, dtype=dtype), torch.as_tensor(episode.valid),
+                     torch.as_tensor(episode.truth, dtype=dtype))
 
 
 class TrainingData:
@@ -110,8 +107,7 @@ class TrainingData:
         self.train = Sequences(flat(train.measurements), flat(train.mask), flat(train.truth))
         self.train_full = train
         self.val = _split(self.scenario, "val", self.scenario.measurement_every, dtype, self.episodes)
-        valid = train.mask
-        positions = train.measurements[valid][:, 4:7]
+        positions = train.measurements[train.mask][:, 4:7]
         self.position_mean = positions.mean(0)
         self.position_std = positions.std(0).clamp_min(1e-9)
 

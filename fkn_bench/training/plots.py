@@ -15,12 +15,13 @@ import pandas as pd  # noqa: E402
 
 from fkn_bench.io import atomic_path  # noqa: E402
 
-__all__ = ["plot_losses", "plot_parameters"]
+__all__ = ["plot_losses", "plot_parameters", "save_png"]
 
 
-def _save(figure: plt.Figure, path: str | Path) -> Path:
+def save_png(figure: plt.Figure, path: str | Path, *, dpi: int = 130) -> Path:
+    """Write ``figure`` as PNG atomically and close it."""
     with atomic_path(path, suffix=".png") as tmp:
-        figure.savefig(tmp, dpi=130, bbox_inches="tight", format="png")
+        figure.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png")
     plt.close(figure)
     return Path(path)
 
@@ -39,7 +40,7 @@ def plot_losses(history: pd.DataFrame, path: str | Path, *, title: str = "", bes
     axis.grid(True, alpha=0.3)
     axis.legend()
     axis.set_title(title)
-    return _save(figure, path)
+    return save_png(figure, path)
 
 
 def plot_parameters(history: pd.DataFrame, path: str | Path, *, title: str = "") -> Path:
@@ -57,4 +58,4 @@ def plot_parameters(history: pd.DataFrame, path: str | Path, *, title: str = "")
         if columns:
             axis.legend(fontsize=7, ncol=2)
     figure.suptitle(title)
-    return _save(figure, path)
+    return save_png(figure, path)
