@@ -147,8 +147,6 @@ def _worker_main(job: _WorkerJob) -> None:
     )
 
     def report(study: optuna.Study, trial: FrozenTrial) -> None:
-        if not job.verbose:
-            return
         if trial.state == TrialState.COMPLETE:
             outcome = f"validation RMSE {trial.value:.5g}"
         elif trial.state == TrialState.PRUNED:
@@ -158,8 +156,8 @@ def _worker_main(job: _WorkerJob) -> None:
         print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {_describe(trial)}",
               file=sys.stderr, flush=True)
 
-    study.optimize(make_objective(job.task), n_trials=job.n_trials, catch=CATCH, callbacks=[report], gc_after_trial=False,
-                   show_progress_bar=False)
+    study.optimize(make_objective(job.task), n_trials=job.n_trials, catch=CATCH,
+                   callbacks=[report] if job.verbose else [], gc_after_trial=False, show_progress_bar=False)
 
 
 def _run_jobs(jobs: list[_WorkerJob], pool: ProcessPoolExecutor | None) -> None:

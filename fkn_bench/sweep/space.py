@@ -106,18 +106,9 @@ def _of_kind(value: Any, kind: str) -> int | float | None:
 
 @dataclass(frozen=True)
 class Knob:
-    """One searched hyperparameter.
-
-    Attributes:
-        name: the configuration field.
-        kind: ``categorical``, ``int`` or ``float``.
-        values: the choices of a categorical knob.
-        low, high: the bounds of a range (inclusive).
-        log: log-uniform sampling of a range.
-        step: discretisation step of a range (None: continuous floats, step 1 for ints).
-        grid: explicit grid values of a range (the grid sampler's candidates).
-        grid_points: number of evenly spaced grid values of a range when ``grid`` is not given.
-    """
+    """One searched hyperparameter: the configuration field ``name`` and its ``[params.<name>]``
+    table (module docstring), of ``kind`` ``categorical``, ``int`` or ``float``. A range without
+    ``step`` is continuous (floats) or has step 1 (integers)."""
 
     name: str
     kind: str
@@ -172,8 +163,7 @@ class Knob:
                 return tuple(sorted({int(round(p)) for p in points}))
             return tuple(float(f"{p:.6g}") for p in points)
         if self.kind == "int":
-            step = int(self.step or 1)
-            values = tuple(range(int(low), int(high) + 1, step))
+            values = tuple(range(int(low), int(high) + 1, int(self.step or 1)))
             if len(values) <= MAX_ENUMERATED:
                 return values
             raise SpaceError(f"{source}: [params.{self.name}] has {len(values)} integer values: give `grid = [...]` "

@@ -166,9 +166,7 @@ class EpochRecord:
     parameters: dict[str, float] = field(default_factory=dict)
 
     def flat(self) -> dict[str, float]:
-        row = {k: v for k, v in asdict(self).items() if k != "parameters"}
-        row.update(self.parameters)
-        return row
+        return {**{k: v for k, v in asdict(self).items() if k != "parameters"}, **self.parameters}
 
 
 OnEpoch = Callable[[int, "list[EpochRecord]"], "bool | None"]
@@ -204,9 +202,9 @@ class Trainer:
         self.evaluations = 0  # loss evaluations of the L-BFGS steps
 
     # ------------------------------------------------------------------ losses
-    def loss(self, sequences: Sequences, raw: Tensor) -> tuple[Tensor, Tensor | None]:
-        """Objective on ``sequences`` with parameters ``raw``; also the supervised MSE when the
-        truth is used (None for ``nll``)."""
+    def loss(self, sequences: Sequences, raw: Tensor) -> tuple[Tensor, Tensor]:
+        """Objective on ``sequences`` with parameters ``raw``, and the 13-state MSE (the same
+        tensor for the supervised objective; a diagnostic for ``nll``)."""
         noise = self.model.parameter_set.to_noise(raw)
         nll = self.config.objective == "nll"
         result = self.variant.run(noise, sequences.measurements, sequences.mask, dt=self.data.scenario.dt,
@@ -226,7 +224,7 @@ class Trainer:
         with torch.no_grad():
             raw = self.model.deployed_raw().expand(self.data.val.batch_size, -1)
             loss, mse = self.loss(self.data.val, raw)
-        return self._reported(float(loss)), math.sqrt(float(mse)) if mse is not None else math.nan
+        return self._reported(float(loss)), math.sqrt(float(mse))
 
     # ------------------------------------------------------------------ epochs
     def _checked(self, loss: Tensor) -> Tensor:
@@ -260,13 +258,12 @@ class Trainer:
         total, count = 0.0, 0
         for batch in self.data.batches(self.config.windows_per_batch, self.generator):
             self.optimizer.zero_grad(set_to_none=True)
-            loss, mse = self.loss(batch, self.model.window_raw(batch))
-            self._checked(loss).backward()
+            loss = self._checked(self.loss(batch, self.model.window_raw(batch))[0])
+            loss.backward()
             if self.config.max_grad_norm is not None:
                 nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm)
             self.optimizer.step()
-            reported = mse if (self.config.objective == "supervised" and mse is not None) else loss
-            total += float(reported.detach()) * batch.batch_size
+            total += float(loss.detach()) * batch.batch_size
             count += batch.batch_size
         self.model.eval()
         return self._reported(total / count)
@@ -306,9 +303,8 @@ class Trainer:
                 else:
                     self.epochs_without_improvement += 1
                 bar.set_postfix(train=f"{train_loss:.4g}", val=f"{val_loss:.4g}", lr=f"{record.lr:.1e}", best=self.best_epoch)
-                if on_epoch is not None and on_epoch(epoch, self.history):
-                    break
-                if self.epochs_without_improvement >= self.config.patience:
+                stop = on_epoch is not None and on_epoch(epoch, self.history)
+                if stop or self.epochs_without_improvement >= self.config.patience:
                     break
         bar.close()
         self.model.load_state_dict(self.best_state)
