@@ -56,22 +56,10 @@ class SweepError(RuntimeError):
 
 @dataclass(frozen=True)
 class SweepSettings:
-    """A sweep (see :mod:`fkn_bench.sweep` and the ``fkn-bench sweep`` options).
-
-    Attributes:
-        space: the search space.
-        scenario: training scenario.
-        out: output directory.
-        estimator: a trainable estimator.
-        sampler: one of :data:`~fkn_bench.sweep.space.SAMPLERS`.
-        trials: trials of the random (or only) stage.
-        grid_trials: most points of the reduced grid (``random-grid``; default ``trials``).
-        top_k: best random trials whose values span the reduced grid.
-        workers: parallel worker processes.
-        storage: journal file path or RDB URL (default ``out/study.journal``).
-        study_name: study name (default ``<estimator>-<scenario>``).
-        seed: sampler seed.
-    """
+    """A sweep: the ``fkn-bench sweep`` options (``sampler``, ``trials``, ``grid_trials``, ``top_k``
+    and ``seed`` as in a space's ``[sweep]`` table, see :mod:`fkn_bench.sweep.space`).
+    ``grid_trials`` defaults to ``trials``, ``storage`` (a journal file path or an RDB URL) to
+    ``out/study.journal`` and ``study_name`` to ``<estimator>-<scenario>``."""
 
     space: SearchSpace
     scenario: Scenario
@@ -193,12 +181,10 @@ def _prepare_study(storage: Any, name: str, settings: SweepSettings, stage: str)
                 f"study {name!r} in {storage_label(settings.storage_spec)} was created with another "
                 f"{key.removeprefix('fkn_bench_')} ({attrs[key]} vs {value}): choose another --study-name or --storage"
             )
-    for key, value in identity.items():
+    labels = {"fkn_bench_stage": stage, "fkn_bench_space_source": settings.space.source}
+    for key, value in {**identity, **labels}.items():
         if key not in attrs:
             study.set_user_attr(key, value)
-    if "fkn_bench_stage" not in attrs:
-        study.set_user_attr("fkn_bench_stage", stage)
-        study.set_user_attr("fkn_bench_space_source", settings.space.source)
     return study
 
 
@@ -283,21 +269,6 @@ def write_toml(path: str | Path, values: dict[str, Any], *, table: str | None = 
     return write_text_atomic(path, "\n".join(lines) + "\n")
 
 
-def _trials_frame(study: optuna.Study, stage: str) -> Any:
-    import pandas as pd
-
-    trials = study.get_trials(deepcopy=False)
-    if not trials:
-        return pd.DataFrame()
-    frame = study.trials_dataframe(attrs=("number", "value", "state", "params", "user_attrs", "duration"))
-    frame.insert(0, "stage", stage)
-    frame.insert(1, "study", study.study_name)
-    frame["last_epoch_reported"] = frame["number"].map({t.number: t.last_step for t in trials})
-    if "duration" in frame:
-        frame["seconds"] = frame.pop("duration").dt.total_seconds()
-    return frame
-
-
 def parallel_coordinates(trials: list[FrozenTrial], space: SearchSpace, path: Path, title: str) -> Path | None:
     """Parallel-coordinates figure of the completed ``trials`` (None when there are none)."""
     from fkn_bench.training.plots import save_png  # headless: matplotlib's Agg backend
@@ -332,11 +303,18 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         everything += trials
         counts[stage] = {state.name.lower(): sum(1 for t in trials if t.state == state)
                          for state in (TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL, TrialState.RUNNING)}
-        frames.append(_trials_frame(study, stage))
+        if trials:
+            frame = study.trials_dataframe(attrs=("number", "value", "state", "params", "user_attrs", "duration"))
+            frame.insert(0, "stage", stage)
+            frame.insert(1, "study", name)
+            frame["last_epoch_reported"] = frame["number"].map({t.number: t.last_step for t in trials})
+            if "duration" in frame:
+                frame["seconds"] = frame.pop("duration").dt.total_seconds()
+            frames.append(frame)
         done = completed(trials)
         if done and (best is None or done[0].value < best[0].value):  # type: ignore[operator]
             best = (done[0], stage)
-    frame = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()
+    frame = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
     trials_csv = out / "trials.csv"
     with atomic_path(trials_csv, suffix=".csv") as tmp:
         frame.to_csv(tmp, index=False)

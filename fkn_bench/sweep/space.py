@@ -84,7 +84,8 @@ MAX_ENUMERATED = 64
 """Largest integer range the grid sampler enumerates without an explicit ``grid``."""
 
 _SWEEP_KEYS = {"estimator", "scenario", "sampler", "trials", "grid_trials", "top_k", "seed", "pruner"}
-_PRUNER_KEYS = {"kind", "n_startup_trials", "n_warmup_steps", "percentile", "min_resource", "reduction_factor"}
+_PRUNER_INTEGERS = {"n_startup_trials": 0, "n_warmup_steps": 0, "min_resource": 1, "reduction_factor": 2}
+_PRUNER_KEYS = {"kind", "percentile", *_PRUNER_INTEGERS}
 _KNOB_KEYS = {"values", "low", "high", "log", "step", "type", "grid", "grid_points"}
 _SPACES_DIR = Path(__file__).with_name("spaces")
 
@@ -147,10 +148,8 @@ class Knob:
 
     def grid_values(self, source: str = "<space>") -> tuple[Any, ...]:
         """Candidates of the grid sampler (see module docstring)."""
-        if self.kind == "categorical":
-            return self.values
-        if self.grid:
-            return self.grid
+        if self.kind == "categorical" or self.grid:
+            return self.values or self.grid
         low, high = self.low, self.high
         assert low is not None and high is not None
         if self.grid_points is not None:
@@ -162,18 +161,17 @@ class Knob:
             if self.kind == "int":
                 return tuple(sorted({int(round(p)) for p in points}))
             return tuple(float(f"{p:.6g}") for p in points)
+        hint = "give `grid = [...]` or `grid_points = N` for the grid sampler"
         if self.kind == "int":
             values = tuple(range(int(low), int(high) + 1, int(self.step or 1)))
             if len(values) <= MAX_ENUMERATED:
                 return values
-            raise SpaceError(f"{source}: [params.{self.name}] has {len(values)} integer values: give `grid = [...]` "
-                             f"or `grid_points = N` for the grid sampler")
+            raise SpaceError(f"{source}: [params.{self.name}] has {len(values)} integer values: {hint}")
         if self.step is not None:
             count = int(round((high - low) / self.step)) + 1
             if count <= MAX_ENUMERATED:
                 return tuple(float(f"{low + i * self.step:.12g}") for i in range(count))
-        raise SpaceError(f"{source}: [params.{self.name}] is a continuous range: give `grid = [...]` or "
-                         f"`grid_points = N` for the grid sampler")
+        raise SpaceError(f"{source}: [params.{self.name}] is a continuous range: {hint}")
 
     def to_dict(self) -> dict[str, Any]:
         if self.kind == "categorical":
@@ -207,15 +205,9 @@ class PrunerSpec:
 
 @dataclass(frozen=True)
 class SearchSpace:
-    """A parsed search space (see module docstring).
-
-    Attributes:
-        knobs: the searched hyperparameters, in file order.
-        fixed: configuration values held by every trial.
-        defaults: the ``[sweep]`` table's command-line defaults (``pruner`` excluded).
-        pruner: the pruner.
-        source: where the space came from (for messages).
-    """
+    """A parsed search space (module docstring): the ``knobs`` in file order, the ``[fixed]``
+    values, the ``[sweep]`` table's command-line ``defaults`` (``pruner`` excluded), the ``pruner``
+    and the ``source`` that messages name."""
 
     knobs: tuple[Knob, ...]
     fixed: dict[str, Any] = field(default_factory=dict)
@@ -345,18 +337,14 @@ def _parse_pruner(table: Any, source: str) -> PrunerSpec:
     _known_keys(table, _PRUNER_KEYS, f"{source}: [sweep.pruner]")
     kind = table.get("kind", "median")
     _require(kind in PRUNERS, f"{source}: [sweep.pruner] kind must be one of {', '.join(PRUNERS)} (got {kind!r})")
-    values: dict[str, Any] = {"kind": kind}
-    for key, low in (("n_startup_trials", 0), ("n_warmup_steps", 0), ("min_resource", 1), ("reduction_factor", 2)):
-        if key in table:
-            try:
-                values[key] = _integer(table[key], f"pruner.{key}", low)
-            except ValueError as exc:
-                raise SpaceError(f"{source}: [sweep] {exc}") from None
-    if "percentile" in table:
-        p = table["percentile"]
-        _require(_is_number(p) and 0 < p < 100, f"{source}: [sweep.pruner] percentile must be in (0, 100) (got {p!r})")
-        values["percentile"] = float(p)
-    return PrunerSpec(**values)
+    try:
+        integers = {key: _integer(table[key], f"pruner.{key}", low) for key, low in _PRUNER_INTEGERS.items()
+                    if key in table}
+    except ValueError as exc:
+        raise SpaceError(f"{source}: [sweep] {exc}") from None
+    p = table.get("percentile", PrunerSpec.percentile)
+    _require(_is_number(p) and 0 < p < 100, f"{source}: [sweep.pruner] percentile must be in (0, 100) (got {p!r})")
+    return PrunerSpec(kind, percentile=float(p), **integers)
 
 
 def parse_space(document: Mapping[str, Any], source: str = "<space>") -> SearchSpace:

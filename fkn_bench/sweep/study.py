@@ -80,10 +80,9 @@ def make_sampler(
     """The sampler of a stage for worker ``worker`` (random and TPE samplers get ``seed + worker``
     so that parallel workers draw different points; the grid sampler gets the same seed in every
     worker, as optuna recommends, and picks grid points by trial number)."""
-    if kind == "random":
-        return optuna.samplers.RandomSampler(seed=seed + worker)
-    if kind == "tpe":
-        return optuna.samplers.TPESampler(seed=seed + worker)
+    if kind in ("random", "tpe"):
+        sampler = optuna.samplers.RandomSampler if kind == "random" else optuna.samplers.TPESampler
+        return sampler(seed=seed + worker)
     if kind == "grid":
         if grid is None:
             raise ValueError("the grid sampler needs a grid")
