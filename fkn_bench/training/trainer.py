@@ -227,18 +227,20 @@ class Trainer:
         return self._reported(float(loss)), math.sqrt(float(mse))
 
     # ------------------------------------------------------------------ epochs
-    def _checked(self, loss: Tensor) -> Tensor:
+    def _backward(self, batch: Sequences) -> Tensor:
+        """The training loss on ``batch``, its gradients computed (FloatingPointError when not finite)."""
+        self.optimizer.zero_grad(set_to_none=True)
+        loss = self.loss(batch, self.model.window_raw(batch))[0]
         if not torch.isfinite(loss):
             raise FloatingPointError(f"non-finite training loss at epoch {len(self.history) + 1}: lower the learning rate")
+        loss.backward()
         return loss
 
     def _lbfgs_epoch(self) -> float:
         batch = self.data.train
 
         def closure() -> Tensor:
-            self.optimizer.zero_grad(set_to_none=True)
-            loss = self._checked(self.loss(batch, self.model.window_raw(batch))[0])
-            loss.backward()
+            loss = self._backward(batch)
             self.evaluations += 1
             return loss
 
@@ -257,9 +259,7 @@ class Trainer:
         self.model.train()
         total, count = 0.0, 0
         for batch in self.data.batches(self.config.windows_per_batch, self.generator):
-            self.optimizer.zero_grad(set_to_none=True)
-            loss = self._checked(self.loss(batch, self.model.window_raw(batch))[0])
-            loss.backward()
+            loss = self._backward(batch)
             if self.config.max_grad_norm is not None:
                 nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm)
             self.optimizer.step()
