@@ -102,11 +102,9 @@ class SweepResult:
 
 @dataclass(frozen=True)
 class _WorkerJob:
-    task: SweepTask
-    storage: str
+    settings: SweepSettings
     study_name: str
     stage: str
-    seed: int
     worker: int
     n_trials: int
     grid: dict[str, list[Any]] | None
@@ -119,19 +117,15 @@ def shares(total: int, workers: int) -> list[int]:
     return [n for n in (base + (1 if i < extra else 0) for i in range(workers)) if n > 0]
 
 
-def _describe(trial: FrozenTrial) -> str:
-    return ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in trial.params.items())
-
-
 def _worker_main(job: _WorkerJob) -> None:
     """Run ``job.n_trials`` trials of a stage (in this process or a spawned one)."""
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
     study = optuna.load_study(
         study_name=job.study_name,
-        storage=open_storage(job.storage),
-        sampler=make_sampler(job.stage, seed=job.seed, worker=job.worker, grid=job.grid),
-        pruner=job.task.space.pruner.make(),
+        storage=open_storage(job.settings.storage_spec),
+        sampler=make_sampler(job.stage, seed=job.settings.seed, worker=job.worker, grid=job.grid),
+        pruner=job.settings.space.pruner.make(),
     )
 
     def report(study: optuna.Study, trial: FrozenTrial) -> None:
@@ -141,10 +135,12 @@ def _worker_main(job: _WorkerJob) -> None:
             outcome = f"pruned after epoch {trial.last_step}"
         else:
             outcome = f"{trial.state.name.lower()}: {trial.user_attrs.get('error', '')}"
-        print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {_describe(trial)}",
+        params = ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in trial.params.items())
+        print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {params}",
               file=sys.stderr, flush=True)
 
-    study.optimize(make_objective(job.task), n_trials=job.n_trials, catch=CATCH,
+    task = SweepTask(job.settings.estimator, job.settings.scenario, job.settings.space)
+    study.optimize(make_objective(task), n_trials=job.n_trials, catch=CATCH,
                    callbacks=[report] if job.verbose else [], gc_after_trial=False, show_progress_bar=False)
 
 
@@ -188,7 +184,7 @@ def _prepare_study(storage: Any, name: str, settings: SweepSettings, stage: str)
     return study
 
 
-def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, first: str, verbose: bool, log: Log,
+def _stage(settings: SweepSettings, stage: str, name: str, first: str, verbose: bool, log: Log,
            workers: ProcessPoolExecutor | None) -> dict[str, list[Any]] | None:
     """Run the trials still missing from ``stage`` (study ``name``; ``first``: the random stage's
     study of ``random-grid``); returns the stage's grid (None but for the grid stage)."""
@@ -216,11 +212,7 @@ def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, firs
     remaining = target - sum(1 for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING)
     split = shares(remaining, settings.workers)
     log(f"[sweep] stage {stage} ({name}): {target} trials, {max(remaining, 0)} to run on {len(split)} worker(s)")
-    jobs = [
-        _WorkerJob(task, settings.storage_spec, name, stage, settings.seed, i, n, grid, verbose)
-        for i, n in enumerate(split)
-    ]
-    _run_jobs(jobs, workers)
+    _run_jobs([_WorkerJob(settings, name, stage, i, n, grid, verbose) for i, n in enumerate(split)], workers)
     return grid
 
 
@@ -230,12 +222,11 @@ def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     out = Path(settings.out)
     out.mkdir(parents=True, exist_ok=True)
-    task = SweepTask(settings.estimator, settings.scenario, settings.space)
     stages = stage_names(settings.name, settings.sampler)
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(settings.workers, mp_context=spawn) if settings.workers > 1 else nullcontext() as workers:
         for stage, name in stages:
-            grid = _stage(settings, task, stage, name, stages[0][1], progress, say, workers)
+            grid = _stage(settings, stage, name, stages[0][1], progress, say, workers)
     result = write_outputs(settings, stages, grid)
     say(f"[sweep] best validation RMSE {result.best_value:.5g} ({result.best_stage} trial {result.best_number}); "
         f"outputs in {out}")
@@ -245,15 +236,11 @@ def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None
 # ---------------------------------------------------------------------------------------------
 # outputs
 def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
+    if isinstance(value, (bool, int, str)):
+        return json.dumps(value)  # TOML's booleans, integers and basic strings are written as JSON's
     if isinstance(value, float):
         text = repr(value)  # nan, inf and -inf are TOML floats as they are
         return text if any(c in text for c in ".en") else text + ".0"
-    if isinstance(value, str):
-        return json.dumps(value)
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     raise TypeError(f"cannot write {type(value).__name__} to TOML")
@@ -289,8 +276,7 @@ def parallel_coordinates(trials: list[FrozenTrial], space: SearchSpace, path: Pa
 
 
 def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: dict[str, list[Any]] | None) -> SweepResult:
-    """``best.toml``, ``trials.csv``, ``parallel_coordinates.png`` and ``sweep.json`` from the
-    stage studies in the storage."""
+    """The outputs (module docstring) from the stage studies in the storage."""
     import pandas as pd
 
     out = Path(settings.out)

@@ -64,7 +64,6 @@ class TrainingData:
     """Train windows and the validation sequence of a scenario's data set.
 
     Args:
-        scenario: name or :class:`Scenario`.
         window: samples per training window (paper: 512).
         stride: samples between window starts (default: ``window``, non-overlapping).
         train_measurement_every: measurement schedule of the training windows (default: the
@@ -72,7 +71,6 @@ class TrainingData:
         episodes: episodes in the data set: seeds ``dataset_seed, dataset_seed + 1, ...`` (the
             paper has one recording: 1). Training windows come from every episode's train
             split, validation runs over every episode's val split.
-        dtype: tensor dtype (float64 by default).
     """
 
     def __init__(
