@@ -322,10 +322,6 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         f"{settings.name}: hyperparameters vs validation RMSE ({settings.sampler}, "
         f"{len(completed(everything))} completed trials)",
     )
-    result = SweepResult(
-        best_value=float(trial.value), best_params=dict(trial.params), best_stage=stage,  # type: ignore[arg-type]
-        best_number=trial.number, best_config=best_config, trials_csv=trials_csv, figure=figure, counts=counts,
-    )
     write_json_atomic(out / "sweep.json", {
         "study_name": settings.name,
         "stages": [{"stage": s, "study": n} for s, n in stages],
@@ -342,4 +338,7 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
                  "user_attrs": dict(trial.user_attrs)},
         "best_config": str(best_config),
     })
-    return result
+    return SweepResult(
+        best_value=float(trial.value), best_params=dict(trial.params), best_stage=stage,  # type: ignore[arg-type]
+        best_number=trial.number, best_config=best_config, trials_csv=trials_csv, figure=figure, counts=counts,
+    )

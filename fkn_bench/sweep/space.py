@@ -310,24 +310,25 @@ def _parse_knob(name: str, table: Any, source: str) -> Knob:
     return dataclasses.replace(knob, grid=tuple(values)) if grid else knob
 
 
-def _integer(value: Any, name: str, low: int = 1) -> int:
+def _integer(value: Any, name: str, low: int = 1, error: type[ValueError] = ValueError) -> int:
     if not isinstance(value, int) or isinstance(value, bool) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low} (got {value!r})")
+        raise error(f"{name} must be an integer >= {low} (got {value!r})")
     return value
 
 
 _SWEEP_INTEGERS = {"trials": 1, "grid_trials": 1, "top_k": 1, "workers": 1, "seed": 0}
 
 
-def check_sweep_options(values: Mapping[str, Any]) -> None:
-    """Raise ValueError for an invalid sweep option (``sampler``, ``trials``, ``grid_trials``,
-    ``top_k``, ``workers``, ``seed``; None values are left to the defaults): the one check of the
-    space's ``[sweep]`` table and of :class:`~fkn_bench.sweep.SweepSettings`."""
+def check_sweep_options(values: Mapping[str, Any], error: type[ValueError] = ValueError,
+                        where: str = "") -> None:
+    """Raise ``error`` (message prefixed by ``where``) for an invalid sweep option (``sampler``,
+    ``trials``, ``grid_trials``, ``top_k``, ``workers``, ``seed``; None values are left to the
+    defaults): the one check of ``[sweep]`` tables and of :class:`~fkn_bench.sweep.SweepSettings`."""
     if values.get("sampler", SAMPLERS[0]) not in SAMPLERS:
-        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)} (got {values['sampler']!r})")
+        raise error(f"{where}sampler must be one of {', '.join(SAMPLERS)} (got {values['sampler']!r})")
     for key, low in _SWEEP_INTEGERS.items():
         if values.get(key) is not None:
-            _integer(values[key], key, low)
+            _integer(values[key], where + key, low, error)
 
 
 def _parse_pruner(table: Any, source: str) -> PrunerSpec:
@@ -337,11 +338,8 @@ def _parse_pruner(table: Any, source: str) -> PrunerSpec:
     _known_keys(table, _PRUNER_KEYS, f"{source}: [sweep.pruner]")
     kind = table.get("kind", "median")
     _require(kind in PRUNERS, f"{source}: [sweep.pruner] kind must be one of {', '.join(PRUNERS)} (got {kind!r})")
-    try:
-        integers = {key: _integer(table[key], f"pruner.{key}", low) for key, low in _PRUNER_INTEGERS.items()
-                    if key in table}
-    except ValueError as exc:
-        raise SpaceError(f"{source}: [sweep] {exc}") from None
+    integers = {key: _integer(table[key], f"{source}: [sweep] pruner.{key}", low, SpaceError)
+                for key, low in _PRUNER_INTEGERS.items() if key in table}
     p = table.get("percentile", PrunerSpec.percentile)
     _require(_is_number(p) and 0 < p < 100, f"{source}: [sweep.pruner] percentile must be in (0, 100) (got {p!r})")
     return PrunerSpec(kind, percentile=float(p), **integers)
@@ -362,10 +360,7 @@ def parse_space(document: Mapping[str, Any], source: str = "<space>") -> SearchS
     _require(isinstance(sweep, dict), f"{source}: [sweep] must be a table")
     _known_keys(sweep, _SWEEP_KEYS, f"{source}: [sweep]")
     defaults = {k: v for k, v in sweep.items() if k != "pruner"}
-    try:
-        check_sweep_options(defaults)
-    except ValueError as exc:
-        raise SpaceError(f"{source}: [sweep] {exc}") from None
+    check_sweep_options(defaults, SpaceError, f"{source}: [sweep] ")
     for key in ("estimator", "scenario"):
         _require(isinstance(defaults.get(key, ""), str), f"{source}: [sweep] {key} must be a string "
                                                          f"(got {defaults.get(key)!r})")

@@ -62,9 +62,8 @@ def open_storage(spec: str | Path) -> BaseStorage:
     text = str(spec)
     if "://" in text:
         return RDBStorage(text)
-    path = Path(text)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return JournalStorage(JournalFileBackend(str(path)))
+    Path(text).parent.mkdir(parents=True, exist_ok=True)
+    return JournalStorage(JournalFileBackend(text))
 
 
 def stage_names(study_name: str, sampler: str) -> list[tuple[str, str]]:
