@@ -42,13 +42,8 @@ CATCH: tuple[type[BaseException], ...] = (TrialError,)
 
 @dataclass(frozen=True)
 class SweepTask:
-    """What every worker needs to evaluate trials (picklable: sent to worker processes).
-
-    Attributes:
-        estimator: trainable estimator name.
-        scenario: training scenario (its train and val splits are used).
-        space: the search space.
-    """
+    """What every worker needs to evaluate trials (picklable: sent to worker processes): the
+    trainable estimator, the training scenario (its train and val splits) and the search space."""
 
     estimator: str
     scenario: Scenario

@@ -27,13 +27,12 @@ import json
 import math
 import multiprocessing
 import sys
-import time
 import warnings
 from collections.abc import Callable
 from contextlib import nullcontext
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -57,22 +56,10 @@ class SweepError(RuntimeError):
 
 @dataclass(frozen=True)
 class SweepSettings:
-    """A sweep (see :mod:`fkn_bench.sweep` and the ``fkn-bench sweep`` options).
-
-    Attributes:
-        space: the search space.
-        scenario: training scenario.
-        out: output directory.
-        estimator: a trainable estimator.
-        sampler: one of :data:`~fkn_bench.sweep.space.SAMPLERS`.
-        trials: trials of the random (or only) stage.
-        grid_trials: most points of the reduced grid (``random-grid``; default ``trials``).
-        top_k: best random trials whose values span the reduced grid.
-        workers: parallel worker processes.
-        storage: journal file path or RDB URL (default ``out/study.journal``).
-        study_name: study name (default ``<estimator>-<scenario>``).
-        seed: sampler seed.
-    """
+    """A sweep: the ``fkn-bench sweep`` options (``sampler``, ``trials``, ``grid_trials``, ``top_k``
+    and ``seed`` as in a space's ``[sweep]`` table, see :mod:`fkn_bench.sweep.space`).
+    ``grid_trials`` defaults to ``trials``, ``storage`` (a journal file path or an RDB URL) to
+    ``out/study.journal`` and ``study_name`` to ``<estimator>-<scenario>``."""
 
     space: SearchSpace
     scenario: Scenario
@@ -103,7 +90,6 @@ class SweepSettings:
 class SweepResult:
     """What a sweep produced."""
 
-    out: Path
     best_value: float
     best_params: dict[str, Any]
     best_stage: str
@@ -112,18 +98,13 @@ class SweepResult:
     trials_csv: Path
     figure: Path | None
     counts: dict[str, dict[str, int]]
-    grid: dict[str, list[Any]] | None = None
-    seconds: float = 0.0
-    stages: list[tuple[str, str]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
 class _WorkerJob:
-    task: SweepTask
-    storage: str
+    settings: SweepSettings
     study_name: str
     stage: str
-    seed: int
     worker: int
     n_trials: int
     grid: dict[str, list[Any]] | None
@@ -136,35 +117,31 @@ def shares(total: int, workers: int) -> list[int]:
     return [n for n in (base + (1 if i < extra else 0) for i in range(workers)) if n > 0]
 
 
-def _describe(trial: FrozenTrial) -> str:
-    return ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in trial.params.items())
-
-
 def _worker_main(job: _WorkerJob) -> None:
     """Run ``job.n_trials`` trials of a stage (in this process or a spawned one)."""
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     warnings.filterwarnings("ignore", category=optuna.exceptions.ExperimentalWarning)
     study = optuna.load_study(
         study_name=job.study_name,
-        storage=open_storage(job.storage),
-        sampler=make_sampler(job.stage, seed=job.seed, worker=job.worker, grid=job.grid),
-        pruner=job.task.space.pruner.make(),
+        storage=open_storage(job.settings.storage_spec),
+        sampler=make_sampler(job.stage, seed=job.settings.seed, worker=job.worker, grid=job.grid),
+        pruner=job.settings.space.pruner.make(),
     )
 
     def report(study: optuna.Study, trial: FrozenTrial) -> None:
-        if not job.verbose:
-            return
         if trial.state == TrialState.COMPLETE:
             outcome = f"validation RMSE {trial.value:.5g}"
         elif trial.state == TrialState.PRUNED:
             outcome = f"pruned after epoch {trial.last_step}"
         else:
             outcome = f"{trial.state.name.lower()}: {trial.user_attrs.get('error', '')}"
-        print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {_describe(trial)}",
+        params = ", ".join(f"{k}={v:.3g}" if isinstance(v, float) else f"{k}={v}" for k, v in trial.params.items())
+        print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {params}",
               file=sys.stderr, flush=True)
 
-    study.optimize(make_objective(job.task), n_trials=job.n_trials, catch=CATCH, callbacks=[report], gc_after_trial=False,
-                   show_progress_bar=False)
+    task = SweepTask(job.settings.estimator, job.settings.scenario, job.settings.space)
+    study.optimize(make_objective(task), n_trials=job.n_trials, catch=CATCH,
+                   callbacks=[report] if job.verbose else [], gc_after_trial=False, show_progress_bar=False)
 
 
 def _run_jobs(jobs: list[_WorkerJob], pool: ProcessPoolExecutor | None) -> None:
@@ -200,72 +177,57 @@ def _prepare_study(storage: Any, name: str, settings: SweepSettings, stage: str)
                 f"study {name!r} in {storage_label(settings.storage_spec)} was created with another "
                 f"{key.removeprefix('fkn_bench_')} ({attrs[key]} vs {value}): choose another --study-name or --storage"
             )
-    for key, value in identity.items():
+    labels = {"fkn_bench_stage": stage, "fkn_bench_space_source": settings.space.source}
+    for key, value in {**identity, **labels}.items():
         if key not in attrs:
             study.set_user_attr(key, value)
-    if "fkn_bench_stage" not in attrs:
-        study.set_user_attr("fkn_bench_stage", stage)
-        study.set_user_attr("fkn_bench_space_source", settings.space.source)
     return study
 
 
-def _started(study: optuna.Study) -> int:
-    return sum(1 for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING)
-
-
-def _stage(settings: SweepSettings, task: SweepTask, stage: str, name: str, target: int,
-           grid: dict[str, list[Any]] | None, verbose: bool, log: Log, workers: ProcessPoolExecutor | None) -> None:
+def _stage(settings: SweepSettings, stage: str, name: str, first: str, verbose: bool, log: Log,
+           workers: ProcessPoolExecutor | None) -> dict[str, list[Any]] | None:
+    """Run the trials still missing from ``stage`` (study ``name``; ``first``: the random stage's
+    study of ``random-grid``); returns the stage's grid (None but for the grid stage)."""
+    grid = settings.space.grid() if settings.sampler == "grid" else None
+    target = settings.trials if grid is None else min(settings.trials, math.prod(len(v) for v in grid.values()))
     storage = open_storage(settings.storage_spec)
     study = _prepare_study(storage, name, settings, stage)
-    if grid is not None:
+    if stage == "grid":
         stored = study.user_attrs.get("fkn_bench_grid")
+        if settings.sampler == "random-grid":
+            grid = stored
+            if grid is None:
+                random_study = optuna.load_study(study_name=first, storage=storage)
+                try:
+                    grid = reduced_grid(random_study.get_trials(deepcopy=False), settings.space,
+                                        top_k=settings.top_k, budget=settings.grid_trials or settings.trials)
+                except ValueError as exc:
+                    raise SweepError(f"cannot derive the grid stage: {exc}") from None
+            log(f"[sweep] reduced grid from the best {settings.top_k} random trials: {json.dumps(grid)}")
+            target = math.prod(len(v) for v in grid.values())
         if stored is None:
             study.set_user_attr("fkn_bench_grid", grid)
         elif stored != grid:
             raise SweepError(f"study {name!r} already runs another grid ({stored}); choose another --study-name")
-    remaining = target - _started(study)
+    remaining = target - sum(1 for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING)
     split = shares(remaining, settings.workers)
     log(f"[sweep] stage {stage} ({name}): {target} trials, {max(remaining, 0)} to run on {len(split)} worker(s)")
-    jobs = [
-        _WorkerJob(task, settings.storage_spec, name, stage, settings.seed, i, n, grid, verbose)
-        for i, n in enumerate(split)
-    ]
-    _run_jobs(jobs, workers)
+    _run_jobs([_WorkerJob(settings, name, stage, i, n, grid, verbose) for i, n in enumerate(split)], workers)
+    return grid
 
 
 def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None = None) -> SweepResult:
     """Run (or resume) the sweep and write its outputs (module docstring)."""
     say = log or (lambda message: None)
-    began = time.perf_counter()
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     out = Path(settings.out)
     out.mkdir(parents=True, exist_ok=True)
-    task = SweepTask(settings.estimator, settings.scenario, settings.space)
     stages = stage_names(settings.name, settings.sampler)
-    grid: dict[str, list[Any]] | None = None
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(settings.workers, mp_context=spawn) if settings.workers > 1 else nullcontext() as workers:
         for stage, name in stages:
-            target = settings.trials
-            if stage == "grid" and settings.sampler == "random-grid":
-                storage = open_storage(settings.storage_spec)
-                grid_study = _prepare_study(storage, name, settings, stage)
-                grid = grid_study.user_attrs.get("fkn_bench_grid")
-                if grid is None:
-                    random_study = optuna.load_study(study_name=stages[0][1], storage=storage)
-                    try:
-                        grid = reduced_grid(random_study.get_trials(deepcopy=False), settings.space,
-                                            top_k=settings.top_k, budget=settings.grid_trials or settings.trials)
-                    except ValueError as exc:
-                        raise SweepError(f"cannot derive the grid stage: {exc}") from None
-                say(f"[sweep] reduced grid from the best {settings.top_k} random trials: {json.dumps(grid)}")
-                target = math.prod(len(v) for v in grid.values())
-            elif stage == "grid":
-                grid = settings.space.grid()
-                target = min(settings.trials, math.prod(len(v) for v in grid.values()))
-            _stage(settings, task, stage, name, target, grid, progress, say, workers)
+            grid = _stage(settings, stage, name, stages[0][1], progress, say, workers)
     result = write_outputs(settings, stages, grid)
-    result.seconds = time.perf_counter() - began
     say(f"[sweep] best validation RMSE {result.best_value:.5g} ({result.best_stage} trial {result.best_number}); "
         f"outputs in {out}")
     return result
@@ -274,19 +236,11 @@ def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None
 # ---------------------------------------------------------------------------------------------
 # outputs
 def _toml_value(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
+    if isinstance(value, (bool, int, str)):
+        return json.dumps(value)  # TOML's booleans, integers and basic strings are written as JSON's
     if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        text = repr(value)
+        text = repr(value)  # nan, inf and -inf are TOML floats as they are
         return text if any(c in text for c in ".en") else text + ".0"
-    if isinstance(value, str):
-        return json.dumps(value)
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     raise TypeError(f"cannot write {type(value).__name__} to TOML")
@@ -296,40 +250,15 @@ def write_toml(path: str | Path, values: dict[str, Any], *, table: str | None = 
     """Write a flat mapping of scalars and lists as TOML (``None`` values become comments: TOML
     has no null, and leaving the key out keeps the reader's default)."""
     lines = [f"# {line}" if line else "#" for line in header.splitlines()]
-    if lines:
-        lines.append("")
-    if table:
-        lines.append(f"[{table}]")
-    for key, value in values.items():
-        if value is None:
-            lines.append(f"# {key}: None (the default when left out)")
-        else:
-            lines.append(f"{key} = {_toml_value(value)}")
+    lines += ([""] if lines else []) + ([f"[{table}]"] if table else [])
+    lines += [f"# {key}: None (the default when left out)" if value is None else f"{key} = {_toml_value(value)}"
+              for key, value in values.items()]
     return write_text_atomic(path, "\n".join(lines) + "\n")
-
-
-def _trials_frame(study: optuna.Study, stage: str) -> Any:
-    import pandas as pd
-
-    trials = study.get_trials(deepcopy=False)
-    if not trials:
-        return pd.DataFrame()
-    frame = study.trials_dataframe(attrs=("number", "value", "state", "params", "user_attrs", "duration"))
-    frame.insert(0, "stage", stage)
-    frame.insert(1, "study", study.study_name)
-    last = {t.number: t.last_step for t in trials}
-    frame["last_epoch_reported"] = frame["number"].map(last)
-    if "duration" in frame:
-        frame["seconds"] = frame.pop("duration").dt.total_seconds()
-    return frame
 
 
 def parallel_coordinates(trials: list[FrozenTrial], space: SearchSpace, path: Path, title: str) -> Path | None:
     """Parallel-coordinates figure of the completed ``trials`` (None when there are none)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from fkn_bench.training.plots import save_png  # headless: matplotlib's Agg backend
 
     done = completed(trials)
     if not done:
@@ -343,15 +272,11 @@ def parallel_coordinates(trials: list[FrozenTrial], space: SearchSpace, path: Pa
     figure = axes.figure
     figure.set_size_inches(max(7.0, 1.6 * (len(params) + 1)), 5.0)
     axes.set_title(title)
-    with atomic_path(path, suffix=".png") as tmp:
-        figure.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
-    plt.close(figure)
-    return path
+    return save_png(figure, path, dpi=120)
 
 
 def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: dict[str, list[Any]] | None) -> SweepResult:
-    """``best.toml``, ``trials.csv``, ``parallel_coordinates.png`` and ``sweep.json`` from the
-    stage studies in the storage."""
+    """The outputs (module docstring) from the stage studies in the storage."""
     import pandas as pd
 
     out = Path(settings.out)
@@ -364,11 +289,18 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         everything += trials
         counts[stage] = {state.name.lower(): sum(1 for t in trials if t.state == state)
                          for state in (TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL, TrialState.RUNNING)}
-        frames.append(_trials_frame(study, stage))
+        if trials:
+            frame = study.trials_dataframe(attrs=("number", "value", "state", "params", "user_attrs", "duration"))
+            frame.insert(0, "stage", stage)
+            frame.insert(1, "study", name)
+            frame["last_epoch_reported"] = frame["number"].map({t.number: t.last_step for t in trials})
+            if "duration" in frame:
+                frame["seconds"] = frame.pop("duration").dt.total_seconds()
+            frames.append(frame)
         done = completed(trials)
         if done and (best is None or done[0].value < best[0].value):  # type: ignore[operator]
             best = (done[0], stage)
-    frame = pd.concat([f for f in frames if len(f)], ignore_index=True) if any(len(f) for f in frames) else pd.DataFrame()
+    frame = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
     trials_csv = out / "trials.csv"
     with atomic_path(trials_csv, suffix=".csv") as tmp:
         frame.to_csv(tmp, index=False)
@@ -390,11 +322,6 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         f"{settings.name}: hyperparameters vs validation RMSE ({settings.sampler}, "
         f"{len(completed(everything))} completed trials)",
     )
-    result = SweepResult(
-        out=out, best_value=float(trial.value), best_params=dict(trial.params), best_stage=stage,  # type: ignore[arg-type]
-        best_number=trial.number, best_config=best_config, trials_csv=trials_csv, figure=figure, counts=counts,
-        grid=grid, stages=stages,
-    )
     write_json_atomic(out / "sweep.json", {
         "study_name": settings.name,
         "stages": [{"stage": s, "study": n} for s, n in stages],
@@ -411,4 +338,7 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
                  "user_attrs": dict(trial.user_attrs)},
         "best_config": str(best_config),
     })
-    return result
+    return SweepResult(
+        best_value=float(trial.value), best_params=dict(trial.params), best_stage=stage,  # type: ignore[arg-type]
+        best_number=trial.number, best_config=best_config, trials_csv=trials_csv, figure=figure, counts=counts,
+    )

@@ -84,7 +84,8 @@ MAX_ENUMERATED = 64
 """Largest integer range the grid sampler enumerates without an explicit ``grid``."""
 
 _SWEEP_KEYS = {"estimator", "scenario", "sampler", "trials", "grid_trials", "top_k", "seed", "pruner"}
-_PRUNER_KEYS = {"kind", "n_startup_trials", "n_warmup_steps", "percentile", "min_resource", "reduction_factor"}
+_PRUNER_INTEGERS = {"n_startup_trials": 0, "n_warmup_steps": 0, "min_resource": 1, "reduction_factor": 2}
+_PRUNER_KEYS = {"kind", "percentile", *_PRUNER_INTEGERS}
 _KNOB_KEYS = {"values", "low", "high", "log", "step", "type", "grid", "grid_points"}
 _SPACES_DIR = Path(__file__).with_name("spaces")
 
@@ -106,18 +107,9 @@ def _of_kind(value: Any, kind: str) -> int | float | None:
 
 @dataclass(frozen=True)
 class Knob:
-    """One searched hyperparameter.
-
-    Attributes:
-        name: the configuration field.
-        kind: ``categorical``, ``int`` or ``float``.
-        values: the choices of a categorical knob.
-        low, high: the bounds of a range (inclusive).
-        log: log-uniform sampling of a range.
-        step: discretisation step of a range (None: continuous floats, step 1 for ints).
-        grid: explicit grid values of a range (the grid sampler's candidates).
-        grid_points: number of evenly spaced grid values of a range when ``grid`` is not given.
-    """
+    """One searched hyperparameter: the configuration field ``name`` and its ``[params.<name>]``
+    table (module docstring), of ``kind`` ``categorical``, ``int`` or ``float``. A range without
+    ``step`` is continuous (floats) or has step 1 (integers)."""
 
     name: str
     kind: str
@@ -156,10 +148,8 @@ class Knob:
 
     def grid_values(self, source: str = "<space>") -> tuple[Any, ...]:
         """Candidates of the grid sampler (see module docstring)."""
-        if self.kind == "categorical":
-            return self.values
-        if self.grid:
-            return self.grid
+        if self.kind == "categorical" or self.grid:
+            return self.values or self.grid
         low, high = self.low, self.high
         assert low is not None and high is not None
         if self.grid_points is not None:
@@ -171,33 +161,24 @@ class Knob:
             if self.kind == "int":
                 return tuple(sorted({int(round(p)) for p in points}))
             return tuple(float(f"{p:.6g}") for p in points)
+        hint = "give `grid = [...]` or `grid_points = N` for the grid sampler"
         if self.kind == "int":
-            step = int(self.step or 1)
-            values = tuple(range(int(low), int(high) + 1, step))
+            values = tuple(range(int(low), int(high) + 1, int(self.step or 1)))
             if len(values) <= MAX_ENUMERATED:
                 return values
-            raise SpaceError(f"{source}: [params.{self.name}] has {len(values)} integer values: give `grid = [...]` "
-                             f"or `grid_points = N` for the grid sampler")
+            raise SpaceError(f"{source}: [params.{self.name}] has {len(values)} integer values: {hint}")
         if self.step is not None:
             count = int(round((high - low) / self.step)) + 1
             if count <= MAX_ENUMERATED:
                 return tuple(float(f"{low + i * self.step:.12g}") for i in range(count))
-        raise SpaceError(f"{source}: [params.{self.name}] is a continuous range: give `grid = [...]` or "
-                         f"`grid_points = N` for the grid sampler")
+        raise SpaceError(f"{source}: [params.{self.name}] is a continuous range: {hint}")
 
     def to_dict(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"kind": self.kind}
         if self.kind == "categorical":
-            out["values"] = list(self.values)
-        else:
-            out.update(low=self.low, high=self.high, log=self.log)
-            if self.step is not None:
-                out["step"] = self.step
-            if self.grid:
-                out["grid"] = list(self.grid)
-            if self.grid_points is not None:
-                out["grid_points"] = self.grid_points
-        return out
+            return {"kind": self.kind, "values": list(self.values)}
+        optional = {"step": self.step, "grid": list(self.grid) or None, "grid_points": self.grid_points}
+        return {"kind": self.kind, "low": self.low, "high": self.high, "log": self.log,
+                **{k: v for k, v in optional.items() if v is not None}}
 
 
 @dataclass(frozen=True)
@@ -221,21 +202,12 @@ class PrunerSpec:
             return optuna.pruners.HyperbandPruner(min_resource=self.min_resource, reduction_factor=self.reduction_factor)
         return optuna.pruners.NopPruner()
 
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
 
 @dataclass(frozen=True)
 class SearchSpace:
-    """A parsed search space (see module docstring).
-
-    Attributes:
-        knobs: the searched hyperparameters, in file order.
-        fixed: configuration values held by every trial.
-        defaults: the ``[sweep]`` table's command-line defaults (``pruner`` excluded).
-        pruner: the pruner.
-        source: where the space came from (for messages).
-    """
+    """A parsed search space (module docstring): the ``knobs`` in file order, the ``[fixed]``
+    values, the ``[sweep]`` table's command-line ``defaults`` (``pruner`` excluded), the ``pruner``
+    and the ``source`` that messages name."""
 
     knobs: tuple[Knob, ...]
     fixed: dict[str, Any] = field(default_factory=dict)
@@ -246,12 +218,6 @@ class SearchSpace:
     @property
     def names(self) -> list[str]:
         return [k.name for k in self.knobs]
-
-    def knob(self, name: str) -> Knob:
-        for k in self.knobs:
-            if k.name == name:
-                return k
-        raise KeyError(name)
 
     def distributions(self) -> dict[str, BaseDistribution]:
         return {k.name: k.distribution() for k in self.knobs}
@@ -268,14 +234,14 @@ class SearchSpace:
         """Raise :class:`SpaceError` unless every knob and fixed key is one of ``fields``."""
         valid = set(fields)
         unknown = [n for n in self.names if n not in valid] + [n for n in self.fixed if n not in valid]
-        if unknown:
-            raise SpaceError(f"{self.source}: unknown {what} field(s) {', '.join(unknown)}; valid: {', '.join(sorted(valid))}")
+        _require(not unknown, f"{self.source}: unknown {what} field(s) {', '.join(unknown)}; "
+                              f"valid: {', '.join(sorted(valid))}")
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "params": {k.name: k.to_dict() for k in self.knobs},
             "fixed": dict(self.fixed),
-            "pruner": self.pruner.to_dict(),
+            "pruner": dataclasses.asdict(self.pruner),
         }
 
     def fingerprint(self) -> str:
@@ -283,150 +249,121 @@ class SearchSpace:
         return hashlib.sha256(json.dumps(self.to_dict(), sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def _require(ok: Any, message: str) -> None:
+    """Raise :class:`SpaceError` with ``message`` unless ``ok``."""
+    if not ok:
+        raise SpaceError(message)
+
+
+def _known_keys(table: Mapping[str, Any], valid: set[str], where: str) -> None:
+    unknown = sorted(set(table) - valid)
+    _require(not unknown, f"{where}: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(valid))}")
+
+
 def _parse_knob(name: str, table: Any, source: str) -> Knob:
     where = f"{source}: [params.{name}]"
-    if not isinstance(table, dict):
-        raise SpaceError(f"{where} must be a table with `values` or `low`/`high`")
-    unknown = sorted(set(table) - _KNOB_KEYS)
-    if unknown:
-        raise SpaceError(f"{where}: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(_KNOB_KEYS))}")
+    _require(isinstance(table, dict), f"{where} must be a table with `values` or `low`/`high`")
+    _known_keys(table, _KNOB_KEYS, where)
     if "values" in table:
-        extra = sorted(set(table) & {"low", "high", "log", "step", "type", "grid", "grid_points"})
-        if extra:
-            raise SpaceError(f"{where}: `values` (categorical) cannot be combined with {', '.join(extra)}")
+        extra = sorted(set(table) - {"values"})
+        _require(not extra, f"{where}: `values` (categorical) cannot be combined with {', '.join(extra)}")
         values = table["values"]
-        if not isinstance(values, list) or not values:
-            raise SpaceError(f"{where}: `values` must be a non-empty list")
+        _require(isinstance(values, list) and values, f"{where}: `values` must be a non-empty list")
         for v in values:
-            if not isinstance(v, (str, int, float, bool)):
-                raise SpaceError(f"{where}: values must be numbers, strings or booleans (got {v!r})")
-        if len(set(map(repr, values))) != len(values):
-            raise SpaceError(f"{where}: `values` has duplicates")
+            _require(isinstance(v, (str, int, float, bool)),
+                     f"{where}: values must be numbers, strings or booleans (got {v!r})")
+        _require(len(set(map(repr, values))) == len(values), f"{where}: `values` has duplicates")
         return Knob(name, "categorical", values=tuple(values))
-    if "low" not in table or "high" not in table:
-        raise SpaceError(f"{where} needs `values = [...]` or both `low` and `high`")
+    _require("low" in table and "high" in table, f"{where} needs `values = [...]` or both `low` and `high`")
     low, high = table["low"], table["high"]
-    if not (_is_number(low) and _is_number(high)):
-        raise SpaceError(f"{where}: `low` and `high` must be finite numbers (got {low!r}, {high!r})")
+    _require(_is_number(low) and _is_number(high),
+             f"{where}: `low` and `high` must be finite numbers (got {low!r}, {high!r})")
     kind = table.get("type", "int" if isinstance(low, int) and isinstance(high, int) else "float")
-    if kind not in ("int", "float"):
-        raise SpaceError(f"{where}: `type` must be \"int\" or \"float\" (got {kind!r})")
-    if _of_kind(low, kind) is None or _of_kind(high, kind) is None:
-        raise SpaceError(f"{where}: an integer range needs integer bounds (got {low!r}, {high!r})")
+    _require(kind in ("int", "float"), f"{where}: `type` must be \"int\" or \"float\" (got {kind!r})")
     low, high = _of_kind(low, kind), _of_kind(high, kind)
-    if not low < high:  # type: ignore[operator]
-        raise SpaceError(f"{where}: need low < high (got {low!r}, {high!r})")
+    _require(low is not None and high is not None,
+             f"{where}: an integer range needs integer bounds (got {table['low']!r}, {table['high']!r})")
+    _require(low < high, f"{where}: need low < high (got {low!r}, {high!r})")  # type: ignore[operator]
     log = table.get("log", False)
-    if not isinstance(log, bool):
-        raise SpaceError(f"{where}: `log` must be true or false (got {log!r})")
-    if log and low <= 0:
-        raise SpaceError(f"{where}: a log range needs low > 0 (got {low!r})")
+    _require(isinstance(log, bool), f"{where}: `log` must be true or false (got {log!r})")
+    _require(not (log and low <= 0), f"{where}: a log range needs low > 0 (got {low!r})")  # type: ignore[operator]
+    noun = "integer" if kind == "int" else "number"
     step = table.get("step")
     if step is not None:
-        if log:
-            raise SpaceError(f"{where}: `step` cannot be combined with `log = true`")
-        step = _of_kind(table["step"], kind)
-        if step is None or step <= 0:
-            raise SpaceError(f"{where}: `step` must be a positive {'integer' if kind == 'int' else 'number'} (got {table['step']!r})")
+        _require(not log, f"{where}: `step` cannot be combined with `log = true`")
+        step = _of_kind(step, kind)
+        _require(step is not None and step > 0, f"{where}: `step` must be a positive {noun} (got {table['step']!r})")
     grid_points = table.get("grid_points")
-    if grid_points is not None and (not isinstance(grid_points, int) or isinstance(grid_points, bool) or grid_points < 2):
-        raise SpaceError(f"{where}: `grid_points` must be an integer >= 2 (got {grid_points!r})")
+    _require(grid_points is None or (isinstance(grid_points, int) and not isinstance(grid_points, bool)
+                                     and grid_points >= 2),
+             f"{where}: `grid_points` must be an integer >= 2 (got {grid_points!r})")
     grid = table.get("grid", [])
-    if not isinstance(grid, list):
-        raise SpaceError(f"{where}: `grid` must be a list")
-    if grid and grid_points is not None:
-        raise SpaceError(f"{where}: give `grid` or `grid_points`, not both")
+    _require(isinstance(grid, list), f"{where}: `grid` must be a list")
+    _require(not (grid and grid_points is not None), f"{where}: give `grid` or `grid_points`, not both")
     knob = Knob(name, kind, low=low, high=high, log=log, step=step, grid_points=grid_points)
-    if grid:
-        values = []
-        for v in grid:
-            if _of_kind(v, kind) is None:
-                raise SpaceError(f"{where}: grid value {v!r} is not {'an integer' if kind == 'int' else 'a number'}")
-            v = _of_kind(v, kind)
-            if not knob.contains(v):
-                raise SpaceError(f"{where}: grid value {v!r} lies outside [{low}, {high}]" + (f" step {step}" if step else ""))
-            values.append(v)
-        if len(set(values)) != len(values):
-            raise SpaceError(f"{where}: `grid` has duplicates")
-        knob = Knob(name, kind, low=low, high=high, log=log, step=step, grid=tuple(values))
-    return knob
+    values = [_of_kind(v, kind) for v in grid]
+    for v, value in zip(grid, values):
+        _require(value is not None, f"{where}: grid value {v!r} is not {'an' if kind == 'int' else 'a'} {noun}")
+        _require(knob.contains(value), f"{where}: grid value {value!r} lies outside [{low}, {high}]"
+                                       + (f" step {step}" if step else ""))
+    _require(len(set(values)) == len(values), f"{where}: `grid` has duplicates")
+    return dataclasses.replace(knob, grid=tuple(values)) if grid else knob
 
 
-def _integer(value: Any, name: str, low: int = 1) -> int:
+def _integer(value: Any, name: str, low: int = 1, error: type[ValueError] = ValueError) -> int:
     if not isinstance(value, int) or isinstance(value, bool) or value < low:
-        raise ValueError(f"{name} must be an integer >= {low} (got {value!r})")
+        raise error(f"{name} must be an integer >= {low} (got {value!r})")
     return value
 
 
 _SWEEP_INTEGERS = {"trials": 1, "grid_trials": 1, "top_k": 1, "workers": 1, "seed": 0}
 
 
-def check_sweep_options(values: Mapping[str, Any]) -> None:
-    """Raise ValueError for an invalid sweep option (``sampler``, ``trials``, ``grid_trials``,
-    ``top_k``, ``workers``, ``seed``; None values are left to the defaults): the one check of the
-    space's ``[sweep]`` table and of :class:`~fkn_bench.sweep.SweepSettings`."""
+def check_sweep_options(values: Mapping[str, Any], error: type[ValueError] = ValueError,
+                        where: str = "") -> None:
+    """Raise ``error`` (message prefixed by ``where``) for an invalid sweep option (``sampler``,
+    ``trials``, ``grid_trials``, ``top_k``, ``workers``, ``seed``; None values are left to the
+    defaults): the one check of ``[sweep]`` tables and of :class:`~fkn_bench.sweep.SweepSettings`."""
     if values.get("sampler", SAMPLERS[0]) not in SAMPLERS:
-        raise ValueError(f"sampler must be one of {', '.join(SAMPLERS)} (got {values['sampler']!r})")
+        raise error(f"{where}sampler must be one of {', '.join(SAMPLERS)} (got {values['sampler']!r})")
     for key, low in _SWEEP_INTEGERS.items():
         if values.get(key) is not None:
-            _integer(values[key], key, low)
+            _integer(values[key], where + key, low, error)
 
 
 def _parse_pruner(table: Any, source: str) -> PrunerSpec:
     if table is None:
         return PrunerSpec()
-    if not isinstance(table, dict):
-        raise SpaceError(f"{source}: [sweep.pruner] must be a table")
-    unknown = sorted(set(table) - _PRUNER_KEYS)
-    if unknown:
-        raise SpaceError(f"{source}: [sweep.pruner]: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(_PRUNER_KEYS))}")
+    _require(isinstance(table, dict), f"{source}: [sweep.pruner] must be a table")
+    _known_keys(table, _PRUNER_KEYS, f"{source}: [sweep.pruner]")
     kind = table.get("kind", "median")
-    if kind not in PRUNERS:
-        raise SpaceError(f"{source}: [sweep.pruner] kind must be one of {', '.join(PRUNERS)} (got {kind!r})")
-    values: dict[str, Any] = {"kind": kind}
-    for key, low in (("n_startup_trials", 0), ("n_warmup_steps", 0), ("min_resource", 1), ("reduction_factor", 2)):
-        if key in table:
-            try:
-                values[key] = _integer(table[key], f"pruner.{key}", low)
-            except ValueError as exc:
-                raise SpaceError(f"{source}: [sweep] {exc}") from None
-    if "percentile" in table:
-        p = table["percentile"]
-        if not _is_number(p) or not 0 < p < 100:
-            raise SpaceError(f"{source}: [sweep.pruner] percentile must be in (0, 100) (got {p!r})")
-        values["percentile"] = float(p)
-    return PrunerSpec(**values)
+    _require(kind in PRUNERS, f"{source}: [sweep.pruner] kind must be one of {', '.join(PRUNERS)} (got {kind!r})")
+    integers = {key: _integer(table[key], f"{source}: [sweep] pruner.{key}", low, SpaceError)
+                for key, low in _PRUNER_INTEGERS.items() if key in table}
+    p = table.get("percentile", PrunerSpec.percentile)
+    _require(_is_number(p) and 0 < p < 100, f"{source}: [sweep.pruner] percentile must be in (0, 100) (got {p!r})")
+    return PrunerSpec(kind, percentile=float(p), **integers)
 
 
 def parse_space(document: Mapping[str, Any], source: str = "<space>") -> SearchSpace:
     """Build a :class:`SearchSpace` from a parsed TOML document (module docstring)."""
     unknown = sorted(set(document) - {"sweep", "fixed", "params"})
-    if unknown:
-        raise SpaceError(f"{source}: unknown table(s) {', '.join(unknown)}; valid: [sweep], [fixed], [params.NAME]")
+    _require(not unknown, f"{source}: unknown table(s) {', '.join(unknown)}; valid: [sweep], [fixed], [params.NAME]")
     params = document.get("params")
-    if not isinstance(params, dict) or not params:
-        raise SpaceError(f"{source}: no knobs to search: add [params.NAME] tables")
+    _require(isinstance(params, dict) and params, f"{source}: no knobs to search: add [params.NAME] tables")
     knobs = tuple(_parse_knob(name, table, source) for name, table in params.items())
     fixed = document.get("fixed", {})
-    if not isinstance(fixed, dict):
-        raise SpaceError(f"{source}: [fixed] must be a table of configuration values")
+    _require(isinstance(fixed, dict), f"{source}: [fixed] must be a table of configuration values")
     both = sorted(set(fixed) & set(params))
-    if both:
-        raise SpaceError(f"{source}: {', '.join(both)} both fixed and searched")
+    _require(not both, f"{source}: {', '.join(both)} both fixed and searched")
     sweep = document.get("sweep", {})
-    if not isinstance(sweep, dict):
-        raise SpaceError(f"{source}: [sweep] must be a table")
-    unknown = sorted(set(sweep) - _SWEEP_KEYS)
-    if unknown:
-        raise SpaceError(f"{source}: [sweep]: unknown key(s) {', '.join(unknown)}; valid: {', '.join(sorted(_SWEEP_KEYS))}")
+    _require(isinstance(sweep, dict), f"{source}: [sweep] must be a table")
+    _known_keys(sweep, _SWEEP_KEYS, f"{source}: [sweep]")
     defaults = {k: v for k, v in sweep.items() if k != "pruner"}
-    try:
-        check_sweep_options(defaults)
-    except ValueError as exc:
-        raise SpaceError(f"{source}: [sweep] {exc}") from None
+    check_sweep_options(defaults, SpaceError, f"{source}: [sweep] ")
     for key in ("estimator", "scenario"):
-        if key in defaults and not isinstance(defaults[key], str):
-            raise SpaceError(f"{source}: [sweep] {key} must be a string (got {defaults[key]!r})")
+        _require(isinstance(defaults.get(key, ""), str), f"{source}: [sweep] {key} must be a string "
+                                                         f"(got {defaults.get(key)!r})")
     return SearchSpace(knobs, dict(fixed), defaults, _parse_pruner(sweep.get("pruner"), source), source)
 
 

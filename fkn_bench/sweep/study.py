@@ -62,9 +62,8 @@ def open_storage(spec: str | Path) -> BaseStorage:
     text = str(spec)
     if "://" in text:
         return RDBStorage(text)
-    path = Path(text)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return JournalStorage(JournalFileBackend(str(path)))
+    Path(text).parent.mkdir(parents=True, exist_ok=True)
+    return JournalStorage(JournalFileBackend(text))
 
 
 def stage_names(study_name: str, sampler: str) -> list[tuple[str, str]]:
@@ -80,10 +79,9 @@ def make_sampler(
     """The sampler of a stage for worker ``worker`` (random and TPE samplers get ``seed + worker``
     so that parallel workers draw different points; the grid sampler gets the same seed in every
     worker, as optuna recommends, and picks grid points by trial number)."""
-    if kind == "random":
-        return optuna.samplers.RandomSampler(seed=seed + worker)
-    if kind == "tpe":
-        return optuna.samplers.TPESampler(seed=seed + worker)
+    if kind in ("random", "tpe"):
+        sampler = optuna.samplers.RandomSampler if kind == "random" else optuna.samplers.TPESampler
+        return sampler(seed=seed + worker)
     if kind == "grid":
         if grid is None:
             raise ValueError("the grid sampler needs a grid")
@@ -113,24 +111,13 @@ def reduced_grid(trials: Sequence[FrozenTrial], space: SearchSpace, *, top_k: in
         raise ValueError("the random stage has no completed trial to derive a grid from")
     candidates: dict[str, list[tuple[Any, int]]] = {}
     for knob in space.knobs:
-        seen: dict[Any, int] = {}
+        first: dict[str, tuple[Any, int]] = {}
         for rank, trial in enumerate(best):
             value = _round(trial.params[knob.name], knob)
-            key = repr(value)
-            if key not in seen:
-                seen[key] = rank
-                candidates.setdefault(knob.name, []).append((value, rank))
+            first.setdefault(repr(value), (value, rank))
+        candidates[knob.name] = list(first.values())
     while math.prod(len(v) for v in candidates.values()) > budget:
-        worst_name, worst_rank = None, -1
-        for name in space.names:
-            values = candidates[name]
-            if len(values) > 1 and values[-1][1] > worst_rank:
-                worst_name, worst_rank = name, values[-1][1]
-        assert worst_name is not None
-        candidates[worst_name].pop()
-    grid: dict[str, list[Any]] = {}
-    for name in space.names:
-        values = [v for v, _ in candidates[name]]
-        knob = space.knob(name)
-        grid[name] = values if knob.kind == "categorical" else sorted(values)
-    return grid
+        shrinkable = [name for name, values in candidates.items() if len(values) > 1]
+        candidates[max(shrinkable, key=lambda name: candidates[name][-1][1])].pop()
+    grid = {name: [v for v, _ in values] for name, values in candidates.items()}
+    return {k.name: grid[k.name] if k.kind == "categorical" else sorted(grid[k.name]) for k in space.knobs}

@@ -54,9 +54,13 @@ class ArtifactError(ValueError):
     """A learned-parameter file that is missing, corrupt or of another format/version."""
 
 
+def _committed() -> Path:
+    return Path(str(resources.files("fkn_bench.baselines"))) / "params"
+
+
 def artifact_path(estimator: str, family: str) -> Path:
     """Where the committed artefact of ``estimator`` for model family ``family`` lives."""
-    return Path(str(resources.files("fkn_bench.baselines"))) / "params" / f"{estimator}-{family}.json"
+    return _committed() / f"{estimator}-{family}.json"
 
 
 def artifact_label(path: str | Path) -> str:
@@ -64,9 +68,8 @@ def artifact_label(path: str | Path) -> str:
     params/<file>`` for a committed one (independent of where the package is installed, so that
     configuration fingerprints, and with them the committed leaderboards, do not change with the
     checkout's location), else the path as the user gave it."""
-    committed = Path(str(resources.files("fkn_bench.baselines"))) / "params"
     try:
-        relative = Path(path).resolve().relative_to(committed.resolve())
+        relative = Path(path).resolve().relative_to(_committed().resolve())
     except (OSError, ValueError):
         return str(path)
     return f"fkn_bench.baselines/params/{relative.as_posix()}"
@@ -92,21 +95,12 @@ def write_artifact(
     estimator_config: dict[str, Any],
     parameters: dict[str, Any],
     training: dict[str, Any],
-    provenance: dict[str, Any] | None = None,
 ) -> Path:
-    """Write an artefact (see module docstring) atomically."""
-    document = {
-        "format": ARTIFACT_FORMAT,
-        "format_version": ARTIFACT_FORMAT_VERSION,
-        "estimator": estimator,
-        "family": family,
-        "scenario": scenario,
-        "estimator_config": estimator_config,
-        "parameters": parameters,
-        "training": training,
-        "provenance": provenance if provenance is not None else run_provenance(),
-    }
-    return write_json_atomic(path, document)
+    """Write an artefact (see module docstring) atomically, with this process's provenance."""
+    fields = dict(estimator=estimator, family=family, scenario=scenario, estimator_config=estimator_config,
+                  parameters=parameters, training=training)
+    return write_json_atomic(path, {"format": ARTIFACT_FORMAT, "format_version": ARTIFACT_FORMAT_VERSION, **fields,
+                                    "provenance": run_provenance()})
 
 
 def read_artifact(path: str | Path) -> dict[str, Any]:

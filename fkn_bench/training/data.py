@@ -56,18 +56,14 @@ def _split(scenario: Scenario, split: str, every: int, dtype: torch.dtype, episo
 
     seeds = [scenario.dataset_seed + i for i in range(episodes)]
     episode = generate_episodes(scenario.replace(measurement_every=every), seeds, split=split)
-    return Sequences(
-        torch.as_tensor(episode.measurements, dtype=dtype),
-        torch.as_tensor(episode.valid),
-        torch.as_tensor(episode.truth, dtype=dtype),
-    )
+    return Sequences(torch.as_tensor(episode.measurements, dtype=dtype), torch.as_tensor(episode.valid),
+                     torch.as_tensor(episode.truth, dtype=dtype))
 
 
 class TrainingData:
     """Train windows and the validation sequence of a scenario's data set.
 
     Args:
-        scenario: name or :class:`Scenario`.
         window: samples per training window (paper: 512).
         stride: samples between window starts (default: ``window``, non-overlapping).
         train_measurement_every: measurement schedule of the training windows (default: the
@@ -75,7 +71,6 @@ class TrainingData:
         episodes: episodes in the data set: seeds ``dataset_seed, dataset_seed + 1, ...`` (the
             paper has one recording: 1). Training windows come from every episode's train
             split, validation runs over every episode's val split.
-        dtype: tensor dtype (float64 by default).
     """
 
     def __init__(
@@ -110,8 +105,7 @@ class TrainingData:
         self.train = Sequences(flat(train.measurements), flat(train.mask), flat(train.truth))
         self.train_full = train
         self.val = _split(self.scenario, "val", self.scenario.measurement_every, dtype, self.episodes)
-        valid = train.mask
-        positions = train.measurements[valid][:, 4:7]
+        positions = train.measurements[train.mask][:, 4:7]
         self.position_mean = positions.mean(0)
         self.position_std = positions.std(0).clamp_min(1e-9)
 

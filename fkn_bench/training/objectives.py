@@ -13,16 +13,13 @@
 from __future__ import annotations
 
 import math
-from typing import Literal
-
 import torch
 from torch import Tensor
 
 from fkn_bench.filters.base import FilterResult
 
-__all__ = ["Objective", "OBJECTIVES", "aligned_state_error", "state_mse", "innovation_nll"]
+__all__ = ["OBJECTIVES", "aligned_state_error", "state_mse", "innovation_nll"]
 
-Objective = Literal["supervised", "nll"]
 OBJECTIVES: tuple[str, ...] = ("supervised", "nll")
 
 

@@ -245,28 +245,24 @@ def fit(
         estimator, model, config, scenario, history, trainer.best_epoch, trainer.best_loss, directory, {},
         time.perf_counter() - began, deployed_estimator_config(model, settings.variant),
     )
-    if directory is not None:
-        _write_outputs(outcome, declared, trainer, data, plots, began)
-    return outcome
-
-
-def _write_outputs(outcome: TrainingOutcome, declared: Trainable, trainer: Trainer, data: TrainingData, plots: bool,
-                   began: float) -> None:
+    if directory is None:
+        return outcome
     from fkn_bench.training.plots import plot_losses, plot_parameters
 
-    history, name, scenario, out, settings = outcome.history, outcome.estimator, outcome.scenario, Path(outcome.out or "."), trainer.config
-    with atomic_path(out / "history.csv") as tmp:
+    with atomic_path(directory / "history.csv") as tmp:
         history.to_csv(tmp, index=False)
     if plots and len(history):
         label = "innovation NLL" if settings.objective == "nll" else "13-state RMSE"
-        plot_losses(history, out / "loss.png", title=f"{name} on {scenario.name} ({label})", best_epoch=trainer.best_epoch)
-        plot_parameters(history, out / "parameters.png", title=f"{name}: learned standard deviations ({scenario.name})")
-    outcome.test = split_metrics(outcome.model, settings, scenario)
+        plot_losses(history, directory / "loss.png", title=f"{estimator} on {scenario.name} ({label})",
+                    best_epoch=trainer.best_epoch)
+        plot_parameters(history, directory / "parameters.png",
+                        title=f"{estimator}: learned standard deviations ({scenario.name})")
+    outcome.test = split_metrics(model, settings, scenario)
     outcome.seconds = time.perf_counter() - began
     training = {
         "objective": settings.objective,
         "optimizer": settings.optimizer,
-        "config": outcome.config.to_dict(),
+        "config": config.to_dict(),
         "data": data.describe(),
         "epochs_run": len(history),
         "best_epoch": outcome.best_epoch,
@@ -279,12 +275,8 @@ def _write_outputs(outcome: TrainingOutcome, declared: Trainable, trainer: Train
         **outcome.test,
         "history": {str(c): history[c].tolist() for c in history.columns if c != "seconds"},
     }
-    write_artifact(
-        outcome.artifact,
-        estimator=outcome.estimator,
-        family=scenario.model_family,
-        scenario={"name": scenario.name, "config_hash": scenario.config_hash()},
-        estimator_config=outcome.estimator_config,
-        parameters=outcome.model.parameter_set.to_dict(outcome.model.deployed_raw().detach()),
-        training=training,
-    )
+    write_artifact(outcome.artifact, estimator=estimator, family=scenario.model_family,
+                   scenario={"name": scenario.name, "config_hash": scenario.config_hash()},
+                   estimator_config=outcome.estimator_config,
+                   parameters=model.parameter_set.to_dict(model.deployed_raw().detach()), training=training)
+    return outcome

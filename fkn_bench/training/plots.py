@@ -15,12 +15,13 @@ import pandas as pd  # noqa: E402
 
 from fkn_bench.io import atomic_path  # noqa: E402
 
-__all__ = ["plot_losses", "plot_parameters"]
+__all__ = ["plot_losses", "plot_parameters", "save_png"]
 
 
-def _save(figure: plt.Figure, path: str | Path) -> Path:
+def save_png(figure: plt.Figure, path: str | Path, *, dpi: int = 130) -> Path:
+    """Write ``figure`` as PNG atomically and close it."""
     with atomic_path(path, suffix=".png") as tmp:
-        figure.savefig(tmp, dpi=130, bbox_inches="tight", format="png")
+        figure.savefig(tmp, dpi=dpi, bbox_inches="tight", format="png")
     plt.close(figure)
     return Path(path)
 
@@ -32,14 +33,12 @@ def plot_losses(history: pd.DataFrame, path: str | Path, *, title: str = "", bes
     axis.plot(history["epoch"], history["val_loss"], label="validation loss", color="tab:orange")
     if best_epoch:
         axis.axvline(best_epoch, color="0.5", linestyle="--", linewidth=1, label=f"best epoch {best_epoch}")
-    axis.set_xlabel("epoch")
-    axis.set_ylabel("loss (13-state RMSE, or NLL)")
+    axis.set(xlabel="epoch", ylabel="loss (13-state RMSE, or NLL)", title=title)
     if (history[["train_loss", "val_loss"]] > 0).all().all():
         axis.set_yscale("log")
     axis.grid(True, alpha=0.3)
     axis.legend()
-    axis.set_title(title)
-    return _save(figure, path)
+    return save_png(figure, path)
 
 
 def plot_parameters(history: pd.DataFrame, path: str | Path, *, title: str = "") -> Path:
@@ -50,11 +49,9 @@ def plot_parameters(history: pd.DataFrame, path: str | Path, *, title: str = "")
         colours = plt.cm.tab20(range(len(columns)))  # 13 process-noise lines: distinct colours
         for column, colour in zip(columns, colours):
             axis.plot(history["epoch"], history[column], label=column[len(tag) :], linewidth=1.2, color=colour)
-        axis.set_yscale("log")
-        axis.set_xlabel("epoch")
-        axis.set_title(label)
+        axis.set(yscale="log", xlabel="epoch", title=label)
         axis.grid(True, alpha=0.3)
         if columns:
             axis.legend(fontsize=7, ncol=2)
     figure.suptitle(title)
-    return _save(figure, path)
+    return save_png(figure, path)

@@ -166,9 +166,7 @@ class EpochRecord:
     parameters: dict[str, float] = field(default_factory=dict)
 
     def flat(self) -> dict[str, float]:
-        row = {k: v for k, v in asdict(self).items() if k != "parameters"}
-        row.update(self.parameters)
-        return row
+        return {**{k: v for k, v in asdict(self).items() if k != "parameters"}, **self.parameters}
 
 
 OnEpoch = Callable[[int, "list[EpochRecord]"], "bool | None"]
@@ -204,19 +202,13 @@ class Trainer:
         self.evaluations = 0  # loss evaluations of the L-BFGS steps
 
     # ------------------------------------------------------------------ losses
-    def loss(self, sequences: Sequences, raw: Tensor) -> tuple[Tensor, Tensor | None]:
-        """Objective on ``sequences`` with parameters ``raw``; also the supervised MSE when the
-        truth is used (None for ``nll``)."""
+    def loss(self, sequences: Sequences, raw: Tensor) -> tuple[Tensor, Tensor]:
+        """Objective on ``sequences`` with parameters ``raw``, and the 13-state MSE (the same
+        tensor for the supervised objective; a diagnostic for ``nll``)."""
         noise = self.model.parameter_set.to_noise(raw)
         nll = self.config.objective == "nll"
-        result = self.variant.run(
-            noise,
-            sequences.measurements,
-            sequences.mask,
-            dt=self.data.scenario.dt,
-            store_covariances=False,
-            store_innovations=nll,
-        )
+        result = self.variant.run(noise, sequences.measurements, sequences.mask, dt=self.data.scenario.dt,
+                                  store_covariances=False, store_innovations=nll)
         mse = state_mse(result.means, sequences.truth, self.config.loss_cut)
         if nll:
             return innovation_nll(result, self.config.loss_cut), mse
@@ -228,26 +220,27 @@ class Trainer:
 
     def validate(self) -> tuple[float, float]:
         """``(validation loss, validation 13-state RMSE)`` with the deployed parameters; the loss
-        is the optimised objective (square root of the MSE, or the NLL) and
-        selects the best epoch."""
+        (square root of the MSE, or the NLL) selects the best epoch."""
         with torch.no_grad():
             raw = self.model.deployed_raw().expand(self.data.val.batch_size, -1)
             loss, mse = self.loss(self.data.val, raw)
-        return self._reported(float(loss)), math.sqrt(float(mse)) if mse is not None else math.nan
+        return self._reported(float(loss)), math.sqrt(float(mse))
 
     # ------------------------------------------------------------------ epochs
-    def _checked(self, loss: Tensor) -> Tensor:
+    def _backward(self, batch: Sequences) -> Tensor:
+        """The training loss on ``batch``, its gradients computed (FloatingPointError when not finite)."""
+        self.optimizer.zero_grad(set_to_none=True)
+        loss = self.loss(batch, self.model.window_raw(batch))[0]
         if not torch.isfinite(loss):
             raise FloatingPointError(f"non-finite training loss at epoch {len(self.history) + 1}: lower the learning rate")
+        loss.backward()
         return loss
 
     def _lbfgs_epoch(self) -> float:
         batch = self.data.train
 
         def closure() -> Tensor:
-            self.optimizer.zero_grad(set_to_none=True)
-            loss = self._checked(self.loss(batch, self.model.window_raw(batch))[0])
-            loss.backward()
+            loss = self._backward(batch)
             self.evaluations += 1
             return loss
 
@@ -266,14 +259,11 @@ class Trainer:
         self.model.train()
         total, count = 0.0, 0
         for batch in self.data.batches(self.config.windows_per_batch, self.generator):
-            self.optimizer.zero_grad(set_to_none=True)
-            loss, mse = self.loss(batch, self.model.window_raw(batch))
-            self._checked(loss).backward()
+            loss = self._backward(batch)
             if self.config.max_grad_norm is not None:
                 nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm)
             self.optimizer.step()
-            reported = mse if (self.config.objective == "supervised" and mse is not None) else loss
-            total += float(reported.detach()) * batch.batch_size
+            total += float(loss.detach()) * batch.batch_size
             count += batch.batch_size
         self.model.eval()
         return self._reported(total / count)
@@ -282,19 +272,13 @@ class Trainer:
         """The deployed standard deviations by name (e.g. ``sigma_Q_qw``)."""
         with torch.no_grad():
             raw = self.model.deployed_raw()
-        values = self.model.parameter_set.to_dict(raw)
-        out: dict[str, float] = {}
-        for name, entry in values["entries"].items():
-            tag = name.split("_")[0].upper()
-            if "std" in entry:
-                out.update({f"sigma_{tag}_{label}": float(v) for label, v in zip(entry["labels"], entry["std"])})
-        return out
+        entries = self.model.parameter_set.to_dict(raw)["entries"]
+        return {f"sigma_{name.split('_')[0].upper()}_{label}": float(v) for name, entry in entries.items()
+                if "std" in entry for label, v in zip(entry["labels"], entry["std"])}
 
     def fit(self, *, on_epoch: OnEpoch | None = None, progress: bool = True) -> list[EpochRecord]:
-        """Train until ``epochs``, early stopping or ``on_epoch`` asks to stop; restores the best
-        weights. Resumable: a trainer restored with :meth:`load_state_dict` continues from its
-        last epoch. ``on_epoch(epoch, history)`` is called after every epoch (see
-        :data:`OnEpoch`)."""
+        """Train until ``epochs``, early stopping or ``on_epoch`` (:data:`OnEpoch`) asks to stop;
+        restores the best weights. A trainer restored with :meth:`load_state_dict` resumes."""
         from tqdm.auto import tqdm
 
         start = len(self.history) + 1
@@ -308,15 +292,8 @@ class Trainer:
                 train_loss = self.run_epoch()
                 val_loss, val_rmse = self.validate()
                 self.scheduler.step(val_loss)
-                record = EpochRecord(
-                    epoch=epoch,
-                    train_loss=train_loss,
-                    val_loss=val_loss,
-                    val_rmse=val_rmse,
-                    lr=self.optimizer.param_groups[0]["lr"],
-                    seconds=time.perf_counter() - began,
-                    parameters=self.deployed_parameters(),
-                )
+                record = EpochRecord(epoch, train_loss, val_loss, val_rmse, self.optimizer.param_groups[0]["lr"],
+                                     time.perf_counter() - began, self.deployed_parameters())
                 self.history.append(record)
                 margin = self.config.min_improvement * abs(self.best_loss) if math.isfinite(self.best_loss) else 0.0
                 if val_loss < self.best_loss - margin:
@@ -326,9 +303,8 @@ class Trainer:
                 else:
                     self.epochs_without_improvement += 1
                 bar.set_postfix(train=f"{train_loss:.4g}", val=f"{val_loss:.4g}", lr=f"{record.lr:.1e}", best=self.best_epoch)
-                if on_epoch is not None and on_epoch(epoch, self.history):
-                    break
-                if self.epochs_without_improvement >= self.config.patience:
+                stop = on_epoch is not None and on_epoch(epoch, self.history)
+                if stop or self.epochs_without_improvement >= self.config.patience:
                     break
         bar.close()
         self.model.load_state_dict(self.best_state)
