@@ -14,6 +14,7 @@ import argparse
 import json
 from pathlib import Path
 
+from fkn_bench.cli import UsageError
 from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files
 
 __all__ = ["add_parser"]
@@ -41,7 +42,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fkn_bench.cli import UsageError
     from fkn_bench.estimators import EstimatorFileError, UnknownEstimatorError
     from fkn_bench.harness.recording import record
     from fkn_bench.scenarios import get_scenario
