@@ -19,13 +19,8 @@ def add_command(subparsers: argparse._SubParsersAction, name: str, help: str, do
 
 
 def add_scenario_file_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--scenario-file",
-        action="append",
-        default=[],
-        metavar="TOML",
-        help="register the [scenario.NAME] tables of this TOML file first (repeatable)",
-    )
+    parser.add_argument("--scenario-file", action="append", default=[], metavar="TOML",
+                        help="register the [scenario.NAME] tables of this TOML file first (repeatable)")
 
 
 def load_scenario_files(args: argparse.Namespace) -> None:

@@ -81,13 +81,8 @@ class DaskBackend:
 
         cluster = None
         if self.scheduler is None:
-            cluster = LocalCluster(
-                n_workers=self.workers,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=":0",
-                silence_logs=logging.ERROR,
-            )
+            cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
         client = Client(cluster if cluster is not None else self.scheduler)
         try:
             futures = [client.submit(run_cell, cell, pure=False) for cell in cells]

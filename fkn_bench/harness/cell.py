@@ -51,6 +51,10 @@ def time_online(estimator: Estimator, measurements: ArrayF, dt: float, *, passes
     return 1e6 * best / max(len(observations), 1)
 
 
+def _message(exc: BaseException) -> str:
+    return "".join(traceback.format_exception_only(type(exc), exc)).strip()
+
+
 def _record(spec: CellSpec, status: str, rows: list[pd.DataFrame], **fields: Any) -> CellRecord:
     return CellRecord(estimator=spec.estimator, scenario=spec.scenario, seeds=tuple(spec.seeds), key=spec.key(),
                       source=spec.source.describe(), status=status, rows=pd.concat(rows, ignore_index=True),
@@ -58,10 +62,9 @@ def _record(spec: CellSpec, status: str, rows: list[pd.DataFrame], **fields: Any
 
 
 def _failure(spec: CellSpec, exc: BaseException) -> CellRecord:
-    message = "".join(traceback.format_exception_only(type(exc), exc)).strip()
     detail = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
     rows = [failure_rows(spec.estimator, spec.scenario, spec.seeds), cost_rows(spec.estimator, spec.scenario, spec.seeds, {})]
-    return _record(spec, "failed", rows, error=message, notes={"traceback": detail})
+    return _record(spec, "failed", rows, error=_message(exc), notes={"traceback": detail})
 
 
 def run_cell(spec: CellSpec) -> CellRecord:
@@ -78,14 +81,9 @@ def run_cell(spec: CellSpec) -> CellRecord:
             with measure() as batched:
                 estimates = estimator.estimate(measurements, valid, dt)
             scores = score_run(
-                episodes.truth,
-                estimates.means,
-                dt,
-                error_covariances=estimates.error_covariances,
-                innovations=estimates.innovations,
-                innovation_covariances=estimates.innovation_covariances,
-                innovation_mask=estimates.innovation_mask,
-                settings=spec.settings,
+                episodes.truth, estimates.means, dt, error_covariances=estimates.error_covariances,
+                innovations=estimates.innovations, innovation_covariances=estimates.innovation_covariances,
+                innovation_mask=estimates.innovation_mask, settings=spec.settings,
             )
         except Exception as exc:  # noqa: BLE001 - an estimator's failure is a result
             return _failure(spec, exc)
@@ -95,7 +93,7 @@ def run_cell(spec: CellSpec) -> CellRecord:
             us_online = time_online(estimator, episodes.measurements[0, :online_steps], dt)
         except Exception as exc:  # noqa: BLE001 - timing only: keep the batch results
             us_online = float("nan")
-            notes["online_error"] = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+            notes["online_error"] = _message(exc)
     cost = {
         "us_per_step_batched": 1e6 * batched.seconds / (episodes.batch_size * episodes.n_steps),
         "us_per_step_online": us_online,

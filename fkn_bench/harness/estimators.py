@@ -110,10 +110,10 @@ def resolve_estimator(name: str, scenario: Scenario, options: dict[str, Any] | N
         return ResolvedEstimator(name, scenario.name, error=f"{type(exc).__name__}: {exc}", options=items)
     try:
         text = json.dumps(_rounded(to_jsonable(config)), sort_keys=True)
+        fingerprint = hashlib.sha256(text.encode()).hexdigest()[:16]
     except (TypeError, ValueError):
-        return ResolvedEstimator(name, scenario.name, estimator, options=items)
-    return ResolvedEstimator(name, scenario.name, estimator, fingerprint=hashlib.sha256(text.encode()).hexdigest()[:16],
-                             options=items)
+        fingerprint = ""
+    return ResolvedEstimator(name, scenario.name, estimator, fingerprint=fingerprint, options=items)
 
 
 def check_estimators(names: Sequence[str]) -> list[str]:

@@ -72,13 +72,10 @@ class ResultStore:
     # ------------------------------------------------------------------ resume
     def finished(self, spec: CellSpec) -> CellRecord | None:
         """The stored record of ``spec`` when it is finished with the same key, else None."""
-        stem = self.cell_stem(spec.estimator, spec.scenario, spec.seeds)
-        json_path = self._paths(stem)[2]
-        if not json_path.exists():
-            return None
+        json_path = self._paths(self.cell_stem(spec.estimator, spec.scenario, spec.seeds))[2]
         try:
             record = self.read_cell(json_path)
-        except StoreError:
+        except StoreError:  # missing (read_json's FileNotFoundError) or broken
             return None
         return record if record.key == spec.key() else None
 
@@ -91,8 +88,7 @@ class ResultStore:
         arrays: dict[str, np.ndarray] = {}
         for name, sums in (("nees", record.nees), ("nis", record.nis)):
             if sums is not None:
-                arrays[f"{name}_sum"] = sums.sum
-                arrays[f"{name}_count"] = sums.count
+                arrays.update({f"{name}_sum": sums.sum, f"{name}_count": sums.count})
         with atomic_path(npz_path) as tmp, open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
         document = {
@@ -128,21 +124,13 @@ class ResultStore:
         except (OSError, KeyError, ValueError) as exc:
             raise StoreError(f"cell {json_path} is incomplete: {exc}") from None
 
-        def pair(name: str) -> StatisticSums | None:
-            if f"{name}_sum" not in sums:
-                return None
-            return StatisticSums(sums[f"{name}_sum"], sums[f"{name}_count"])
-
+        pairs = {name: StatisticSums(sums[f"{name}_sum"], sums[f"{name}_count"])
+                 for name in ("nees", "nis") if f"{name}_sum" in sums}
         return CellRecord(
-            estimator=document["estimator"],
-            scenario=document["scenario"],
+            **{k: document[k] for k in ("estimator", "scenario", "key", "source", "status")},
             seeds=tuple(int(s) for s in document["seeds"]),
-            key=document["key"],
-            source=document["source"],
-            status=document["status"],
             rows=rows,
-            nees=pair("nees"),
-            nis=pair("nis"),
+            **pairs,
             error=document.get("error"),
             notes=document.get("notes") or {},
             provenance=document.get("provenance") or {},
