@@ -26,11 +26,9 @@ __all__ = ["CellRecord", "Results"]
 
 @dataclass(frozen=True, eq=False)
 class CellRecord:
-    """A cell's outcome as data (see module docstring): what :func:`fkn_bench.harness.cell.run_cell`
-    returns and the store writes and reads.
+    """A cell's outcome as data: what :func:`fkn_bench.harness.cell.run_cell` returns.
 
     Attributes:
-        estimator, scenario, seeds: the cell.
         key: :meth:`fkn_bench.harness.grid.CellSpec.key` (resume compares it).
         source: the source's ``describe()``.
         status: ``"ok"`` or ``"failed"``.
