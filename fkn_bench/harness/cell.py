@@ -2,10 +2,9 @@
 
 Steps (:func:`run_cell`): load the episodes of the chunk from the cell's source; take a copy of
 the cell's estimator (built once, when the grid was resolved: every cell starts from the same
-pristine estimator, on every backend); call ``estimate()`` once on the whole batch
-(timed, with peak memory: the batched cost); time a short online run (``reset`` and ``step`` over
-the first ``online_steps`` steps of the chunk's first sequence: the online cost); score the batch
-with :func:`fkn_bench.metrics.score_run`. Everything runs under
+pristine estimator, on every backend); call ``estimate()`` once on the whole batch, then time a
+short online run (the batched and online costs, :mod:`fkn_bench.harness.profiling`); score the
+batch with :func:`fkn_bench.metrics.score_run`. Everything runs under
 :func:`fkn_bench.runtime.torch_threads` (one torch thread by default), so results do not depend on
 the process that runs the cell.
 

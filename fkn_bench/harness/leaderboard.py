@@ -1,10 +1,9 @@
 """Leaderboards: per scenario a ranked Markdown table, its HTML page and its CSV, plus an index,
 the per-seed CSV of record and a provenance document, all built from stored results.
 
-Ranking: by the primary score, the 13-state RMSE (:data:`fkn_bench.harness.summary.PRIMARY_SCORE`;
-the root of the mean over the 13 state components and the scored window of the squared component
-errors, the paper's test loss), mean over seeds, lower is better; ties by estimator name;
-estimators without a score (every run failed) last. Divergence rates, consistency and cost are
+Ranking: by the primary score, the 13-state RMSE (:data:`fkn_bench.harness.summary.PRIMARY_SCORE`),
+mean over seeds, lower is better; ties by estimator name; estimators without a score (every run
+failed) last. Divergence rates, consistency and cost are
 shown beside it, never folded into it. The paper's numbers appear as labelled, unranked
 "(quoted)" rows where they apply (:mod:`fkn_bench.harness.reference`).
 
