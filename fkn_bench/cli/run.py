@@ -64,10 +64,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="worker processes (local: a process pool when > 1; dask: LocalCluster size)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: start a LocalCluster)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-    parser.add_argument(
-        "--estimator-option", action="append", default=[], metavar="KEY=VALUE",
-        help="option for the estimators' factories, e.g. parameters=runs/fkn/parameters.json (repeatable)",
-    )
+    parser.add_argument("--estimator-option", action="append", default=[], metavar="KEY=VALUE",
+                        help="option for the estimators' factories, e.g. parameters=runs/fkn/parameters.json "
+                             "(repeatable)")
     replay = parser.add_argument_group("recordings (instead of --scenario)")
     replay.add_argument("--recording", metavar="FILE.mcap", help="run on this MCAP recording")
     replay.add_argument("--truth-topic", metavar="TOPIC", help="pose topic of the ground truth")
@@ -110,10 +109,8 @@ def _scenarios(args: argparse.Namespace) -> list[Any]:
     for scenario in scenarios:
         start, stop = scenario.split_bounds()[args.split]
         if args.cut >= stop - start:
-            raise UsageError(
-                f"--cut {args.cut} leaves nothing to score in the {args.split} split of {scenario.name} "
-                f"({stop - start} steps)"
-            )
+            raise UsageError(f"--cut {args.cut} leaves nothing to score in the {args.split} split of "
+                             f"{scenario.name} ({stop - start} steps)")
     return scenarios
 
 
@@ -188,9 +185,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(summary_text(summaries))
     if args.out:
-        print(
-            f"fkn-bench run: {len(cells)} cells ({outcome.computed} computed, {outcome.reused} reused, "
-            f"{outcome.failed} failed) in {args.out}",
-            file=sys.stderr,
-        )
+        print(f"fkn-bench run: {len(cells)} cells ({outcome.computed} computed, {outcome.reused} reused, "
+              f"{outcome.failed} failed) in {args.out}", file=sys.stderr)
     return 1 if cells and outcome.failed == len(cells) else 0

@@ -27,7 +27,6 @@ __all__ = [
     "resolve_estimator",
     "resolve",
     "select_estimators",
-    "check_estimators",
 ]
 
 DEFAULT_ESTIMATOR_PREFERENCE: tuple[str, ...] = ("flexkalmannet", "manual-ekf")
@@ -107,25 +106,20 @@ def resolve_estimator(name: str, scenario: Scenario, options: dict[str, Any] | N
     return ResolvedEstimator(name, scenario.name, estimator, fingerprint=fingerprint, options=items)
 
 
-def check_estimators(names: Sequence[str]) -> list[str]:
-    """Return ``names`` without duplicates (first occurrence kept), or raise
+def resolve(
+    names: Sequence[str] | None, scenarios: Sequence[Scenario], options: dict[str, Any] | None = None
+) -> list[ResolvedEstimator]:
+    """Every pair of ``names`` (None: every registered estimator; duplicates dropped) x
+    ``scenarios``, each built once, estimator-major; unknown names raise
     :class:`~fkn_bench.estimators.UnknownEstimatorError` listing the valid names."""
     valid = estimator_names()
-    unknown = [n for n in names if n not in valid]
+    unknown = [n for n in names or () if n not in valid]
     if unknown:
         raise UnknownEstimatorError(
             f"unknown estimator{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}; "
             f"valid estimators: {', '.join(valid)}"
         )
-    return list(dict.fromkeys(names))
-
-
-def resolve(
-    names: Sequence[str] | None, scenarios: Sequence[Scenario], options: dict[str, Any] | None = None
-) -> list[ResolvedEstimator]:
-    """Every pair of ``names`` (None: every registered estimator) x ``scenarios``, each built once,
-    estimator-major; unknown names raise :class:`~fkn_bench.estimators.UnknownEstimatorError`."""
-    names = estimator_names() if names is None else check_estimators(names)
+    names = valid if names is None else list(dict.fromkeys(names))
     return [resolve_estimator(name, scenario, options) for name in names for scenario in scenarios]
 
 
