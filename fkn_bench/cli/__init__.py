@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -63,8 +64,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"fkn-bench {args.command}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # e.g. `fkn-bench run | head`: the reader left, nothing to report
-        import os
-
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
         return 0

@@ -111,13 +111,11 @@ def run(args: argparse.Namespace) -> int:
     except SweepError as exc:
         print(f"fkn-bench sweep: error: {exc}", file=sys.stderr)
         return 1
-    counts = {stage: ", ".join(f"{n} {state}" for state, n in c.items() if n) for stage, c in result.counts.items()}
     print(f"best validation RMSE {result.best_value:.6g} ({result.best_stage} trial {result.best_number}): "
           + ", ".join(f"{k}={v}" for k, v in result.best_params.items()))
-    for stage, text in counts.items():
-        print(f"  {stage}: {text}")
-    print(f"  {result.best_config}")
-    print(f"  {result.trials_csv}")
-    if result.figure is not None:
-        print(f"  {result.figure}")
+    for stage, counts in result.counts.items():
+        print(f"  {stage}: " + ", ".join(f"{n} {state}" for state, n in counts.items() if n))
+    for path in (result.best_config, result.trials_csv, result.figure):
+        if path is not None:
+            print(f"  {path}")
     return 0

@@ -259,11 +259,10 @@ def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[di
         f"({_fmt(ranked[s][0]['state_rmse'], 4)})"
         for s in scenarios
     ]
-    environments = _environments(results)
     env_lines = [
         f"- fkn-bench {e.get('fkn_bench')}, commit {e.get('git_commit')}, Python {e.get('python')}, "
         f"numpy {e.get('numpy')}, torch {e.get('torch')}, {(e.get('machine') or {}).get('platform')}"
-        for e in environments
+        for e in _environments(results)
     ]
     settings = results.settings()
     return "\n".join([
