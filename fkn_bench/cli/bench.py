@@ -151,9 +151,11 @@ def format_summary(document: dict[str, Any], *, source: str = "") -> str:
                      row["what"]))
     title = f"fkn-bench speed suite{': ' + source if source else ''} (pytest-benchmark {document.get('version', '?')}"
     title += f", {document.get('datetime', '?')})"
-    note = ("Times are wall-clock per call; steps/s = steps per call / median. Absolute times vary by tens of "
-            "percent between runs on shared machines: compare ratios within one run (fkn-bench bench gate).")
-    return "\n".join([title, _machine(document), "", text_table(header, body, right=range(1, 7)), "", note])
+    note = ("Times are wall-clock per call; steps/s = steps per call / median. Absolute times vary by "
+            "tens of percent between runs on shared machines: compare ratios within one run "
+            "(fkn-bench bench gate).")
+    return "\n".join([title, _machine(document), "", text_table(header, body, right=range(1, 7)), "",
+                      note])
 
 
 def run_report(args: argparse.Namespace) -> int:

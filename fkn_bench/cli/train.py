@@ -22,8 +22,8 @@ __all__ = ["add_parser", "parse_options"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = add_command(subparsers, "train", "train a trainable estimator (FlexKalmanNet, the tuned baselines)",
-                         __doc__)
+    parser = add_command(subparsers, "train",
+                         "train a trainable estimator (FlexKalmanNet, the tuned baselines)", __doc__)
     parser.add_argument("--estimator", default="flexkalmannet", help="trainable estimator (default: flexkalmannet)")
     parser.add_argument("--scenario", default="ds1", help="training scenario (default: ds1)")
     parser.add_argument("--filter", dest="variant", choices=("ekf", "ukf", "mekf"), help="filter variant")

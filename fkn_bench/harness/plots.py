@@ -82,9 +82,8 @@ def uncertainty_figure(trace: Trace, *, steps: int | None = None) -> Figure:
     estimator's 13x13 state covariance (the paper's uncertainty figure)."""
     times, truth, means, _, _ = _aligned(trace, steps)
     covariances = trace.estimates.covariances
-    sigma = None
-    if covariances is not None:
-        sigma = np.sqrt(np.clip(np.diagonal(covariances[0, : len(times)], axis1=-2, axis2=-1), 0.0, None))
+    sigma = (None if covariances is None
+             else np.sqrt(np.clip(np.diagonal(covariances[0, : len(times)], axis1=-2, axis2=-1), 0.0, None)))
     figure = new_figure(14, 10)
     axes = figure.subplots(4, 4, sharex=True)
     for row, (group, index) in enumerate(STATE_GROUPS.items()):

@@ -21,7 +21,8 @@ from fkn_bench.harness.records import Results
 from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS, NEES_DOF, NIS_DOF, average_statistic, chi2_interval, summarize
 from fkn_bench.types import STATE_NAMES
 
-__all__ = ["PRIMARY_SCORE", "GROUP_RMSE_KEYS", "summarize_pair", "summarize_results", "per_seed_table", "STATISTIC_METRICS"]
+__all__ = ["PRIMARY_SCORE", "GROUP_RMSE_KEYS", "STATISTIC_METRICS", "summarize_pair", "summarize_results",
+           "per_seed_table"]
 
 PRIMARY_SCORE = ("state", "rmse")
 """(group, metric) of the primary score: the 13-state RMSE (lower is better)."""
