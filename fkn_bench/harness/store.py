@@ -63,18 +63,17 @@ class ResultStore:
         self.root = Path(root)
 
     # ------------------------------------------------------------------ paths
-    def cell_stem(self, estimator: str, scenario: str, seeds: tuple[int, ...]) -> Path:
-        return self.root / "cells" / safe_name(estimator) / safe_name(scenario) / f"seeds-{seeds[0]}-{seeds[-1]}"
-
-    def _paths(self, stem: Path) -> tuple[Path, Path, Path]:
+    def _paths(self, cell: CellSpec | CellRecord) -> tuple[Path, Path, Path]:
+        """The cell's CSV, NPZ and JSON files."""
+        stem = self.root / "cells" / safe_name(cell.estimator) / safe_name(cell.scenario)
+        stem /= f"seeds-{cell.seeds[0]}-{cell.seeds[-1]}"
         return stem.with_suffix(".csv"), stem.with_suffix(".npz"), stem.with_suffix(".json")
 
     # ------------------------------------------------------------------ resume
     def finished(self, spec: CellSpec) -> CellRecord | None:
         """The stored record of ``spec`` when it is finished with the same key, else None."""
-        json_path = self._paths(self.cell_stem(spec.estimator, spec.scenario, spec.seeds))[2]
         try:
-            record = self.read_cell(json_path)
+            record = self.read_cell(self._paths(spec)[2])
         except StoreError:  # missing (read_json's FileNotFoundError) or broken
             return None
         return record if record.key == spec.key() else None
@@ -82,8 +81,7 @@ class ResultStore:
     # ------------------------------------------------------------------ write
     def write_cell(self, record: CellRecord) -> Path:
         """Write the record's rows, sums and JSON (last) atomically; returns the JSON path."""
-        stem = self.cell_stem(record.estimator, record.scenario, record.seeds)
-        csv_path, npz_path, json_path = self._paths(stem)
+        csv_path, npz_path, json_path = self._paths(record)
         write_text_atomic(csv_path, rows_to_csv(record.rows))
         arrays: dict[str, np.ndarray] = {}
         for name, sums in (("nees", record.nees), ("nis", record.nis)):
