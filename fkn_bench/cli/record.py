@@ -74,11 +74,9 @@ def run(args: argparse.Namespace) -> int:
             **summary.timings,
         }, indent=2))
         return 0
-    print(
-        f"wrote {summary.path}: {summary.n_steps} steps of {scenario.name} (seed {args.seed}), "
-        f"{summary.message_count} messages on {len(summary.message_counts)} topics, "
-        f"{summary.size_bytes / 1e6:.2f} MB in {summary.write_seconds:.2f} s"
-    )
+    print(f"wrote {summary.path}: {summary.n_steps} steps of {scenario.name} (seed {args.seed}), "
+          f"{summary.message_count} messages on {len(summary.message_counts)} topics, "
+          f"{summary.size_bytes / 1e6:.2f} MB in {summary.write_seconds:.2f} s")
     width = max(len(t) for t in summary.message_counts)
     for topic, count in summary.message_counts.items():
         print(f"  {topic:<{width}}  {count}")
