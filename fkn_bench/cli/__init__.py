@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 
-__all__ = ["main", "UsageError", "COMMANDS"]
+__all__ = ["main", "UsageError", "usage_errors", "COMMANDS"]
 
 COMMANDS: tuple[str, ...] = (
     "scenarios", "simulate", "run", "train", "bench", "leaderboard", "plot", "record", "reproduce", "sweep",
@@ -22,6 +24,15 @@ COMMANDS: tuple[str, ...] = (
 
 class UsageError(Exception):
     """Invalid command-line input; printed without a traceback, exit code 2."""
+
+
+@contextmanager
+def usage_errors(*errors: type[BaseException]) -> Iterator[None]:
+    """Re-raise ``errors`` raised in the block as :class:`UsageError` with the same message."""
+    try:
+        yield
+    except errors as exc:
+        raise UsageError(str(exc)) from None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -53,8 +64,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"fkn-bench {args.command}: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # e.g. `fkn-bench run | head`: the reader left, nothing to report
-        import os
-
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())  # no second error when Python flushes stdout at exit
         return 0

@@ -93,16 +93,14 @@ def summarize_benchmarks(document: dict[str, Any]) -> list[dict[str, Any]]:
     for bench in document["benchmarks"]:
         stats = bench.get("stats", {})
         extra = bench.get("extra_info", {}) or {}
-        median = float(stats.get("median", math.nan))
+        times = {f"{k}_s": float(stats.get(k, math.nan)) for k in ("median", "mean", "min", "stddev")}
+        median = times["median_s"]
         steps = extra.get("steps")
         rows.append({
             "name": bench.get("name", "?"),
             "group": bench.get("group"),
             "rounds": int(stats.get("rounds", 0)),
-            "median_s": median,
-            "mean_s": float(stats.get("mean", math.nan)),
-            "min_s": float(stats.get("min", math.nan)),
-            "stddev_s": float(stats.get("stddev", math.nan)),
+            **times,
             "steps": int(steps) if steps is not None else None,
             "steps_per_s": (int(steps) / median) if steps and median > 0 else None,
             "what": extra.get("what", ""),
@@ -153,11 +151,11 @@ def format_summary(document: dict[str, Any], *, source: str = "") -> str:
                      row["what"]))
     title = f"fkn-bench speed suite{': ' + source if source else ''} (pytest-benchmark {document.get('version', '?')}"
     title += f", {document.get('datetime', '?')})"
-    lines = [title, _machine(document), "", text_table(header, body, right=range(1, 7))]
-    lines.append("")
-    lines.append("Times are wall-clock per call; steps/s = steps per call / median. Absolute times vary by tens of "
-                 "percent between runs on shared machines: compare ratios within one run (fkn-bench bench gate).")
-    return "\n".join(lines)
+    note = ("Times are wall-clock per call; steps/s = steps per call / median. Absolute times vary by "
+            "tens of percent between runs on shared machines: compare ratios within one run "
+            "(fkn-bench bench gate).")
+    return "\n".join([title, _machine(document), "", text_table(header, body, right=range(1, 7)), "",
+                      note])
 
 
 def run_report(args: argparse.Namespace) -> int:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from fkn_bench.cli import UsageError
 from fkn_bench.cli.options import add_command
 
 __all__ = ["add_parser", "run"]
@@ -31,7 +32,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fkn_bench.cli import UsageError
     from fkn_bench.harness.leaderboard import write_leaderboards
     from fkn_bench.harness.store import ResultStore, StoreError
 

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
-
 from typing import Any
+
+from fkn_bench.cli import UsageError
 
 __all__ = [
     "add_command", "add_scenario_file_option", "load_scenario_files", "check_minimum", "parse_value", "parse_key_values",
@@ -18,13 +19,8 @@ def add_command(subparsers: argparse._SubParsersAction, name: str, help: str, do
 
 
 def add_scenario_file_option(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--scenario-file",
-        action="append",
-        default=[],
-        metavar="TOML",
-        help="register the [scenario.NAME] tables of this TOML file first (repeatable)",
-    )
+    parser.add_argument("--scenario-file", action="append", default=[], metavar="TOML",
+                        help="register the [scenario.NAME] tables of this TOML file first (repeatable)")
 
 
 def load_scenario_files(args: argparse.Namespace) -> None:
@@ -37,8 +33,6 @@ def load_scenario_files(args: argparse.Namespace) -> None:
 def check_minimum(args: argparse.Namespace, **minimum: int) -> None:
     """Usage error for the first integer option ``--NAME`` (``args.NAME``; None: not given) below
     its minimum, in the order given (0: "a non-negative integer", 1: "a positive integer")."""
-    from fkn_bench.cli import UsageError
-
     for name, low in minimum.items():
         value = getattr(args, name)
         if value is not None and value < low:
@@ -65,8 +59,6 @@ def parse_value(text: str) -> Any:
 
 def parse_key_values(items: list[str], option: str) -> dict[str, Any]:
     """``KEY=VALUE`` strings to a dict (values through :func:`parse_value`)."""
-    from fkn_bench.cli import UsageError
-
     out: dict[str, Any] = {}
     for item in items:
         key, sep, value = item.partition("=")

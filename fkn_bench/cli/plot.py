@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from fkn_bench.cli import usage_errors
 from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files
 
 __all__ = ["add_parser", "run"]
@@ -39,7 +40,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fkn_bench.cli import UsageError
     from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.harness.estimators import SelectionError, select_estimators
     from fkn_bench.harness.grid import safe_name
@@ -55,16 +55,12 @@ def run(args: argparse.Namespace) -> int:
     check_minimum(args, seed=0, steps=2, cut=0)
     load_scenario_files(args)
     scenario = get_scenario(args.scenario)
-    try:
+    with usage_errors(UnknownEstimatorError, SelectionError):
         resolved = select_estimators([args.estimator] if args.estimator else None, [scenario]).resolved[0]
-    except (UnknownEstimatorError, SelectionError) as exc:
-        raise UsageError(str(exc)) from None
     results = None
     if args.results:
-        try:
+        with usage_errors(StoreError):
             results = ResultStore(args.results).load()
-        except StoreError as exc:
-            raise UsageError(str(exc)) from None
 
     out = Path(args.out)
     run_trace = trace(resolved, SimulatedSource(scenario, args.split), args.seed)

@@ -14,6 +14,7 @@ import argparse
 import json
 from pathlib import Path
 
+from fkn_bench.cli import UsageError
 from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files
 
 __all__ = ["add_parser"]
@@ -22,12 +23,9 @@ __all__ = ["add_parser"]
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(subparsers, "record", "record an episode and its estimates as MCAP (ROS 2 + Foxglove)", __doc__)
     parser.add_argument("--scenario", default="ds1", help="scenario name (default: ds1)")
-    parser.add_argument(
-        "--estimator",
-        default="manual-ekf",
-        help="registered estimator name, a saved estimator (.json), or 'none' for truth and "
-        "measurements only (default: manual-ekf)",
-    )
+    parser.add_argument("--estimator", default="manual-ekf",
+                        help="registered estimator name, a saved estimator (.json), or 'none' for truth and "
+                             "measurements only (default: manual-ekf)")
     parser.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
     parser.add_argument("--split", default="full", choices=("full", "train", "val", "test"))
     parser.add_argument("--steps", type=int, default=None, metavar="N", help="record only the first N steps")
@@ -41,7 +39,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fkn_bench.cli import UsageError
     from fkn_bench.estimators import EstimatorFileError, UnknownEstimatorError
     from fkn_bench.harness.recording import record
     from fkn_bench.scenarios import get_scenario
@@ -57,44 +54,29 @@ def run(args: argparse.Namespace) -> int:
     if estimator is not None and estimator.endswith(".json") and not Path(estimator).is_file():
         raise UsageError(f"estimator file not found: {estimator}")
     try:
-        summary = record(
-            args.out,
-            scenario=scenario,
-            estimator=estimator,
-            seed=args.seed,
-            split=args.split,
-            n_steps=args.steps,
-            namespace=args.namespace,
-            foxglove=not args.no_foxglove,
-            compression=args.compression,
-        )
+        summary = record(args.out, scenario=scenario, estimator=estimator, seed=args.seed, split=args.split,
+                         n_steps=args.steps, namespace=args.namespace, foxglove=not args.no_foxglove,
+                         compression=args.compression)
     except (UnknownEstimatorError, EstimatorFileError) as exc:
         raise UsageError(str(exc)) from None
     except PermissionError as exc:
         raise UsageError(f"cannot write {args.out}: {exc.strerror}") from None
     if args.json:
-        print(
-            json.dumps(
-                {
-                    "path": str(summary.path),
-                    "scenario": scenario.name,
-                    "estimator": estimator,
-                    "seed": args.seed,
-                    "steps": summary.n_steps,
-                    "messages": summary.message_counts,
-                    "size_bytes": summary.size_bytes,
-                    "write_seconds": summary.write_seconds,
-                    **summary.timings,
-                },
-                indent=2,
-            )
-        )
+        print(json.dumps({
+            "path": str(summary.path),
+            "scenario": scenario.name,
+            "estimator": estimator,
+            "seed": args.seed,
+            "steps": summary.n_steps,
+            "messages": summary.message_counts,
+            "size_bytes": summary.size_bytes,
+            "write_seconds": summary.write_seconds,
+            **summary.timings,
+        }, indent=2))
         return 0
-    print(
-        f"wrote {summary.path}: {summary.n_steps} steps of {scenario.name} (seed {args.seed}), "
-        f"{summary.message_count} messages on {len(summary.message_counts)} topics, "
-        f"{summary.size_bytes / 1e6:.2f} MB in {summary.write_seconds:.2f} s"
-    )
+    print(f"wrote {summary.path}: {summary.n_steps} steps of {scenario.name} (seed {args.seed}), "
+          f"{summary.message_count} messages on {len(summary.message_counts)} topics, "
+          f"{summary.size_bytes / 1e6:.2f} MB in {summary.write_seconds:.2f} s")
     width = max(len(t) for t in summary.message_counts)
     for topic, count in summary.message_counts.items():
         print(f"  {topic:<{width}}  {count}")

@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from fkn_bench.cli import usage_errors
 from fkn_bench.cli.options import add_command, check_minimum
 
 __all__ = ["add_parser", "run"]
@@ -42,25 +43,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fkn_bench.cli import UsageError
     from fkn_bench.flexkalmannet import FlexKalmanNetConfig
     from fkn_bench.reproduce import ReproduceSettings, run_reproduction
     from fkn_bench.reproduce.pipeline import stderr_log
 
     check_minimum(args, seed=0, seeds=1)
-    config = None
-    if args.config is not None:
-        try:
-            config = FlexKalmanNetConfig.from_toml(args.config)
-        except (ValueError, TypeError) as exc:
-            raise UsageError(str(exc)) from None
-    settings = ReproduceSettings(seed=args.seed, eval_seeds=args.seeds, quick=args.quick, config=config,
-                                 config_source=str(args.config) if args.config is not None else None,
-                                 figures=not args.no_figures)
-    try:
+    with usage_errors(ValueError, TypeError):
+        config = FlexKalmanNetConfig.from_toml(args.config) if args.config is not None else None
+        settings = ReproduceSettings(seed=args.seed, eval_seeds=args.seeds, quick=args.quick, config=config,
+                                     config_source=str(args.config) if args.config is not None else None,
+                                     figures=not args.no_figures)
         settings.training_config()
-    except (ValueError, TypeError) as exc:
-        raise UsageError(str(exc)) from None
     out = args.out if args.out is not None else Path("runs") / ("reproduce-quick" if args.quick else "reproduce")
     reproduction = run_reproduction(out, settings, progress=not args.no_progress,
                                     log=None if args.no_progress else stderr_log)

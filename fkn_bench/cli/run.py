@@ -27,6 +27,7 @@ import json
 import sys
 from typing import Any
 
+from fkn_bench.cli import UsageError, usage_errors
 from fkn_bench.cli.options import (add_command, add_scenario_file_option, check_minimum, load_scenario_files,
                                    parse_key_values)
 
@@ -63,10 +64,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="worker processes (local: a process pool when > 1; dask: LocalCluster size)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: start a LocalCluster)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
-    parser.add_argument(
-        "--estimator-option", action="append", default=[], metavar="KEY=VALUE",
-        help="option for the estimators' factories, e.g. parameters=runs/fkn/parameters.json (repeatable)",
-    )
+    parser.add_argument("--estimator-option", action="append", default=[], metavar="KEY=VALUE",
+                        help="option for the estimators' factories, e.g. parameters=runs/fkn/parameters.json "
+                             "(repeatable)")
     replay = parser.add_argument_group("recordings (instead of --scenario)")
     replay.add_argument("--recording", metavar="FILE.mcap", help="run on this MCAP recording")
     replay.add_argument("--truth-topic", metavar="TOPIC", help="pose topic of the ground truth")
@@ -78,8 +78,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _check_arguments(args: argparse.Namespace) -> None:
-    from fkn_bench.cli import UsageError
-
     check_minimum(args, seeds=1, workers=1, cut=0)
     if args.scheduler is not None and args.backend != "dask":
         raise UsageError("--scheduler needs --backend dask")
@@ -90,24 +88,20 @@ def _check_arguments(args: argparse.Namespace) -> None:
 def _estimators(args: argparse.Namespace, scenarios: list[Any]) -> list[Any]:
     """The resolved (estimator, scenario) pairs to run (:func:`fkn_bench.harness.select_estimators`:
     its notes go to stderr, its refusals are usage errors)."""
-    from fkn_bench.cli import UsageError
     from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.harness import SelectionError, select_estimators
 
     options = parse_key_values(args.estimator_option, "--estimator-option")
     if options and not args.estimator:
         raise UsageError("--estimator-option needs --estimator NAME")
-    try:
+    with usage_errors(UnknownEstimatorError, SelectionError):
         selection = select_estimators(args.estimator, scenarios, every=args.all, options=options)
-    except (UnknownEstimatorError, SelectionError) as exc:
-        raise UsageError(str(exc)) from None
     for note in selection.notes:
         print(f"fkn-bench run: {note}", file=sys.stderr)
     return selection.resolved
 
 
 def _scenarios(args: argparse.Namespace) -> list[Any]:
-    from fkn_bench.cli import UsageError
     from fkn_bench.scenarios import get_scenario, scenario_names
 
     names = args.scenario or (scenario_names() if args.all else [DEFAULT_SCENARIO])
@@ -115,36 +109,30 @@ def _scenarios(args: argparse.Namespace) -> list[Any]:
     for scenario in scenarios:
         start, stop = scenario.split_bounds()[args.split]
         if args.cut >= stop - start:
-            raise UsageError(
-                f"--cut {args.cut} leaves nothing to score in the {args.split} split of {scenario.name} "
-                f"({stop - start} steps)"
-            )
+            raise UsageError(f"--cut {args.cut} leaves nothing to score in the {args.split} split of "
+                             f"{scenario.name} ({stop - start} steps)")
     return scenarios
 
 
 def _recording_source(args: argparse.Namespace) -> Any:
     """The recording source of ``--recording`` (errors naming the file are usage errors)."""
-    from fkn_bench.cli import UsageError
     from fkn_bench.harness import RecordingSource
     from fkn_bench.recordings import RecordingError
 
     if args.scenario or args.all:
         raise UsageError("--recording replaces --scenario and --all")
     options: dict[str, Any] = {"repair": bool(args.repair)}
-    if args.truth_topic:
-        options["truth_topic"] = args.truth_topic
-    if args.measurement_topic:
-        options["measurement_topic"] = args.measurement_topic
+    for topic in ("truth_topic", "measurement_topic"):
+        if getattr(args, topic):
+            options[topic] = getattr(args, topic)
     if args.dt is not None:
         try:
             options["dt"] = args.dt if args.dt == "native" else float(args.dt)
         except ValueError:
             raise UsageError(f"--dt must be a number of seconds or 'native' (got {args.dt!r})") from None
     source = RecordingSource(str(args.recording), tuple(sorted(options.items())))
-    try:
+    with usage_errors(RecordingError, OSError):
         print(source.trajectory().report.summary(), file=sys.stderr)
-    except (RecordingError, OSError) as exc:
-        raise UsageError(str(exc)) from None
     return source
 
 
@@ -168,8 +156,6 @@ def run(args: argparse.Namespace) -> int:
         if args.measurement_topic and args.seeds == DEFAULT_SEEDS:
             args.seeds = 1  # recorded measurements: every seed would score the same data
         if args.cut >= recording.scenario.n_steps:
-            from fkn_bench.cli import UsageError
-
             raise UsageError(f"--cut {args.cut} leaves nothing to score in the recording ({recording.scenario.n_steps} steps)")
         scenarios = [recording.scenario]
         sources: list[Any] = [recording]
@@ -199,9 +185,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(summary_text(summaries))
     if args.out:
-        print(
-            f"fkn-bench run: {len(cells)} cells ({outcome.computed} computed, {outcome.reused} reused, "
-            f"{outcome.failed} failed) in {args.out}",
-            file=sys.stderr,
-        )
+        print(f"fkn-bench run: {len(cells)} cells ({outcome.computed} computed, {outcome.reused} reused, "
+              f"{outcome.failed} failed) in {args.out}", file=sys.stderr)
     return 1 if cells and outcome.failed == len(cells) else 0

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import Any
 
 from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
 
@@ -22,21 +23,18 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.scenarios import get_scenario, list_scenarios
 
     load_scenario_files(args)
-    if args.name:
+    if args.name:  # one scenario: its configuration, key by key
         scenario = get_scenario(args.name)
-        data = scenario.to_dict() | {"config_hash": scenario.config_hash()}
-        if args.json:
-            print(json.dumps(data, indent=2))
-        else:
-            width = max(len(k) for k in data)
-            for key, value in data.items():
-                print(f"{key:<{width}}  {value}")
-        return 0
-    scenarios = list_scenarios()
+        lines = scenario.to_dict() | {"config_hash": scenario.config_hash()}
+        document: Any = lines
+    else:  # every scenario: name and description
+        scenarios = list_scenarios()
+        document = [s.to_dict() for s in scenarios]
+        lines = {s.name: s.description for s in scenarios}
     if args.json:
-        print(json.dumps([s.to_dict() for s in scenarios], indent=2))
+        print(json.dumps(document, indent=2))
         return 0
-    width = max(len(s.name) for s in scenarios)
-    for s in scenarios:
-        print(f"{s.name:<{width}}  {s.description}")
+    width = max(len(key) for key in lines)
+    for key, value in lines.items():
+        print(f"{key:<{width}}  {value}")
     return 0

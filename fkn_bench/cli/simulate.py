@@ -22,6 +22,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
+def _rms_max(errors: np.ndarray) -> dict[str, float | None]:
+    if not len(errors):
+        return {"rms": None, "max": None}
+    return {"rms": float(np.sqrt(np.mean(errors**2))), "max": float(errors.max())}
+
+
 def episode_summary(scenario_name: str, seed: int, split: str) -> dict:
     """Summary statistics of one generated episode (JSON-compatible)."""
     from fkn_bench.envs import generate_episodes
@@ -49,14 +55,8 @@ def episode_summary(scenario_name: str, seed: int, split: str) -> dict:
         "rate_norm_rad_s": {"min": float(rate.min()), "max": float(rate.max())},
         "initial_attitude_wxyz": truth[0, :4].round(6).tolist(),
         "initial_position_m": truth[0, 4:7].round(6).tolist(),
-        "measured_attitude_error_deg": {
-            "rms": float(np.sqrt(np.mean(attitude_error**2))) if len(m) else None,
-            "max": float(attitude_error.max()) if len(m) else None,
-        },
-        "measured_position_error_m": {
-            "rms": float(np.sqrt(np.mean(position_error**2))) if len(m) else None,
-            "max": float(position_error.max()) if len(m) else None,
-        },
+        "measured_attitude_error_deg": _rms_max(attitude_error),
+        "measured_position_error_m": _rms_max(position_error),
         "sign_flipped_quaternions": int(flipped),
     }
 

@@ -28,7 +28,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files
+from fkn_bench.cli import usage_errors
+from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files
 
 __all__ = ["add_parser", "run"]
 
@@ -36,12 +37,8 @@ __all__ = ["add_parser", "run"]
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     from fkn_bench.sweep.space import SAMPLERS
 
-    parser = subparsers.add_parser(
-        "sweep",
-        help="hyperparameter search (random then grid, or TPE) on optuna",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    parser = add_command(subparsers, "sweep", "hyperparameter search (random then grid, or TPE) on optuna",
+                         __doc__)
     parser.add_argument("--space", required=True, metavar="TOML",
                         help="search-space file, or a packaged space name (paper, quick)")
     parser.add_argument("--estimator", help="trainable estimator (default: the space's, else flexkalmannet)")
@@ -66,7 +63,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from fkn_bench.cli import UsageError
     from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.scenarios import get_scenario
     from fkn_bench.sweep import SearchSpace, SpaceError, SweepError, SweepSettings, load_space, resolve_space, run_sweep
@@ -74,10 +70,8 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.training import trainable
 
     load_scenario_files(args)
-    try:
+    with usage_errors(SpaceError):
         space: SearchSpace = load_space(resolve_space(args.space))
-    except SpaceError as exc:
-        raise UsageError(str(exc)) from None
 
     def option(name: str, fallback: object = None) -> Any:
         """The command line's value of option ``name``, else the space's ``[sweep]`` default."""
@@ -87,15 +81,13 @@ def run(args: argparse.Namespace) -> int:
     estimator = option("estimator", "flexkalmannet")
     scenario = get_scenario(option("scenario", "ds1"))
     sampler = option("sampler", "random-grid")
-    try:
+    with usage_errors(UnknownEstimatorError, SpaceError, ValueError, TypeError):
         space.check_fields(trainable(estimator).config({}).to_dict(), f"{estimator} training config")
         trial_config(estimator, space, {})  # the fixed values on their own must be valid
         if sampler == "grid":
             space.grid()
-    except (UnknownEstimatorError, SpaceError, ValueError, TypeError) as exc:
-        raise UsageError(str(exc)) from None
     study_name = args.study_name or f"{estimator}-{scenario.name}"
-    try:
+    with usage_errors(ValueError):
         settings = SweepSettings(
             space=space,
             scenario=scenario,
@@ -110,8 +102,6 @@ def run(args: argparse.Namespace) -> int:
             study_name=study_name,
             seed=option("seed", 0),
         )
-    except ValueError as exc:
-        raise UsageError(str(exc)) from None
 
     def log(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
@@ -121,13 +111,11 @@ def run(args: argparse.Namespace) -> int:
     except SweepError as exc:
         print(f"fkn-bench sweep: error: {exc}", file=sys.stderr)
         return 1
-    counts = {stage: ", ".join(f"{n} {state}" for state, n in c.items() if n) for stage, c in result.counts.items()}
     print(f"best validation RMSE {result.best_value:.6g} ({result.best_stage} trial {result.best_number}): "
           + ", ".join(f"{k}={v}" for k, v in result.best_params.items()))
-    for stage, text in counts.items():
-        print(f"  {stage}: {text}")
-    print(f"  {result.best_config}")
-    print(f"  {result.trials_csv}")
-    if result.figure is not None:
-        print(f"  {result.figure}")
+    for stage, counts in result.counts.items():
+        print(f"  {stage}: " + ", ".join(f"{n} {state}" for state, n in counts.items() if n))
+    for path in (result.best_config, result.trials_csv, result.figure):
+        if path is not None:
+            print(f"  {path}")
     return 0

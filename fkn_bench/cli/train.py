@@ -15,17 +15,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fkn_bench.cli import UsageError
-from fkn_bench.cli.options import add_scenario_file_option, load_scenario_files, parse_key_values
+from fkn_bench.cli import usage_errors
+from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files, parse_key_values
 
 __all__ = ["add_parser", "parse_options"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = subparsers.add_parser(
-        "train", help="train a trainable estimator (FlexKalmanNet, the tuned baselines)", description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+    parser = add_command(subparsers, "train",
+                         "train a trainable estimator (FlexKalmanNet, the tuned baselines)", __doc__)
     parser.add_argument("--estimator", default="flexkalmannet", help="trainable estimator (default: flexkalmannet)")
     parser.add_argument("--scenario", default="ds1", help="training scenario (default: ds1)")
     parser.add_argument("--filter", dest="variant", choices=("ekf", "ukf", "mekf"), help="filter variant")
@@ -65,10 +63,8 @@ def run(args: argparse.Namespace) -> int:
     load_scenario_files(args)
     scenario = get_scenario(args.scenario)
     out = args.out if args.out is not None else Path("runs") / f"{args.estimator}-{scenario.name}"
-    try:
+    with usage_errors(UnknownEstimatorError, ValueError, TypeError):
         outcome = fit(args.estimator, scenario, parse_options(args), out=out, resume=args.resume, progress=not args.no_progress)
-    except (UnknownEstimatorError, ValueError, TypeError) as exc:
-        raise UsageError(str(exc)) from None
     summary = outcome.summary()
     if args.write_artifact:
         from fkn_bench.io import write_bytes_atomic

@@ -1,19 +1,6 @@
-"""The benchmark harness: joins estimators, episodes and metrics into a grid of cells, runs it on
-a backend, stores the results, and summarises them.
-
-* :mod:`~fkn_bench.harness.estimators`: resolving estimators (each pair built once) and choosing
-  them (:func:`select_estimators`, the default estimator);
-* :mod:`~fkn_bench.harness.sources`: where episodes come from (:class:`SimulatedSource`,
-  :class:`RecordingSource`);
-* :mod:`~fkn_bench.harness.grid`: cells (estimator x source x seed chunk);
-* :mod:`~fkn_bench.harness.cell`: running and scoring one cell;
-* :mod:`~fkn_bench.harness.backends`: local and Dask execution;
-* :mod:`~fkn_bench.harness.store`, :mod:`~fkn_bench.harness.records`: result files and records;
-* :mod:`~fkn_bench.harness.runner`: resumable grid runs;
-* :mod:`~fkn_bench.harness.summary`, :mod:`~fkn_bench.harness.report`: summaries over seeds;
-* :mod:`~fkn_bench.harness.leaderboard` and :mod:`~fkn_bench.harness.plots`: leaderboards and
-  figures; :mod:`~fkn_bench.harness.reference`: the paper's quoted numbers.
-"""
+"""The benchmark harness: joins estimators, episodes and metrics into a grid of cells
+(estimator x source x seed chunk), runs it on a backend, stores the results, and summarises them
+(summaries over seeds, leaderboards, figures); each submodule's docstring says its part."""
 
 from fkn_bench.harness.backends import BACKENDS, DaskBackend, LocalBackend, make_backend
 from fkn_bench.harness.cell import run_cell
@@ -21,7 +8,6 @@ from fkn_bench.harness.estimators import (
     ResolvedEstimator,
     Selection,
     SelectionError,
-    check_estimators,
     resolve,
     resolve_estimator,
     select_estimators,
@@ -58,7 +44,6 @@ __all__ = [
     "SimulatedSource",
     "StoreError",
     "build_grid",
-    "check_estimators",
     "chunk_seeds",
     "deterministic_rows",
     "make_backend",

@@ -4,13 +4,6 @@ Every backend runs :func:`fkn_bench.harness.cell.run_cell` on each cell and yiel
 they complete; the caller (the runner, in the client process) writes them. Cells are independent
 and each is computed identically wherever it runs (fixed seed chunks, one torch thread), so all
 backends give bit-identical metrics for the same cells.
-
-* :class:`LocalBackend`: in this process (``workers=1``) or a pool of ``workers`` spawned
-  processes.
-* :class:`DaskBackend`: a Dask distributed cluster at ``scheduler`` (``tcp://host:8786``), or a
-  ``LocalCluster(processes=True, n_workers=workers, threads_per_worker=1)`` started for the run.
-  Workers need fkn-bench installed; they return results to the client, so they need not share a
-  file system with it.
 """
 
 from __future__ import annotations
@@ -64,7 +57,9 @@ class LocalBackend:
 
 
 class DaskBackend:
-    """A Dask distributed cluster (see module docstring)."""
+    """A Dask distributed cluster at ``scheduler`` (``tcp://host:8786``), or a ``LocalCluster`` of
+    ``workers`` single-threaded processes started for the run. Workers need fkn-bench installed;
+    they return results to the client, so they need not share a file system with it."""
 
     name = "dask"
 
@@ -81,13 +76,8 @@ class DaskBackend:
 
         cluster = None
         if self.scheduler is None:
-            cluster = LocalCluster(
-                n_workers=self.workers,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=":0",
-                silence_logs=logging.ERROR,
-            )
+            cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
         client = Client(cluster if cluster is not None else self.scheduler)
         try:
             futures = [client.submit(run_cell, cell, pure=False) for cell in cells]

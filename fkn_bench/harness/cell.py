@@ -2,10 +2,9 @@
 
 Steps (:func:`run_cell`): load the episodes of the chunk from the cell's source; take a copy of
 the cell's estimator (built once, when the grid was resolved: every cell starts from the same
-pristine estimator, on every backend); call ``estimate()`` once on the whole batch
-(timed, with peak memory: the batched cost); time a short online run (``reset`` and ``step`` over
-the first ``online_steps`` steps of the chunk's first sequence: the online cost); score the batch
-with :func:`fkn_bench.metrics.score_run`. Everything runs under
+pristine estimator, on every backend); call ``estimate()`` once on the whole batch, then time a
+short online run (the batched and online costs, :mod:`fkn_bench.harness.profiling`); score the
+batch with :func:`fkn_bench.metrics.score_run`. Everything runs under
 :func:`fkn_bench.runtime.torch_threads` (one torch thread by default), so results do not depend on
 the process that runs the cell.
 
@@ -51,6 +50,10 @@ def time_online(estimator: Estimator, measurements: ArrayF, dt: float, *, passes
     return 1e6 * best / max(len(observations), 1)
 
 
+def _message(exc: BaseException) -> str:
+    return "".join(traceback.format_exception_only(type(exc), exc)).strip()
+
+
 def _record(spec: CellSpec, status: str, rows: list[pd.DataFrame], **fields: Any) -> CellRecord:
     return CellRecord(estimator=spec.estimator, scenario=spec.scenario, seeds=tuple(spec.seeds), key=spec.key(),
                       source=spec.source.describe(), status=status, rows=pd.concat(rows, ignore_index=True),
@@ -58,10 +61,9 @@ def _record(spec: CellSpec, status: str, rows: list[pd.DataFrame], **fields: Any
 
 
 def _failure(spec: CellSpec, exc: BaseException) -> CellRecord:
-    message = "".join(traceback.format_exception_only(type(exc), exc)).strip()
     detail = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
     rows = [failure_rows(spec.estimator, spec.scenario, spec.seeds), cost_rows(spec.estimator, spec.scenario, spec.seeds, {})]
-    return _record(spec, "failed", rows, error=message, notes={"traceback": detail})
+    return _record(spec, "failed", rows, error=_message(exc), notes={"traceback": detail})
 
 
 def run_cell(spec: CellSpec) -> CellRecord:
@@ -78,14 +80,9 @@ def run_cell(spec: CellSpec) -> CellRecord:
             with measure() as batched:
                 estimates = estimator.estimate(measurements, valid, dt)
             scores = score_run(
-                episodes.truth,
-                estimates.means,
-                dt,
-                error_covariances=estimates.error_covariances,
-                innovations=estimates.innovations,
-                innovation_covariances=estimates.innovation_covariances,
-                innovation_mask=estimates.innovation_mask,
-                settings=spec.settings,
+                episodes.truth, estimates.means, dt, error_covariances=estimates.error_covariances,
+                innovations=estimates.innovations, innovation_covariances=estimates.innovation_covariances,
+                innovation_mask=estimates.innovation_mask, settings=spec.settings,
             )
         except Exception as exc:  # noqa: BLE001 - an estimator's failure is a result
             return _failure(spec, exc)
@@ -95,7 +92,7 @@ def run_cell(spec: CellSpec) -> CellRecord:
             us_online = time_online(estimator, episodes.measurements[0, :online_steps], dt)
         except Exception as exc:  # noqa: BLE001 - timing only: keep the batch results
             us_online = float("nan")
-            notes["online_error"] = "".join(traceback.format_exception_only(type(exc), exc)).strip()
+            notes["online_error"] = _message(exc)
     cost = {
         "us_per_step_batched": 1e6 * batched.seconds / (episodes.batch_size * episodes.n_steps),
         "us_per_step_online": us_online,

@@ -3,10 +3,8 @@ harness needs afterwards (availability, configuration fingerprint, the estimator
 comes from that one build.
 
 An estimator is *available* for a scenario when its factory builds it (``make_estimator(name,
-scenario=...)`` returns without error). A registered estimator may be unavailable, e.g. a learned
-one whose trained parameters are not present; :func:`select_estimators` then refuses it when named
-and skips it in "every estimator" selections, saying why, rather than scoring a filter that never
-ran. The default choice (no names given) is also made here: :data:`DEFAULT_ESTIMATOR_PREFERENCE`.
+scenario=...)`` returns without error); a learned one whose trained parameters are not present is
+not. :func:`select_estimators` chooses what runs, saying why it refuses or skips a pair.
 """
 
 from __future__ import annotations
@@ -29,7 +27,6 @@ __all__ = [
     "resolve_estimator",
     "resolve",
     "select_estimators",
-    "check_estimators",
 ]
 
 DEFAULT_ESTIMATOR_PREFERENCE: tuple[str, ...] = ("flexkalmannet", "manual-ekf")
@@ -39,17 +36,11 @@ the paper's learned filter when it is registered and its parameters exist, else 
 
 @dataclass(frozen=True, eq=False)
 class ResolvedEstimator:
-    """Estimator ``name`` built once for ``scenario`` (with factory ``options``).
-
-    Attributes:
-        name, scenario: the pair (registered name, scenario name).
-        estimator: the built estimator, or None when its factory raised (``error`` says why).
-        error: ``"Type: message"`` of the factory's exception, None when available.
-        fingerprint: 16 hex digits of SHA-256 over ``to_config()`` (floats rounded to
-            :data:`FINGERPRINT_DIGITS`), so that a retuned estimator is recomputed on resume; ""
-            when unknown (unavailable, or a configuration JSON cannot hold).
-        options: the factory options as sorted ``(name, value)`` pairs.
-    """
+    """Estimator ``name`` (registered name) built once for scenario ``scenario`` (its name) with
+    factory ``options`` (sorted ``(name, value)`` pairs). ``estimator`` is None when the factory
+    raised and ``error`` (``"Type: message"``) says why. ``fingerprint``: 16 hex digits of SHA-256
+    over ``to_config()`` (floats rounded to :data:`FINGERPRINT_DIGITS`), so that a retuned
+    estimator is recomputed on resume; "" when unknown (unavailable, or not JSON-compatible)."""
 
     name: str
     scenario: str
@@ -89,7 +80,6 @@ with probability ~1e-4 per number), while any real change of a parameter still c
 
 
 def _rounded(value: Any) -> Any:
-    """``value`` (JSON-compatible) with every float rounded to :data:`FINGERPRINT_DIGITS`."""
     if isinstance(value, float):
         return float(f"{value:.{FINGERPRINT_DIGITS}g}")
     if isinstance(value, dict):
@@ -110,31 +100,26 @@ def resolve_estimator(name: str, scenario: Scenario, options: dict[str, Any] | N
         return ResolvedEstimator(name, scenario.name, error=f"{type(exc).__name__}: {exc}", options=items)
     try:
         text = json.dumps(_rounded(to_jsonable(config)), sort_keys=True)
+        fingerprint = hashlib.sha256(text.encode()).hexdigest()[:16]
     except (TypeError, ValueError):
-        return ResolvedEstimator(name, scenario.name, estimator, options=items)
-    return ResolvedEstimator(name, scenario.name, estimator, fingerprint=hashlib.sha256(text.encode()).hexdigest()[:16],
-                             options=items)
-
-
-def check_estimators(names: Sequence[str]) -> list[str]:
-    """Return ``names`` without duplicates (first occurrence kept), or raise
-    :class:`~fkn_bench.estimators.UnknownEstimatorError` listing the valid names."""
-    valid = estimator_names()
-    unknown = [n for n in names if n not in valid]
-    if unknown:
-        raise UnknownEstimatorError(
-            f"unknown estimator{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}; "
-            f"valid estimators: {', '.join(valid)}"
-        )
-    return list(dict.fromkeys(names))
+        fingerprint = ""
+    return ResolvedEstimator(name, scenario.name, estimator, fingerprint=fingerprint, options=items)
 
 
 def resolve(
     names: Sequence[str] | None, scenarios: Sequence[Scenario], options: dict[str, Any] | None = None
 ) -> list[ResolvedEstimator]:
-    """Every pair of ``names`` (None: every registered estimator) x ``scenarios``, each built once,
-    estimator-major; unknown names raise :class:`~fkn_bench.estimators.UnknownEstimatorError`."""
-    names = estimator_names() if names is None else check_estimators(names)
+    """Every pair of ``names`` (None: every registered estimator; duplicates dropped) x
+    ``scenarios``, each built once, estimator-major; unknown names raise
+    :class:`~fkn_bench.estimators.UnknownEstimatorError` listing the valid names."""
+    valid = estimator_names()
+    unknown = [n for n in names or () if n not in valid]
+    if unknown:
+        raise UnknownEstimatorError(
+            f"unknown estimator{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}; "
+            f"valid estimators: {', '.join(valid)}"
+        )
+    names = valid if names is None else list(dict.fromkeys(names))
     return [resolve_estimator(name, scenario, options) for name in names for scenario in scenarios]
 
 
@@ -171,11 +156,8 @@ def select_estimators(
       estimators with no available pair dropped.
     * no names: the default (:data:`DEFAULT_ESTIMATOR_PREFERENCE`), which must be available.
     """
-    notes: list[str] = []
-    if names:
-        pairs = resolve(names, scenarios, options)
-    elif every:
-        pairs = resolve(None, scenarios, options)
+    if names or every:
+        pairs, notes = resolve(names or None, scenarios, options), []
     else:
         pairs, notes = _default(scenarios)
     chosen = []

@@ -50,17 +50,9 @@ def safe_name(name: str) -> str:
 
 @dataclass(frozen=True)
 class CellSpec:
-    """One unit of work: filter ``seeds`` of ``source`` with the ``resolved`` estimator and score them.
-
-    Attributes:
-        resolved: the estimator, built once for the source's scenario
-            (:class:`~fkn_bench.harness.estimators.ResolvedEstimator`: name, configuration
-            fingerprint, factory options; an unavailable one makes the cell fail with its error).
-        source: where the episodes come from (:class:`~fkn_bench.harness.sources.EpisodeSource`).
-        seeds: the seed chunk.
-        settings: metric settings.
-        online_steps: length of the timed online run.
-    """
+    """One unit of work: filter the seed chunk ``seeds`` of ``source`` with the ``resolved``
+    estimator (built once for the source's scenario; an unavailable one makes the cell fail with
+    its error), score them with ``settings`` and time an online run of ``online_steps``."""
 
     resolved: ResolvedEstimator
     source: EpisodeSource

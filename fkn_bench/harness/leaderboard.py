@@ -1,10 +1,9 @@
 """Leaderboards: per scenario a ranked Markdown table, its HTML page and its CSV, plus an index,
 the per-seed CSV of record and a provenance document, all built from stored results.
 
-Ranking: by the primary score, the 13-state RMSE (:data:`fkn_bench.harness.summary.PRIMARY_SCORE`;
-the root of the mean over the 13 state components and the scored window of the squared component
-errors, the paper's test loss), mean over seeds, lower is better; ties by estimator name;
-estimators without a score (every run failed) last. Divergence rates, consistency and cost are
+Ranking: by the primary score, the 13-state RMSE (:data:`fkn_bench.harness.summary.PRIMARY_SCORE`),
+mean over seeds, lower is better; ties by estimator name; estimators without a score (every run
+failed) last. Divergence rates, consistency and cost are
 shown beside it, never folded into it. The paper's numbers appear as labelled, unranked
 "(quoted)" rows where they apply (:mod:`fkn_bench.harness.reference`).
 
@@ -33,7 +32,7 @@ from fkn_bench.harness.reference import QuotedRow, quoted_rows
 from fkn_bench.harness.report import format_number, format_percent
 from fkn_bench.harness.rows import deterministic_rows
 from fkn_bench.harness.store import rows_to_csv
-from fkn_bench.harness.summary import summarize_pair
+from fkn_bench.harness.summary import GROUP_RMSE_KEYS, summarize_pair
 from fkn_bench.harness.tables import Table, html_page, markdown_table
 from fkn_bench.io import to_jsonable, write_text_atomic
 from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS
@@ -107,11 +106,7 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
             s["estimator"],
             _fmt(s["state_rmse"], 4),
             f"{_fmt(st['median'], 4)} [{_fmt(st['q25'], 3)}, {_fmt(st['q75'], 3)}]",
-            _fmt(s["attitude_rmse_deg"]),
-            _fmt(s["position_rmse_m"]),
-            _fmt(s["omega_rmse_rad_s"]),
-            _fmt(s["velocity_rmse_m_s"]),
-            _fmt(s["settling_time_s"]),
+            *(_fmt(s[k]) for k in (*GROUP_RMSE_KEYS.values(), "settling_time_s")),
             _pct(s["settled_fraction"]),
             _pct(s["diverged_fraction"]),
             _fmt(s["anees"]),
@@ -228,27 +223,14 @@ def _scenario_csv(ranked: Sequence[dict[str, Any]]) -> str:
         st = s["statistics"]["state_rmse"]
         records.append({
             "rank": i if math.isfinite(_score(s)) else None,
-            "estimator": s["estimator"],
-            "scenario": s["scenario"],
-            "runs": s["runs"],
-            "state_rmse": s["state_rmse"],
-            "state_rmse_median": st["median"],
-            "state_rmse_q25": st["q25"],
-            "state_rmse_q75": st["q75"],
-            "attitude_rmse_deg": s["attitude_rmse_deg"],
-            "position_rmse_m": s["position_rmse_m"],
-            "omega_rmse_rad_s": s["omega_rmse_rad_s"],
-            "velocity_rmse_m_s": s["velocity_rmse_m_s"],
+            **{k: s[k] for k in ("estimator", "scenario", "runs", "state_rmse")},
+            **{f"state_rmse_{k}": st[k] for k in ("median", "q25", "q75")},
+            **{k: s[k] for k in GROUP_RMSE_KEYS.values()},
             **{f"rmse_{n}": s["rmse"][n] for n in STATE_NAMES},
-            "settling_time_s": s["settling_time_s"],
-            "settled_fraction": s["settled_fraction"],
-            "diverged_fraction": s["diverged_fraction"],
-            "anees": s["anees"],
+            **{k: s[k] for k in ("settling_time_s", "settled_fraction", "diverged_fraction", "anees")},
             "anees_lower": s["anees_bounds"][0],
             "anees_upper": s["anees_bounds"][1],
-            "nees_in_bounds_fraction": s["nees_in_bounds_fraction"],
-            "anis": s["anis"],
-            "nis_in_bounds_fraction": s["nis_in_bounds_fraction"],
+            **{k: s[k] for k in ("nees_in_bounds_fraction", "anis", "nis_in_bounds_fraction")},
         })
     frame = pd.DataFrame(records)
     frame["rank"] = frame["rank"].astype("Int64")
@@ -263,31 +245,24 @@ def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[di
             positions.setdefault(summary["estimator"], []).append(position)
             scores[(summary["estimator"], scenario)] = summary["state_rmse"]
     estimators = sorted(positions, key=lambda e: (sum(positions[e]) / len(positions[e]), e))
-    header = ["estimator", *scenarios]
-    rows = []
-    for e in estimators:
-        cells = []
-        for s in scenarios:
-            value = scores.get((e, s))
-            text = _fmt(value, 4) if value is not None else _DASH
-            if ranked[s][0]["estimator"] == e and text != _DASH:
-                text = f"**{text}**"
-            cells.append(text)
-        rows.append([e, *cells])
+
+    def cell(e: str, s: str) -> str:
+        text = _fmt(scores.get((e, s)), 4)
+        return f"**{text}**" if ranked[s][0]["estimator"] == e and text != _DASH else text
+
     overview = Table(
         "Overview: 13-state RMSE (mean over seeds, lower is better; best in bold; estimators by mean rank)",
-        header, rows,
+        ["estimator", *scenarios], [[e, *(cell(e, s) for s in scenarios)] for e in estimators],
     )
     links = [
         f"- [{s}]({s}.md) ([HTML]({s}.html), [CSV]({s}.csv)): best {ranked[s][0]['estimator']} "
         f"({_fmt(ranked[s][0]['state_rmse'], 4)})"
         for s in scenarios
     ]
-    environments = _environments(results)
     env_lines = [
         f"- fkn-bench {e.get('fkn_bench')}, commit {e.get('git_commit')}, Python {e.get('python')}, "
         f"numpy {e.get('numpy')}, torch {e.get('torch')}, {(e.get('machine') or {}).get('platform')}"
-        for e in environments
+        for e in _environments(results)
     ]
     settings = results.settings()
     return "\n".join([

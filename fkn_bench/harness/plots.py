@@ -1,15 +1,6 @@
 """Figures in the style of the FlexKalmanNet paper, drawn headless (matplotlib's Agg canvas; no
 GUI backend is touched and pyplot's global state is never used).
 
-* :func:`states_figure`: the four state groups (quaternion, position, angular rate, velocity) with
-  estimate, measurement and truth (the paper's EKF result figures);
-* :func:`uncertainty_figure`: every state component with its estimate +- 2 sigma band from the
-  estimator's 13x13 state covariance (the paper's uncertainty figure; 2 sigma ~ 95.4%);
-* :func:`errors_figure`: the four group errors over time with the settling band and the settling
-  time marked, and the unscored transient (before the cut) shaded;
-* :func:`comparison_figure`: a bar chart of the primary score of every estimator on one scenario
-  (mean over seeds, with the interquartile range), quoted paper rows hatched.
-
 Quaternions are drawn sign-aligned to the truth (``q`` and ``-q`` are the same attitude).
 """
 
@@ -64,8 +55,8 @@ def _title(trace: Trace) -> str:
 
 
 def states_figure(trace: Trace, *, steps: int | None = None, title: str = "") -> Figure:
-    """Estimate (solid), measurement (dots) and truth (dashed) of the four state groups; ``title``
-    replaces the default one (estimator, scenario and seed)."""
+    """Estimate (solid), measurement (dots) and truth (dashed) of the four state groups (the paper's
+    EKF result figures); ``title`` replaces the default one (estimator, scenario and seed)."""
     times, truth, means, measured, ok = _aligned(trace, steps)
     figure = new_figure(10, 10)
     axes = figure.subplots(4, 1, sharex=True)
@@ -87,12 +78,12 @@ def states_figure(trace: Trace, *, steps: int | None = None, title: str = "") ->
 
 
 def uncertainty_figure(trace: Trace, *, steps: int | None = None) -> Figure:
-    """Each of the 13 components: estimate, truth and the +- 2 sigma band of the estimate."""
+    """Each of the 13 components: estimate, truth and the +- 2 sigma band (~95.4%) from the
+    estimator's 13x13 state covariance (the paper's uncertainty figure)."""
     times, truth, means, _, _ = _aligned(trace, steps)
     covariances = trace.estimates.covariances
-    sigma = None
-    if covariances is not None:
-        sigma = np.sqrt(np.clip(np.diagonal(covariances[0, : len(times)], axis1=-2, axis2=-1), 0.0, None))
+    sigma = (None if covariances is None
+             else np.sqrt(np.clip(np.diagonal(covariances[0, : len(times)], axis1=-2, axis2=-1), 0.0, None)))
     figure = new_figure(14, 10)
     axes = figure.subplots(4, 4, sharex=True)
     for row, (group, index) in enumerate(STATE_GROUPS.items()):
@@ -118,7 +109,8 @@ def uncertainty_figure(trace: Trace, *, steps: int | None = None) -> Figure:
 
 
 def errors_figure(trace: Trace, *, settings: MetricSettings | None = None, steps: int | None = None) -> Figure:
-    """Group errors over the run with the settling band and time (:mod:`fkn_bench.metrics.settling`)."""
+    """Group errors over the run with the settling band and time (:mod:`fkn_bench.metrics.settling`)
+    and the unscored transient (before the cut) shaded."""
     settings = settings or MetricSettings()
     errors = group_errors(trace.truth[None], trace.estimates.means)
     n = len(trace.times) if steps is None else min(int(steps), len(trace.times))
@@ -147,7 +139,7 @@ def errors_figure(trace: Trace, *, settings: MetricSettings | None = None, steps
 
 def comparison_figure(scenario: str, summaries: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow] = ()) -> Figure:
     """Bar chart of the 13-state RMSE per estimator on ``scenario`` (mean over seeds; the line
-    spans the interquartile range; diverged shares annotated)."""
+    spans the interquartile range; diverged shares annotated; quoted paper rows hatched)."""
     labels = [s["estimator"] for s in summaries] + [q.label for q in quoted]
     values = [s["state_rmse"] for s in summaries] + [q.state_rmse for q in quoted]
     figure = new_figure(max(6.0, 1.2 * len(labels) + 2), 5)

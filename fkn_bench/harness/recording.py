@@ -56,8 +56,7 @@ def record(
             raise ValueError(f"n_steps must be >= 1 (got {n_steps})")
         episodes = episodes.window(0, int(n_steps))
     generated = time.perf_counter()
-    est_obj = None
-    estimates = None
+    est_obj = estimates = None
     if estimator is not None:
         if isinstance(estimator, Estimator):
             est_obj = estimator

@@ -1,12 +1,6 @@
-"""Cell records and their collection (:class:`Results`): what the store reads and writes and what
-summaries, leaderboards and plots consume.
-
-A :class:`CellRecord` is a cell's outcome in plain data (no estimator, no source object): the
-identity of the cell, its status, its tidy rows and the per-step NEES/NIS sums of its runs; the
-cell computes it, the store writes and reads it.
-:class:`Results` collects records and pools the sums of the cells of one estimator and scenario
-in seed order (a fixed order, so pooled values are identical whatever order cells finished in).
-"""
+"""Cell records (a cell's outcome in plain data: no estimator, no source object) and their
+collection (:class:`Results`): what the store reads and writes and what summaries, leaderboards
+and plots consume."""
 
 from __future__ import annotations
 
@@ -26,11 +20,9 @@ __all__ = ["CellRecord", "Results"]
 
 @dataclass(frozen=True, eq=False)
 class CellRecord:
-    """A cell's outcome as data (see module docstring): what :func:`fkn_bench.harness.cell.run_cell`
-    returns and the store writes and reads.
+    """A cell's outcome as data: what :func:`fkn_bench.harness.cell.run_cell` returns.
 
     Attributes:
-        estimator, scenario, seeds: the cell.
         key: :meth:`fkn_bench.harness.grid.CellSpec.key` (resume compares it).
         source: the source's ``describe()``.
         status: ``"ok"`` or ``"failed"``.
@@ -72,7 +64,8 @@ def _pool(parts: Sequence[StatisticSums | None]) -> StatisticSums | None:
 
 
 class Results:
-    """Records of many cells (any order in, canonical order inside)."""
+    """Records of many cells (any order in, canonical order inside: pooled sums are identical
+    whatever order cells finished in)."""
 
     def __init__(self, records: Iterable[CellRecord]) -> None:
         self.records: list[CellRecord] = sorted(records, key=lambda r: (r.estimator, r.scenario, r.seeds))

@@ -15,7 +15,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from fkn_bench.types import STATE_NAMES
+from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES
 
 __all__ = [
     "QuotedRow",
@@ -28,7 +28,6 @@ __all__ = [
     "QuotedTrainingResult",
     "PAPER_TRAINING_RESULTS",
     "PAPER_LEARNED_STD",
-    "PAPER_HARDWARE",
     "PAPER_CLAIMS",
 ]
 
@@ -56,8 +55,7 @@ class QuotedRow:
 
 
 def _components(values: tuple[float, ...]) -> dict[str, float]:
-    assert len(values) == len(STATE_NAMES)
-    return dict(zip(STATE_NAMES, values))
+    return dict(zip(STATE_NAMES, values, strict=True))
 
 
 PAPER_LEARNED = QuotedRow(
@@ -111,29 +109,29 @@ PAPER_TRAINING_RESULTS: dict[str, QuotedTrainingResult] = {
 }
 """The paper's training results per data set (quoted)."""
 
+def _learned_std(r: tuple[float, ...], q: tuple[float, ...]) -> dict[str, float]:
+    """Keys as the training history's columns: ``sigma_R_<measurement component>``, then
+    ``sigma_Q_<state component>``."""
+    return {
+        **{f"sigma_R_{n}": v for n, v in zip(MEASUREMENT_NAMES, r, strict=True)},
+        **{f"sigma_Q_{n}": v for n, v in zip(STATE_NAMES, q, strict=True)},
+    }
+
+
 PAPER_LEARNED_STD: dict[str, dict[str, float]] = {
-    # table "Learned standard deviation parameters from DS1 and DS2"; keys as the training
-    # history's columns (sigma_R_<measurement component>, sigma_Q_<state component>)
-    "ds1": {
-        "sigma_R_qw": 0.042746, "sigma_R_qx": 0.036301, "sigma_R_qy": 0.048697, "sigma_R_qz": 0.029550,
-        "sigma_R_rx": 0.078810, "sigma_R_ry": 0.058190, "sigma_R_rz": 0.082663,
-        "sigma_Q_qw": 0.000161, "sigma_Q_qx": 0.000090, "sigma_Q_qy": 0.000071, "sigma_Q_qz": 0.000026,
-        "sigma_Q_rx": 0.000150, "sigma_Q_ry": 0.000010, "sigma_Q_rz": 0.000132,
-        "sigma_Q_wx": 0.000079, "sigma_Q_wy": 0.000145, "sigma_Q_wz": 0.000037,
-        "sigma_Q_vx": 0.000023, "sigma_Q_vy": 0.000028, "sigma_Q_vz": 0.000025,
-    },
-    "ds2": {
-        "sigma_R_qw": 0.045785, "sigma_R_qx": 0.038067, "sigma_R_qy": 0.048149, "sigma_R_qz": 0.035209,
-        "sigma_R_rx": 0.073300, "sigma_R_ry": 0.054914, "sigma_R_rz": 0.081457,
-        "sigma_Q_qw": 0.000145, "sigma_Q_qx": 0.000667, "sigma_Q_qy": 0.002006, "sigma_Q_qz": 0.000026,
-        "sigma_Q_rx": 0.006237, "sigma_Q_ry": 0.004650, "sigma_Q_rz": 0.006365,
-        "sigma_Q_wx": 0.000575, "sigma_Q_wy": 0.000515, "sigma_Q_wz": 0.000876,
-        "sigma_Q_vx": 0.000087, "sigma_Q_vy": 0.000022, "sigma_Q_vz": 0.000040,
-    },
+    # table "Learned standard deviation parameters from DS1 and DS2"
+    "ds1": _learned_std(
+        (0.042746, 0.036301, 0.048697, 0.029550, 0.078810, 0.058190, 0.082663),
+        (0.000161, 0.000090, 0.000071, 0.000026, 0.000150, 0.000010, 0.000132,
+         0.000079, 0.000145, 0.000037, 0.000023, 0.000028, 0.000025),
+    ),
+    "ds2": _learned_std(
+        (0.045785, 0.038067, 0.048149, 0.035209, 0.073300, 0.054914, 0.081457),
+        (0.000145, 0.000667, 0.002006, 0.000026, 0.006237, 0.004650, 0.006365,
+         0.000575, 0.000515, 0.000876, 0.000087, 0.000022, 0.000040),
+    ),
 }
 """The 20 learned standard deviations per data set (quoted, table of learned parameters)."""
-
-PAPER_HARDWARE = "virtual server, 4 virtual cores of an AMD EPYC 7452 (2.35 GHz), 8 GB, no GPU (paper, section 4.2)"
 
 PAPER_CLAIMS: dict[str, object] = {
     # section 5.2: "a significant decrease within the first 100 to 150 discrete-time steps"

@@ -86,32 +86,24 @@ def score_rows(estimator: str, scenario: str, seeds: Sequence[int], scores: RunS
             add(group, "settling_band", settling.band[i], unit)
         add("settling", "time", scores.settling_time[i], "s")
         add("settling", "settled", scores.settled[i], "1")
-        add("consistency", "nees_mean", scores.nees_mean[i], "1")
-        add("consistency", "nis_mean", scores.nis_mean[i], "1")
-        add("consistency", "nis_count", scores.nis_count[i], "1")
-        add("stability", "diverged", flags["diverged"][i], "1")
-        for reason in DIVERGENCE_REASONS:
-            add("stability", reason, flags[reason][i], "1")
+        for metric in ("nees_mean", "nis_mean", "nis_count"):
+            add("consistency", metric, getattr(scores, metric)[i], "1")
+        for flag in ("diverged", *DIVERGENCE_REASONS):
+            add("stability", flag, flags[flag][i], "1")
         add("stability", "failed", 0.0, "1")
     return _frame(rows)
 
 
 def cost_rows(estimator: str, scenario: str, seeds: Sequence[int], cost: Mapping[str, float]) -> pd.DataFrame:
     """The cell's cost measurements (:data:`COST_METRICS`), repeated for each of its seeds."""
-    rows: list[_Row] = []
-    for seed in seeds:
-        for metric, unit in COST_METRICS.items():
-            rows.append((estimator, scenario, int(seed), "cost", metric, float(cost.get(metric, np.nan)), unit))
-    return _frame(rows)
+    return _frame([(estimator, scenario, int(seed), "cost", metric, float(cost.get(metric, np.nan)), unit)
+                   for seed in seeds for metric, unit in COST_METRICS.items()])
 
 
 def failure_rows(estimator: str, scenario: str, seeds: Sequence[int]) -> pd.DataFrame:
     """Rows of a cell whose estimator raised: each seed diverged and failed, nothing else."""
-    rows: list[_Row] = []
-    for seed in seeds:
-        rows.append((estimator, scenario, int(seed), "stability", "diverged", 1.0, "1"))
-        rows.append((estimator, scenario, int(seed), "stability", "failed", 1.0, "1"))
-    return _frame(rows)
+    return _frame([(estimator, scenario, int(seed), "stability", flag, 1.0, "1")
+                   for seed in seeds for flag in ("diverged", "failed")])
 
 
 def sort_rows(rows: pd.DataFrame) -> pd.DataFrame:

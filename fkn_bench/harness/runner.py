@@ -72,18 +72,14 @@ def run_grid(
         else:
             records.append(done)
     reused = len(records)
-    bar = tqdm(total=len(cells), initial=reused, desc="fkn-bench run", unit="cell", file=sys.stderr,
-               disable=not progress, dynamic_ncols=True)
-    try:
-        if todo:
-            for record in backend.run(todo):
-                if store is not None:
-                    store.write_cell(record)
-                records.append(record)
-                bar.set_postfix_str(record.name, refresh=False)
-                bar.update(1)
-    finally:
-        bar.close()
+    with tqdm(total=len(cells), initial=reused, desc="fkn-bench run", unit="cell", file=sys.stderr,
+              disable=not progress, dynamic_ncols=True) as bar:
+        for record in backend.run(todo) if todo else ():
+            if store is not None:
+                store.write_cell(record)
+            records.append(record)
+            bar.set_postfix_str(record.name, refresh=False)
+            bar.update(1)
     results = Results(records)
     if store is not None:
         store.write_summary(results, grid_provenance(cells, backend))

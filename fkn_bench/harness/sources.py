@@ -1,11 +1,6 @@
-"""Where a grid cell's episodes come from.
-
-A source turns a tuple of seeds into :class:`~fkn_bench.envs.Episodes` (truth, measurements,
-validity, times) and says who it is (``label``, ``key``, ``describe``) for result files and
-provenance. :class:`SimulatedSource` generates a scenario's split; other sources (a recording
-with a truth topic, say) plug in by implementing :class:`EpisodeSource`: the cell code only
-calls these members.
-"""
+"""Where a grid cell's episodes come from: :class:`SimulatedSource` generates a scenario's split,
+:class:`RecordingSource` replays an MCAP recording; other sources plug in by implementing
+:class:`EpisodeSource` (the cell code only calls its members)."""
 
 from __future__ import annotations
 

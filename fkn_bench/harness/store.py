@@ -63,36 +63,30 @@ class ResultStore:
         self.root = Path(root)
 
     # ------------------------------------------------------------------ paths
-    def cell_stem(self, estimator: str, scenario: str, seeds: tuple[int, ...]) -> Path:
-        return self.root / "cells" / safe_name(estimator) / safe_name(scenario) / f"seeds-{seeds[0]}-{seeds[-1]}"
-
-    def _paths(self, stem: Path) -> tuple[Path, Path, Path]:
+    def _paths(self, cell: CellSpec | CellRecord) -> tuple[Path, Path, Path]:
+        """The cell's CSV, NPZ and JSON files."""
+        stem = self.root / "cells" / safe_name(cell.estimator) / safe_name(cell.scenario)
+        stem /= f"seeds-{cell.seeds[0]}-{cell.seeds[-1]}"
         return stem.with_suffix(".csv"), stem.with_suffix(".npz"), stem.with_suffix(".json")
 
     # ------------------------------------------------------------------ resume
     def finished(self, spec: CellSpec) -> CellRecord | None:
         """The stored record of ``spec`` when it is finished with the same key, else None."""
-        stem = self.cell_stem(spec.estimator, spec.scenario, spec.seeds)
-        json_path = self._paths(stem)[2]
-        if not json_path.exists():
-            return None
         try:
-            record = self.read_cell(json_path)
-        except StoreError:
+            record = self.read_cell(self._paths(spec)[2])
+        except StoreError:  # missing (read_json's FileNotFoundError) or broken
             return None
         return record if record.key == spec.key() else None
 
     # ------------------------------------------------------------------ write
     def write_cell(self, record: CellRecord) -> Path:
         """Write the record's rows, sums and JSON (last) atomically; returns the JSON path."""
-        stem = self.cell_stem(record.estimator, record.scenario, record.seeds)
-        csv_path, npz_path, json_path = self._paths(stem)
+        csv_path, npz_path, json_path = self._paths(record)
         write_text_atomic(csv_path, rows_to_csv(record.rows))
         arrays: dict[str, np.ndarray] = {}
         for name, sums in (("nees", record.nees), ("nis", record.nis)):
             if sums is not None:
-                arrays[f"{name}_sum"] = sums.sum
-                arrays[f"{name}_count"] = sums.count
+                arrays.update({f"{name}_sum": sums.sum, f"{name}_count": sums.count})
         with atomic_path(npz_path) as tmp, open(tmp, "wb") as fh:
             np.savez_compressed(fh, **arrays)
         document = {
@@ -128,21 +122,13 @@ class ResultStore:
         except (OSError, KeyError, ValueError) as exc:
             raise StoreError(f"cell {json_path} is incomplete: {exc}") from None
 
-        def pair(name: str) -> StatisticSums | None:
-            if f"{name}_sum" not in sums:
-                return None
-            return StatisticSums(sums[f"{name}_sum"], sums[f"{name}_count"])
-
+        pairs = {name: StatisticSums(sums[f"{name}_sum"], sums[f"{name}_count"])
+                 for name in ("nees", "nis") if f"{name}_sum" in sums}
         return CellRecord(
-            estimator=document["estimator"],
-            scenario=document["scenario"],
+            **{k: document[k] for k in ("estimator", "scenario", "key", "source", "status")},
             seeds=tuple(int(s) for s in document["seeds"]),
-            key=document["key"],
-            source=document["source"],
-            status=document["status"],
             rows=rows,
-            nees=pair("nees"),
-            nis=pair("nis"),
+            **pairs,
             error=document.get("error"),
             notes=document.get("notes") or {},
             provenance=document.get("provenance") or {},

@@ -21,7 +21,8 @@ from fkn_bench.harness.records import Results
 from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS, NEES_DOF, NIS_DOF, average_statistic, chi2_interval, summarize
 from fkn_bench.types import STATE_NAMES
 
-__all__ = ["PRIMARY_SCORE", "summarize_pair", "summarize_results", "per_seed_table", "STATISTIC_METRICS"]
+__all__ = ["PRIMARY_SCORE", "GROUP_RMSE_KEYS", "STATISTIC_METRICS", "summarize_pair", "summarize_results",
+           "per_seed_table"]
 
 PRIMARY_SCORE = ("state", "rmse")
 """(group, metric) of the primary score: the 13-state RMSE (lower is better)."""
@@ -37,12 +38,10 @@ STATISTIC_METRICS: dict[str, tuple[str, str]] = {
 }
 """Metrics whose mean, median and IQR over seeds the summary's ``statistics`` gives."""
 
-_GROUP_KEYS = {
-    "attitude": "attitude_rmse_deg",
-    "position": "position_rmse_m",
-    "omega": "omega_rmse_rad_s",
-    "velocity": "velocity_rmse_m_s",
+GROUP_RMSE_KEYS: dict[str, str] = {
+    g: k for k, (g, m) in STATISTIC_METRICS.items() if m == "rmse" and g in GROUPS
 }
+"""Summary key of each group's RMSE, e.g. ``attitude_rmse_deg``."""
 
 
 def per_seed_table(rows: pd.DataFrame) -> pd.DataFrame:
@@ -94,7 +93,7 @@ def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str,
         "failed_runs": int(np.nansum(failed)),
         "state_rmse": mean(*PRIMARY_SCORE),
         "rmse": {name: mean("state", f"rmse_{name}") for name in STATE_NAMES},
-        **{_GROUP_KEYS[g]: mean(g, "rmse") for g in GROUPS},
+        **{GROUP_RMSE_KEYS[g]: mean(g, "rmse") for g in GROUPS},
         "settling_time_s": mean("settling", "time"),
         "settled_fraction": mean("settling", "settled"),
         "settling_time_by_group_s": {g: mean(g, "settling_time") for g in GROUPS},

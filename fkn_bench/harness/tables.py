@@ -69,16 +69,15 @@ def markdown_table(table: Table, *, level: int = 2) -> str:
 def html_table(table: Table, *, level: int = 2) -> str:
     """An HTML fragment: heading, ``<table>`` and notes (escaped)."""
     esc = html.escape
-    align = table.alignment()
+
+    def row(cells: Sequence[str], tag: str) -> str:
+        return "<tr>" + "".join(f'<{tag} class="{a}">{esc(str(c))}</{tag}>'
+                                for c, a in zip(cells, table.alignment())) + "</tr>"
+
     parts = [f"<h{level}>{esc(table.title)}</h{level}>"] if table.title else []
-    parts.append("<table>")
-    parts.append("<thead><tr>" + "".join(f'<th class="{a}">{esc(str(h))}</th>' for h, a in zip(table.header, align)) + "</tr></thead>")
-    parts.append("<tbody>")
-    for row in table.rows:
-        parts.append("<tr>" + "".join(f'<td class="{a}">{esc(str(c))}</td>' for c, a in zip(row, align)) + "</tr>")
-    parts.append("</tbody></table>")
-    for note in table.notes:
-        parts.append(f"<p class=\"note\">{esc(note)}</p>")
+    parts += ["<table>", f"<thead>{row(table.header, 'th')}</thead>", "<tbody>"]
+    parts += [row(cells, "td") for cells in table.rows]
+    parts += ["</tbody></table>", *(f'<p class="note">{esc(note)}</p>' for note in table.notes)]
     return "\n".join(parts) + "\n"
 
 

@@ -45,9 +45,7 @@ def trace(estimator: ResolvedEstimator | str, source: EpisodeSource, seed: int) 
     episodes = source.load([seed])
     dt = float(episodes.scenario.dt)
     with torch_threads():
-        estimates = resolved.estimator.estimate(
-            episodes.measurements.copy(), episodes.valid.copy(), dt
-        )
+        estimates = resolved.estimator.estimate(episodes.measurements.copy(), episodes.valid.copy(), dt)
     return Trace(
         estimator=resolved.name,
         scenario=source.label,
