@@ -35,7 +35,6 @@ import numpy as np
 from fkn_bench.filters.base import check_dt
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 from fkn_bench.io import read_json, write_json_atomic
-from fkn_bench.linalg import dot
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = [
@@ -167,7 +166,9 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
     Accepts a Gymnasium observation dict (``pose``, ``valid``, ``time``) or a ``(7,)`` array
     (all NaN when missing). Raises ``ValueError`` for anything else, a non-finite time included.
     """
-    if isinstance(observation, dict):
+    if type(observation) is np.ndarray:  # the common online case first: a (7,) array
+        pose, valid, time = observation, True, None
+    elif isinstance(observation, dict):
         try:
             pose = observation["pose"]
         except KeyError:
@@ -322,7 +323,8 @@ class RecursiveEstimator(Estimator):
         self._online = OnlineState(now, state, initialised)
         mean, covariance = self._online_report(state)
         mean = mean.copy()
-        mean[0:4] /= math.sqrt(dot(mean[0:4], mean[0:4]))
+        w, x, y, z = mean[0:4].tolist()
+        mean[0:4] /= math.sqrt(w * w + x * x + y * y + z * z)
         return Estimate(time=now, mean=mean, native_covariance=covariance, initialised=initialised, updated=updated)
 
     def _online_sanitize(self, z: ArrayF) -> ArrayF | None:

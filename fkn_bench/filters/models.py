@@ -194,10 +194,11 @@ class PoseTwistModel(StateSpaceModel):
         """
         batch = x.shape[0]
         dt = float(dt)
-        if isinstance(x, np.ndarray):  # numpy (online): A x and E in one product, the sums in place
-            y = x @ constant(x, ("pose-AtB", dt), lambda: np.ascontiguousarray(_pose_constants(dt)[:, 13:78]))
+        if isinstance(x, np.ndarray):  # numpy (online): A x and E in one product (np.dot: less
+            # dispatch than @ for 2-D arrays, the same BLAS call), the sums in place
+            y = np.dot(x, constant(x, ("pose-AtB", dt), lambda: np.ascontiguousarray(_pose_constants(dt)[:, 13:78])))
             mean, E = y[:, 0:13], y[:, 13:65].reshape(batch, 4, 13)  # E = [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
-            mean[:, 0:4] += (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0] if batch > 1 else E[0, :, 0:4] @ x[0, 0:4]
+            mean[:, 0:4] += (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0] if batch > 1 else np.dot(E[0, :, 0:4], x[0, 0:4])
             if not jacobian:
                 return mean, None
             A = constant(x, ("pose-A", dt), lambda: np.ascontiguousarray(_pose_constants(dt)[None, :, 0:13]))
@@ -219,7 +220,9 @@ class PoseTwistModel(StateSpaceModel):
             w, x, y, z, *r = measurements[0].tolist()  # the same rule on Python floats
             norm = math.sqrt(w * w + x * x + y * y + z * z)  # NaN or inf where q is not finite or overflows
             if mask[0] and self.min_quaternion_norm <= norm < math.inf and all(map(math.isfinite, r)):
-                return np.array([[w / norm, x / norm, y / norm, z / norm, *r]], dtype=measurements.dtype), _USABLE
+                out = measurements.copy()
+                out[0, :4] /= norm
+                return out, _USABLE
             return np.zeros((1, 7), dtype=measurements.dtype), np.zeros(1, dtype=bool)
         xp = namespace(measurements)
         finite = all_last(xp.isfinite(measurements))
@@ -240,12 +243,13 @@ class PoseTwistModel(StateSpaceModel):
 
     def normalize(self, x: Array) -> tuple[Array, slice | None, Array | None]:
         if isinstance(x, np.ndarray) and x.shape[0] == 1:  # one numpy row: a scalar norm, in place
-            q = x[0, :4]
-            norm = math.sqrt(dot(q, q))
-            unit = q / norm
             x = x.copy()
-            x[0, :4] = unit
-            return x, slice(0, 4), ((_EYE4 - unit[:, None] * unit) / norm)[None]
+            unit = x[0, :4]
+            norm = math.sqrt(dot(unit, unit))
+            unit /= norm
+            N = _EYE4 - np.multiply.outer(unit, unit)
+            N /= norm
+            return x, slice(0, 4), N[None]
         xp = namespace(x)
         q = x[:, :4]
         norm = xp.sqrt(sum_last(q * q))
