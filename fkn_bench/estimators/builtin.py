@@ -23,7 +23,7 @@ from typing import Any
 from fkn_bench.estimators.kalman import KalmanEstimator
 from fkn_bench.estimators.oracle import oracle_noise
 from fkn_bench.estimators.registry import register_estimator
-from fkn_bench.scenarios import Scenario
+from fkn_bench.scenarios import ASTROBEE_INERTIA, Scenario
 
 __all__ = ["manual_estimator", "oracle_ekf"]
 
@@ -56,3 +56,32 @@ for _variant in ("ekf", "ukf", "mekf"):
         description=f"{_variant.upper()} with the paper's manual tuning (sigma_R 0.1; sigma_Q 0.005 q/w, 1e-4 r/v)",
     )
 register_estimator("oracle-ekf", oracle_ekf, description="EKF with noise derived from the scenario's true noise")
+
+
+def rigid_body_estimator(variant: str, *, ratios: bool) -> Any:
+    """Factory of the torque-free rigid-body filter on ``variant`` with the paper's manual noise
+    tuning: known inertia (the scenario's principal moments, else Astrobee's), or estimated
+    inertia ratios (prior: isotropic)."""
+    model = "rigid-body-ratios" if ratios else "rigid-body"
+
+    def factory(scenario: Scenario | None = None, **options: Any) -> KalmanEstimator:
+        if not ratios:
+            options.setdefault("inertia", list(scenario.inertia if scenario is not None else ASTROBEE_INERTIA))
+        options.setdefault("name", f"{model}-{variant}")
+        options.setdefault("description", f"{variant.upper()} on the torque-free rigid body ({'inertia ratios estimated' if ratios else 'known inertia'})")
+        return KalmanEstimator(variant=variant, model=model, **options)
+
+    return factory
+
+
+for _variant in ("ekf", "ukf"):
+    register_estimator(
+        f"rigid-body-{_variant}",
+        rigid_body_estimator(_variant, ratios=False),
+        description=f"{_variant.upper()} on the torque-free rigid body with the scenario's inertia, paper's manual noise",
+    )
+    register_estimator(
+        f"rigid-body-{_variant}-ratios",
+        rigid_body_estimator(_variant, ratios=True),
+        description=f"{_variant.upper()} on the torque-free rigid body, inertia ratios estimated online",
+    )

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
-from fkn_bench.filters import VARIANTS, NoiseParameters, make_filter
+from fkn_bench.filters import MODELS, VARIANTS, NoiseParameters, make_filter, make_model
 from fkn_bench.filters.pose import (
     error_covariance_from_state,
     pose_innovation,
@@ -34,9 +34,16 @@ def filter_result_to_estimates(result: Any, variant: Any, *, extras: Mapping[str
     result of an adaptive filter: the same fields) to numpy :class:`Estimates`; ``variant`` gives
     ``covariance_dim`` (13 or 12) and ``innovation_dim`` (7 or 6)."""
     numpy = lambda a: None if a is None else a.detach().numpy() if hasattr(a, "detach") else a  # noqa: E731
-    means = with_unit_quaternion(numpy(result.means))
+    states = numpy(result.means)
+    extras = dict(extras or {})
+    native = numpy(result.covariances)
+    if states.shape[-1] > 13:  # an augmented state (inertia ratios): the pose and twist are reported
+        extras.setdefault("inertia_ratios", states[..., 13:].copy())
+        states = states[..., :13]
+        native = None if native is None else native[..., :13, :13]
+    means = with_unit_quaternion(states)
     q = means[..., :4]
-    covariances = error_covariances = native = numpy(result.covariances)
+    covariances = error_covariances = native
     if native is not None:
         if variant.covariance_dim == 12:
             covariances = state_covariance_from_error(q, native)
@@ -53,7 +60,7 @@ def filter_result_to_estimates(result: Any, variant: Any, *, extras: Mapping[str
         innovation_covariances=innovation_covariances,
         innovation_mask=numpy(result.updated),
         initialised=numpy(result.initialised),
-        extras=dict(extras or {}),
+        extras=extras,
     )
 
 
@@ -62,6 +69,13 @@ class KalmanEstimator(RecursiveEstimator):
 
     Keyword-only arguments:
         variant: ``"ekf"``, ``"ukf"`` or ``"mekf"``.
+        model: the process model (:data:`fkn_bench.filters.MODELS`): ``"constant-velocity"``
+            (the paper's), ``"rigid-body"`` (torque free, known ``inertia``) or
+            ``"rigid-body-ratios"`` (inertia ratios estimated; ``inertia`` is their prior mean).
+            The rigid-body models run on the EKF and the UKF; with estimated ratios ``q_std`` and
+            ``p0_std`` have two more entries (the log ratios) and ``Estimates.extras`` holds
+            ``inertia_ratios`` ``(B, T, 2)``.
+        inertia: principal moments ``(Jx, Jy, Jz)`` in kg m^2 (rigid-body models only).
         q_std, r_std, p0_std: standard deviations in the variant's layout (default: its manual
             tuning; see :data:`fkn_bench.filters.models.PAPER_MANUAL_LAYOUT` and
             :data:`fkn_bench.filters.MEKF_MANUAL_LAYOUT`).
@@ -74,6 +88,8 @@ class KalmanEstimator(RecursiveEstimator):
         self,
         *,
         variant: str = "ekf",
+        model: str = "constant-velocity",
+        inertia: Sequence[float] | None = None,
         q_std: Sequence[float] | None = None,
         r_std: Sequence[float] | None = None,
         p0_std: Sequence[float] | None = None,
@@ -85,8 +101,11 @@ class KalmanEstimator(RecursiveEstimator):
     ) -> None:
         if variant not in VARIANTS:
             raise ValueError(f"unknown filter variant {variant!r}; valid variants: {', '.join(VARIANTS)}")
-        self.variant_name = variant
-        self.filter = make_filter(variant)
+        if model not in MODELS:
+            raise ValueError(f"unknown process model {model!r}; valid models: {', '.join(MODELS)}")
+        self.variant_name, self.model_name = variant, model
+        self.inertia = None if inertia is None else tuple(float(v) for v in inertia)
+        self.filter = make_filter(variant, model=make_model(model, inertia=self.inertia))
         layout = self.filter.layout
         matrices = []
         self._given: dict[str, str] = {}
@@ -152,9 +171,15 @@ class KalmanEstimator(RecursiveEstimator):
             result = self.filter.run(self.noise_parameters(), torch.from_numpy(z), torch.from_numpy(m), dt=step)
         return filter_result_to_estimates(result, self.filter)
 
+    def _online_report(self, state: Any) -> tuple[ArrayF, ArrayF]:
+        mean, covariance = state.mean[0], state.covariance[0]
+        return (mean[:13], covariance[:13, :13]) if mean.shape[0] > 13 else (mean, covariance)
+
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:
         config: dict[str, Any] = {"variant": self.variant_name}
+        if self.model_name != "constant-velocity":
+            config.update(model=self.model_name, inertia=None if self.inertia is None else list(self.inertia))
         for index, entry in enumerate(("q", "r", "p0")):
             matrix = self._numpy_noise[index]
             if self._given[entry] == "cov":
@@ -164,7 +189,7 @@ class KalmanEstimator(RecursiveEstimator):
         config.update(name=self.name, description=self.description)
         return config
 
-    CONFIG_KEYS = frozenset({"variant", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "name", "description"})
+    CONFIG_KEYS = frozenset({"variant", "model", "inertia", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "name", "description"})
     """Keys of :meth:`to_config` (subclasses add theirs)."""
 
     @classmethod

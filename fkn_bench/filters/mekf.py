@@ -89,6 +89,8 @@ class MultiplicativeEKF(KalmanFilter):
     name = "mekf"
 
     def __init__(self, *, model: PoseTwistModel | None = None) -> None:
+        if model is not None and type(model) is not PoseTwistModel:
+            raise ValueError(f"the multiplicative EKF propagates the paper's constant-rate model only (got {type(model).__name__})")
         self.model = model if model is not None else PoseTwistModel()
         self.layout = MEKF_MANUAL_LAYOUT
 

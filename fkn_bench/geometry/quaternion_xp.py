@@ -23,6 +23,10 @@ __all__ = [
     "from_rotation_vector",
     "to_rotation_vector",
     "rotation_matrix",
+    "right_theta_matrix",
+    "right_omega_matrix",
+    "rotate",
+    "rotation_jacobian",
     "skew",
     "align_sign",
 ]
@@ -46,6 +50,16 @@ def _omega(w: Array) -> tuple[tuple[Array, ...], ...]:
     return ((0.0, -wx, -wy, -wz), (wx, 0.0, -wz, wy), (wy, wz, 0.0, -wx), (wz, -wy, wx, 0.0))
 
 
+def _right_theta(q: Array) -> tuple[tuple[Array, ...], ...]:
+    w, x, y, z = (q[..., i] for i in range(4))
+    return ((-x, -y, -z), (w, -z, y), (z, w, -x), (-y, x, w))
+
+
+def _right_omega(w: Array) -> tuple[tuple[Array, ...], ...]:
+    wx, wy, wz = (w[..., i] for i in range(3))
+    return ((0.0, -wx, -wy, -wz), (wx, 0.0, wz, -wy), (wy, -wz, 0.0, wx), (wz, wy, -wx, 0.0))
+
+
 def _skew(v: Array) -> tuple[tuple[Array, ...], ...]:
     x, y, z = (v[..., i] for i in range(3))
     return ((0.0, -z, y), (z, 0.0, -x), (-y, x, 0.0))
@@ -63,6 +77,7 @@ def _hamilton(pq: Array) -> tuple[Array, ...]:
 
 
 _THETA, _OMEGA, _SKEW = _linear(_theta, 4), _linear(_omega, 3), _linear(_skew, 3)
+_RIGHT_THETA, _RIGHT_OMEGA = _linear(_right_theta, 4), _linear(_right_omega, 3)
 _HAMILTON = _linear(lambda e: _hamilton(e.reshape(4, 4)), 16)
 
 
@@ -77,6 +92,21 @@ def _rotation(qq: np.ndarray) -> tuple[float, ...]:
 
 
 _ROTATION = _linear(lambda e: _rotation(e.reshape(4, 4)), 16)
+
+
+def _rotation_derivative(transpose: bool) -> np.ndarray:
+    """``K (12, 12)`` with ``vec(v q^T) @ K = d(R(q) v)/dq`` (or ``R(q)^T v``) flattened ``(3, 4)``.
+
+    ``(R - I) v`` is a quadratic form in ``q`` for each output ``i``, ``sum_ab q_a q_b C[a, b, i, j]
+    v_j``, so its derivative ``d/dq_c = sum_bj (C[c, b, i, j] + C[b, c, i, j]) q_b v_j`` is
+    bilinear in ``v`` and ``q``."""
+    C = _ROTATION.reshape(4, 4, 3, 3)
+    if transpose:
+        C = C.transpose(0, 1, 3, 2)
+    return (C.transpose(3, 1, 2, 0) + C.transpose(3, 0, 2, 1)).reshape(12, 12)
+
+
+_ROTATION_DERIVATIVE = {False: _rotation_derivative(False), True: _rotation_derivative(True)}
 
 
 def _apply(v: Array, key: str, C: np.ndarray, shape: tuple[int, ...]) -> Array:
@@ -103,6 +133,32 @@ def theta_matrix(q: Array) -> Array:
 def omega_matrix(w: Array) -> Array:
     """``Omega(w)`` ``(..., 4, 4)`` with ``Omega(w) q = [0, w] (x) q = Theta(q) w``."""
     return _apply(w, "omega", _OMEGA, (4, 4))
+
+
+def right_theta_matrix(q: Array) -> Array:
+    """``Theta_R(q)`` ``(..., 4, 3)``: ``Theta_R(q) w = q (x) [0, w]`` (a body-frame rate)."""
+    return _apply(q, "right-theta", _RIGHT_THETA, (4, 3))
+
+
+def right_omega_matrix(w: Array) -> Array:
+    """``Omega_R(w)`` ``(..., 4, 4)`` with ``Omega_R(w) q = q (x) [0, w] = Theta_R(q) w``."""
+    return _apply(w, "right-omega", _RIGHT_OMEGA, (4, 4))
+
+
+def rotate(q: Array, v: Array, *, transpose: bool = False) -> Array:
+    """``R(q) v`` (``R(q)^T v`` with ``transpose``) of ``(..., 4)`` and ``(..., 3)`` arrays, with
+    :func:`rotation_matrix`'s formula (``q`` unit)."""
+    R = rotation_matrix(q)
+    return ((R.swapaxes(-1, -2) if transpose else R) @ v[..., None])[..., 0]
+
+
+def rotation_jacobian(q: Array, v: Array, *, transpose: bool = False) -> Array:
+    """``d(R(q) v)/dq`` ``(..., 3, 4)`` (of ``R(q)^T v`` with ``transpose``): the exact
+    derivative of :func:`rotate`'s formula, also where ``q`` is not unit."""
+    vq = v[..., :, None] * q[..., None, :]
+    key = ("quaternion", "rotation-derivative", transpose)
+    out = vq.reshape(tuple(vq.shape[:-2]) + (12,)) @ constant(vq, key, lambda: _ROTATION_DERIVATIVE[transpose])
+    return out.reshape(tuple(out.shape[:-1]) + (3, 4))
 
 
 def skew(v: Array) -> Array:
