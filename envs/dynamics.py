@@ -103,7 +103,8 @@ class FreeTumble:
     Args:
         attitude0: initial attitudes ``(B, 4)``.
         omega_world0: initial world-frame angular velocities ``(B, 3)``, rad/s.
-        inertia: principal moments ``(Jx, Jy, Jz)`` of the body axes, kg m^2.
+        inertia: principal moments ``(Jx, Jy, Jz)`` of the body axes, kg m^2: one triple for the
+            batch, or ``(B, 3)`` (one per episode).
         dt: sample interval, s.
         substeps: RK4 steps per sample interval.
     """
@@ -117,9 +118,10 @@ class FreeTumble:
         substeps: int = 1,
     ) -> None:
         q0 = np.array(attitude0, dtype=float)
-        jx, jy, jz = (float(v) for v in inertia)
+        J = np.broadcast_to(np.array(inertia, dtype=float), (q0.shape[0], 3))
+        jx, jy, jz = J[:, 0], J[:, 1], J[:, 2]
         # Euler's equations: dw_x = (Jy - Jz)/Jx w_y w_z and cyclic
-        self._coeff = np.array([(jy - jz) / jx, (jz - jx) / jy, (jx - jy) / jz])
+        self._coeff = np.stack([(jy - jz) / jx, (jz - jx) / jy, (jx - jy) / jz], axis=1)
         conjugate = q0 * np.array([1.0, -1.0, -1.0, -1.0])  # the world rate in the body frame:
         omega_body = _rotate(conjugate, np.array(omega_world0, dtype=float))
         self._y = np.concatenate([q0, omega_body], axis=1)
@@ -137,9 +139,9 @@ class FreeTumble:
                 0.5 * (w * ox + yq * oz - z * oy),
                 0.5 * (w * oy + z * ox - x * oz),
                 0.5 * (w * oz + x * oy - yq * ox),
-                a[0] * oy * oz,
-                a[1] * oz * ox,
-                a[2] * ox * oy,
+                a[:, 0] * oy * oz,
+                a[:, 1] * oz * ox,
+                a[:, 2] * ox * oy,
             ],
             axis=1,
         )

@@ -18,7 +18,7 @@ from fkn_bench.geometry import quaternion as quat
 from fkn_bench.scenarios import SPLITS, Scenario, get_scenario
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["Episodes", "EpisodeStream", "generate_episodes", "initial_states"]
+__all__ = ["Episodes", "EpisodeStream", "generate_episodes", "initial_states", "true_inertia"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -90,6 +90,16 @@ def initial_states(scenario: Scenario, seeds: Sequence[int]) -> tuple[ArrayF, Ar
     return np.array(attitudes).reshape(-1, 4), np.array(positions).reshape(-1, 3), velocity
 
 
+def true_inertia(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
+    """The true principal moments ``(B, 3)`` (kg m^2) of each seed's body: the scenario's
+    ``inertia`` scaled per axis by ``1 + u``, ``u ~ U(-inertia_error, inertia_error)``."""
+    nominal = np.array(scenario.inertia)
+    if scenario.inertia_error == 0.0:
+        return np.tile(nominal, (len(seeds), 1))
+    error = scenario.inertia_error
+    return np.array([nominal * (1.0 + stream(seed, "inertia").uniform(-error, error, 3)) for seed in seeds])
+
+
 class EpisodeStream:
     """Generates a batch of episodes of ``scenario``, one per non-negative integer seed, chunk by
     chunk (``advance(n)``), for the environments."""
@@ -105,9 +115,11 @@ class EpisodeStream:
     def _make_rotation(self) -> ForcedRotation | FreeTumble:
         sc = self.scenario
         omega = np.tile(np.array(sc.omega0), (len(self.seeds), 1))
+        if sc.omega0_frame == "body":
+            omega = quat.rotate(self._q0, omega)
         if sc.dynamics == "forced":
             return ForcedRotation(self._q0, omega, sc.dt)
-        return FreeTumble(self._q0, omega, sc.inertia, sc.dt, sc.free_substeps)
+        return FreeTumble(self._q0, omega, true_inertia(sc, self.seeds), sc.dt, sc.free_substeps)
 
     def seek(self, index: int) -> None:
         """Continue from step ``index``: O(1) for forced rotation; free tumbling integrates

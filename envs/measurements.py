@@ -44,9 +44,9 @@ _DRAWS: dict[str, tuple[str, tuple[int, ...]]] = {
 }
 """Per-step draw method and shape of each measurement stream."""
 
-STREAMS: tuple[str, ...] = ("attitude0", "position0", *_DRAWS)
+STREAMS: tuple[str, ...] = ("attitude0", "position0", *_DRAWS, "inertia")
 """Names of the independent random streams of an episode. Their order fixes their keys: append
-new streams at the end (of :data:`_DRAWS`)."""
+new streams at the end."""
 
 BLOCK = 4096
 """Steps per random-stream block."""

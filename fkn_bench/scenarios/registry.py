@@ -174,6 +174,28 @@ for _scenario in (
         dynamics="free",
         tags=(),
     ),
+    _DS2.replace(
+        name="tumble-flip",
+        description=(
+            "Torque-free tumble spinning 10 deg off Astrobee's intermediate axis (body rate "
+            "(0.6, 0.1, 0.05) rad/s from a random attitude): the body flips about every 150 s "
+            "(Dzhanibekov effect)"
+        ),
+        dynamics="free",
+        omega0=(0.6, 0.1, 0.05),
+        omega0_frame="body",
+        tags=(),
+    ),
+    _DS2.replace(
+        name="tumble-inertia-error",
+        description=(
+            "tumble-fast where each seed's true principal moments differ from Astrobee's nominal "
+            "ones by up to +-10% per axis (uniform): a filter told the nominal inertia is misinformed"
+        ),
+        dynamics="free",
+        inertia_error=0.1,
+        tags=(),
+    ),
     _DS1.replace(
         name="ds1-flips",
         description=(

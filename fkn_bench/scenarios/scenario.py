@@ -64,7 +64,11 @@ class Scenario:
         (the paper's thruster-forced rotation; attitude by the exact quaternion exponential) and
         ``"free"`` integrates the torque-free rigid body with principal moments ``inertia``
         (Euler's equations and quaternion kinematics, RK4 with ``free_substeps`` sub-steps per
-        sample), starting from world-frame rate ``omega0``.
+        sample), starting from rate ``omega0`` (rad/s) given in the world frame or, with
+        ``omega0_frame = "body"``, in the body frame (so that, from a random attitude, the body
+        spins about a chosen body axis). ``inertia_error``: each seed's true principal moments
+        are ``inertia * (1 + u)`` with ``u`` uniform in ``[-inertia_error, inertia_error]`` per
+        axis (free dynamics only): ``inertia`` is then the nominal value an estimator is told.
         ``attitude0``: initial attitude (wxyz); ``None`` draws a uniformly random one per seed.
         ``position0`` (m) plus per-axis Gaussian spread ``position0_std`` and constant
         ``velocity0`` (m/s) give the translation.
@@ -89,7 +93,9 @@ class Scenario:
     description: str = ""
     dynamics: Literal["forced", "free"] = "forced"
     omega0: tuple[float, float, float] = (0.02, 0.04, 0.06)
+    omega0_frame: Literal["world", "body"] = "world"
     inertia: tuple[float, float, float] = ASTROBEE_INERTIA
+    inertia_error: float = 0.0
     attitude0: tuple[float, float, float, float] | None = None
     position0: tuple[float, float, float] = (10.9, -6.7, 4.9)
     position0_std: float = 0.0
@@ -123,6 +129,13 @@ class Scenario:
         a, b, c = sorted(inertia)
         _check(c <= a + b, "inertia", "physical: each moment <= sum of the other two", self.inertia)
         set_(self, "inertia", inertia)
+        _check(self.omega0_frame in ("world", "body"), "omega0_frame", "'world' or 'body'", self.omega0_frame)
+        e = self.inertia_error
+        _check(_is_finite_number(e) and 0.0 <= e < 0.5 and (e == 0.0 or self.dynamics == "free"), "inertia_error",
+               "a number in [0, 0.5), non-zero only with free dynamics", e)
+        _check(c * (1 + e) <= (a + b) * (1 - e), "inertia_error",
+               "small enough that every drawn inertia is physical", e)
+        set_(self, "inertia_error", float(e))
         if self.attitude0 is not None:
             q = _vector(self.attitude0, "attitude0", 4)
             norm = math.sqrt(sum(v * v for v in q))
