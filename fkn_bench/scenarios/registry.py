@@ -174,6 +174,16 @@ for _scenario in (
         dynamics="free",
         tags=(),
     ),
+    _DS1.replace(
+        name="ds1-flips",
+        description=(
+            "ds1 where each measured quaternion arrives as -q with probability 0.5 and 1% of the "
+            "measurements are gross outliers (random attitude, 1 m position error)"
+        ),
+        sign_flip_probability=0.5,
+        outlier_fraction=0.01,
+        tags=(),
+    ),
     _DS2.replace(
         name="tumble-flip",
         description=(
@@ -194,16 +204,6 @@ for _scenario in (
         ),
         dynamics="free",
         inertia_error=0.1,
-        tags=(),
-    ),
-    _DS1.replace(
-        name="ds1-flips",
-        description=(
-            "ds1 where each measured quaternion arrives as -q with probability 0.5 and 1% of the "
-            "measurements are gross outliers (random attitude, 1 m position error)"
-        ),
-        sign_flip_probability=0.5,
-        outlier_fraction=0.01,
         tags=(),
     ),
 ):

@@ -205,9 +205,19 @@ class Scenario:
         return cls(**dict(data))
 
     def config_hash(self) -> str:
-        """Short SHA-256 of the generating configuration (name, description and tags excluded)."""
-        payload = {k: v for k, v in self.to_dict().items() if k not in ("name", "description", "tags")}
+        """Short SHA-256 of the generating configuration (name, description and tags excluded;
+        fields added since the first release are left out at their default value, so that the
+        hashes of earlier configurations, which artefacts and stored results carry, still hold)."""
+        payload = {
+            k: v for k, v in self.to_dict().items()
+            if k not in ("name", "description", "tags") and _LATER_DEFAULTS.get(k, _NO_DEFAULT) != v
+        }
         return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
+
+
+_NO_DEFAULT = object()
+_LATER_DEFAULTS: dict[str, Any] = {"omega0_frame": "world", "inertia_error": 0.0}
+"""Fields added after the first release, with the defaults that leave them out of the hash."""
 
 
 def _check_fields(names: Iterable[str]) -> None:

@@ -57,3 +57,34 @@ def test_oracle_ekf_uses_the_scenarios_true_noise() -> None:
         make_estimator("oracle-ekf")
     with pytest.raises(ValueError, match="needs the scenario"):
         oracle_ekf()
+
+
+def test_rigid_body_estimators() -> None:
+    """Known inertia from the scenario (Astrobee's without one); ratios estimated from an
+    isotropic prior; a 13-state report with the ratios in the extras; online == batch."""
+    from fkn_bench.envs import generate_episodes
+    from fkn_bench.scenarios import ASTROBEE_INERTIA
+
+    scenario = get_scenario("tumble-fast").replace(inertia=(0.2, 0.15, 0.25))
+    known = make_estimator("rigid-body-ekf", scenario=scenario)
+    assert known.to_config()["inertia"] == [0.2, 0.15, 0.25] and known.to_config()["model"] == "rigid-body"
+    assert make_estimator("rigid-body-ukf").to_config()["inertia"] == list(ASTROBEE_INERTIA)
+    ratios = make_estimator("rigid-body-ekf-ratios", scenario=scenario)
+    assert ratios.to_config()["inertia"] is None and len(ratios.q_std) == 15
+    episodes = generate_episodes("tumble-fast", 2, split="test").window(0, 300)
+    batch = ratios.estimate(episodes.measurements, episodes.valid, 0.1)
+    assert batch.means.shape == (2, 300, 13) and batch.covariances.shape == (2, 300, 13, 13)
+    assert batch.extras["inertia_ratios"].shape == (2, 300, 2)
+    ratios.reset(dt=0.1)
+    for t in range(300):
+        estimate = ratios.step(episodes.measurements[1, t])
+    np.testing.assert_allclose(estimate.mean, batch.means[1, -1], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(estimate.native_covariance, batch.covariances[1, -1], rtol=0, atol=1e-12)
+    rebuilt = KalmanEstimator.from_config(ratios.to_config())
+    np.testing.assert_array_equal(rebuilt.estimate(episodes.measurements, episodes.valid, 0.1).means, batch.means)
+    with pytest.raises(ValueError, match="unknown process model"):
+        KalmanEstimator(model="spinning-top")
+    with pytest.raises(ValueError, match="constant-rate model only"):
+        KalmanEstimator(variant="mekf", model="rigid-body", inertia=ASTROBEE_INERTIA)
+    with pytest.raises(ValueError, match="q_std needs 15 values"):
+        KalmanEstimator(model="rigid-body-ratios", q_std=[0.01] * 13)

@@ -19,7 +19,10 @@ from fkn_bench.scenarios import (
     scenario_names,
 )
 
-BUILT_IN = ("ds1", "ds2", "ds1-noise5x", "ds1-gap100", "ds1-dropout", "tumble-slow", "tumble-fast", "ds1-flips")
+BUILT_IN = (
+    "ds1", "ds2", "ds1-noise5x", "ds1-gap100", "ds1-dropout", "tumble-slow", "tumble-fast", "ds1-flips",
+    "tumble-flip", "tumble-inertia-error",
+)
 
 
 @pytest.fixture
@@ -76,6 +79,15 @@ def test_tumble_scenarios() -> None:
         assert s.dynamics == "free" and s.inertia == ASTROBEE_INERTIA and s.measurement_every == 10
     assert slow.omega0 == (0.02, 0.04, 0.06) and slow.model_family == "ds1"
     assert fast.omega0 == (0.10, 0.20, 0.30) and fast.model_family == "ds2"
+
+
+def test_free_tumble_stress_scenarios() -> None:
+    flip, wrong = get_scenario("tumble-flip"), get_scenario("tumble-inertia-error")
+    for s in (flip, wrong):
+        _paper_defaults(s)
+        assert s.dynamics == "free" and s.inertia == ASTROBEE_INERTIA and s.model_family == "ds2"
+    assert flip.omega0_frame == "body" and flip.omega0 == (0.6, 0.1, 0.05) and flip.inertia_error == 0.0
+    assert wrong.inertia_error == 0.1 and wrong.omega0 == get_scenario("tumble-fast").omega0
 
 
 def test_flips_scenario() -> None:
