@@ -36,7 +36,7 @@ from collections.abc import Mapping
 from functools import partial
 from typing import Any
 
-from fkn_bench.filters import ParameterSet, make_filter
+from fkn_bench.filters import ParameterSet
 from fkn_bench.training import DirectParameters, Trainable, TrainConfig, TrainingData
 from fkn_bench.training.artifacts import TrainedKalmanEstimator
 from fkn_bench.training.pipeline import options_with_file
@@ -100,7 +100,7 @@ def tuned_config(name: str, options: Mapping[str, Any]) -> TrainConfig:
 
 def _build(config: TrainConfig, data: TrainingData) -> DirectParameters:
     """The paper's 20 standard deviations (log map), starting from the manual tuning."""
-    return DirectParameters(ParameterSet(make_filter(config.variant).layout))
+    return DirectParameters(ParameterSet(config.build_filter(data.scenario).layout))
 
 
 def tuned_trainable(name: str) -> Trainable:

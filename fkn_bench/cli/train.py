@@ -25,8 +25,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(subparsers, "train",
                          "train a trainable estimator (FlexKalmanNet, the tuned baselines)", __doc__)
     parser.add_argument("--estimator", default="flexkalmannet", help="trainable estimator (default: flexkalmannet)")
-    parser.add_argument("--scenario", default="ds1", help="training scenario (default: ds1)")
+    parser.add_argument("--scenario", action="append", default=None,
+                        help="training scenario (default: ds1); repeat it to train on a mixture of scenarios")
+    parser.add_argument("--family", help="model family of the artefact (default: the scenarios' common family, "
+                                         "else 'default': the artefact used where no family applies)")
     parser.add_argument("--filter", dest="variant", choices=("ekf", "ukf", "mekf"), help="filter variant")
+    parser.add_argument("--model", dest="process_model", metavar="MODEL",
+                        help="process model: constant-velocity (the paper's), rigid-body (the scenario's "
+                             "inertia) or rigid-body-ratios (inertia ratios estimated)")
     parser.add_argument("--objective", choices=("supervised", "nll"), help="training objective")
     parser.add_argument("--config", metavar="TOML", help="configuration file (options below override it)")
     parser.add_argument("--epochs", type=int, help="maximum epochs")
@@ -48,7 +54,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def parse_options(args: argparse.Namespace) -> dict[str, Any]:
     """Config overrides from the named options and ``--set KEY=VALUE`` pairs."""
     options = parse_key_values(args.set, "--set")
-    for name in ("variant", "objective", "epochs", "lr", "seed", "config"):
+    for name in ("variant", "process_model", "objective", "epochs", "lr", "seed", "config"):
         value = getattr(args, name)
         if value is not None:
             options[name] = value
@@ -61,16 +67,18 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.training import fit
 
     load_scenario_files(args)
-    scenario = get_scenario(args.scenario)
-    out = args.out if args.out is not None else Path("runs") / f"{args.estimator}-{scenario.name}"
+    scenarios = [get_scenario(name) for name in (args.scenario or ["ds1"])]
+    label = "+".join(s.name for s in scenarios)
+    out = args.out if args.out is not None else Path("runs") / f"{args.estimator}-{label}"
     with usage_errors(UnknownEstimatorError, ValueError, TypeError):
-        outcome = fit(args.estimator, scenario, parse_options(args), out=out, resume=args.resume, progress=not args.no_progress)
+        outcome = fit(args.estimator, scenarios, parse_options(args), out=out, resume=args.resume,
+                      progress=not args.no_progress, family=args.family)
     summary = outcome.summary()
     if args.write_artifact:
         from fkn_bench.io import write_bytes_atomic
         from fkn_bench.training.artifacts import artifact_path
 
-        target = artifact_path(args.estimator, scenario.model_family)
+        target = artifact_path(args.estimator, summary["family"])
         write_bytes_atomic(target, Path(summary["artifact"]).read_bytes())
         summary["installed_artifact"] = str(target)
     if args.json:

@@ -15,7 +15,6 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet.checkpoint import build_model
 from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
 from fkn_bench.flexkalmannet.reference import ReferenceEpoch, sequential_reference_epoch
@@ -56,7 +55,7 @@ def training_benchmark(
     built model (:func:`measure_training_speed` and the speed gate's ``train-epoch`` check)."""
     data = training_data(scenario, config)
     fresh = build_model(config, data)
-    trainer = Trainer(copy.deepcopy(fresh), make_filter(config.variant), data, config.train_config())
+    trainer = Trainer(copy.deepcopy(fresh), config.build_filter(scenario), data, config.train_config())
     reference_model = copy.deepcopy(fresh)
 
     def reference() -> ReferenceEpoch:

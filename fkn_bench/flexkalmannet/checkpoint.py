@@ -15,7 +15,7 @@ from typing import Any
 
 import torch
 
-from fkn_bench.filters import ParameterSet, make_filter
+from fkn_bench.filters import ParameterSet
 from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
 from fkn_bench.flexkalmannet.network import FlexKalmanNet, FlexKalmanNetwork
 from fkn_bench.scenarios import Scenario
@@ -29,7 +29,7 @@ REFERENCE_SAMPLES = 2048
 
 
 def _model_skeleton(config: FlexKalmanNetConfig, reference: torch.Tensor, mean: torch.Tensor, std: torch.Tensor) -> FlexKalmanNet:
-    variant = make_filter(config.variant)
+    variant = config.build_filter()
     parameter_set = ParameterSet(variant.layout, learn=config.learn, positivity=config.positivity)  # type: ignore[arg-type]
     with torch.random.fork_rng(devices=[]):  # seeded weights, the global generator left as it was
         torch.manual_seed(config.seed)

@@ -19,7 +19,6 @@ import torch
 
 from fkn_bench.estimators.base import Estimates, Estimator, RecursiveEstimator, check_batch_inputs
 from fkn_bench.estimators.kalman import filter_result_to_estimates
-from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet.checkpoint import model_from_checkpoint
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
@@ -41,7 +40,7 @@ class FlexKalmanNetEstimator(TrainedKalmanEstimator):
     def from_checkpoint(cls, path: str | Path) -> FlexKalmanNetEstimator:
         model, config, scenario, document = model_from_checkpoint(path)
         metadata = {"checkpoint": str(path), "scenario": scenario.name, "best_epoch": document.get("best_epoch")}
-        return cls(metadata=metadata, **deployed_estimator_config(model, config.variant))
+        return cls(metadata=metadata, **deployed_estimator_config(model, config))
 
 
 class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
@@ -58,7 +57,7 @@ class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
             if history < 1:
                 raise ValueError(f"history must be >= 1 (got {history})")
             self.model.history = int(history)
-        self.filter = make_filter(self.config.variant)
+        self.filter = self.config.build_filter()
         self._recent: deque[torch.Tensor] = deque(maxlen=self.model.history)
 
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
@@ -100,7 +99,8 @@ def flexkalmannet_factory(
     """Registry factory of ``flexkalmannet``.
 
     Args:
-        scenario: picks the committed artefact of ``scenario.model_family`` (ds1 when None).
+        scenario: picks the committed artefact of the scenario's model family (see
+            :func:`~fkn_bench.training.artifacts.artifact_family`).
         checkpoint: use this trained checkpoint instead of the committed parameters.
         parameters: use this learned-parameter JSON (e.g. written by ``fkn-bench train``).
         mode: ``constant`` (paper) or ``time_varying`` (needs ``checkpoint``).

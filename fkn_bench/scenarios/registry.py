@@ -166,12 +166,14 @@ for _scenario in (
             "rate wobbles (period ~875 s) and the world-frame rate varies by ~14%"
         ),
         dynamics="free",
+        model_family="tumble",
         tags=(),
     ),
     _DS2.replace(
         name="tumble-fast",
         description="Torque-free tumble with Astrobee's flight inertia from ds2's initial rate",
         dynamics="free",
+        model_family="tumble",
         tags=(),
     ),
     _DS1.replace(
@@ -192,6 +194,7 @@ for _scenario in (
             "(Dzhanibekov effect)"
         ),
         dynamics="free",
+        model_family="tumble",
         omega0=(0.6, 0.1, 0.05),
         omega0_frame="body",
         tags=(),
@@ -203,6 +206,7 @@ for _scenario in (
             "ones by up to +-10% per axis (uniform): a filter told the nominal inertia is misinformed"
         ),
         dynamics="free",
+        model_family="tumble",
         inertia_error=0.1,
         tags=(),
     ),

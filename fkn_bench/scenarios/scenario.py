@@ -86,7 +86,8 @@ class Scenario:
         and each measured quaternion is negated with probability ``sign_flip_probability``.
     Bookkeeping
         ``dataset_seed`` is the seed of the training data set; ``model_family`` names the
-        committed learned model that applies to this scenario (``"ds1"`` or ``"ds2"``).
+        committed learned model that applies to this scenario (``"ds1"`` or ``"ds2"`` for the
+        constant rates, ``"tumble"`` for free tumbling).
     """
 
     name: str

@@ -44,6 +44,8 @@ __all__ = [
     "deployed_estimator_config",
     "TrainedKalmanEstimator",
     "artifact_factory",
+    "artifact_family",
+    "DEFAULT_FAMILY",
 ]
 
 ARTIFACT_FORMAT = "fkn-bench-learned-parameters"
@@ -116,12 +118,16 @@ def read_artifact(path: str | Path) -> dict[str, Any]:
                             ("estimator", "family", "estimator_config", "parameters"), ArtifactError)
 
 
-def deployed_estimator_config(model: Any, variant: str) -> dict[str, Any]:
-    """KalmanEstimator config (variant and noise matrices or stds) of a trained
-    :class:`~fkn_bench.training.NoiseModel`'s deployed parameters."""
+def deployed_estimator_config(model: Any, settings: Any) -> dict[str, Any]:
+    """KalmanEstimator config (variant, process model and noise matrices or stds) of a trained
+    :class:`~fkn_bench.training.NoiseModel`'s deployed parameters (``settings``: the
+    :class:`~fkn_bench.training.TrainConfig` it was trained with)."""
     with torch.no_grad():
         noise = model.parameter_set.to_noise(model.deployed_raw())
-    config: dict[str, Any] = {"variant": variant}
+    config: dict[str, Any] = {"variant": settings.variant}
+    if settings.process_model != "constant-velocity":
+        inertia = settings.inertia
+        config.update(model=settings.process_model, inertia=None if inertia is None else list(inertia))
     for entry, matrix in (("q", noise.process), ("r", noise.measurement), ("p0", noise.initial)):
         m = matrix.detach().to(torch.float64).numpy()
         if np.count_nonzero(m - np.diag(np.diag(m))) == 0:
@@ -158,15 +164,35 @@ class TrainedKalmanEstimator(KalmanEstimator):
     CONFIG_KEYS = KalmanEstimator.CONFIG_KEYS | {"metadata"}  # from_config passes metadata= to __init__
 
 
+DEFAULT_FAMILY = "default"
+"""The family of the artefact trained on a mixture of motions (constant rate and free tumbling),
+used where no named scenario's family applies: recordings, user scenarios, no scenario."""
+
+
+def artifact_family(name: str, scenario: Scenario | None) -> str:
+    """The model family whose committed artefact of ``name`` runs on ``scenario``: a built-in
+    scenario's own family; for anything else (a recording, a user scenario, no scenario) the
+    mixture-trained :data:`DEFAULT_FAMILY` when it is committed, else the scenario's family
+    (``ds1`` without a scenario)."""
+    from fkn_bench.scenarios import get_scenario, scenario_names
+
+    if scenario is not None and scenario.name in scenario_names():
+        if get_scenario(scenario.name).config_hash() == scenario.config_hash():
+            return scenario.model_family
+    if artifact_path(name, DEFAULT_FAMILY).is_file():
+        return DEFAULT_FAMILY
+    return scenario.model_family if scenario is not None else "ds1"
+
+
 def artifact_factory(name: str, cls: type[TrainedKalmanEstimator] = TrainedKalmanEstimator) -> Callable[..., Any]:
     """Registry factory of the trained estimator ``name``: the committed artefact of the
-    scenario's model family (ds1 when no scenario is given), or ``parameters=PATH`` (a
+    scenario's model family (see :func:`artifact_family`), or ``parameters=PATH`` (a
     ``parameters.json`` written by ``fkn-bench train``)."""
 
     def factory(scenario: Scenario | None = None, *, parameters: str | Path | None = None) -> TrainedKalmanEstimator:
         if parameters is not None:
             return cls.from_artifact(parameters, name=name)
-        family = scenario.model_family if scenario is not None else "ds1"
+        family = artifact_family(name, scenario)
         path = artifact_path(name, family)
         if not path.is_file():
             raise ArtifactError(

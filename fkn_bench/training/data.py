@@ -7,6 +7,10 @@ cut every ``stride`` samples; a batch is a set of windows that run through the f
 parallel as its batch axis. Validation runs the filter over the whole val split, as evaluation
 does over the test split.
 
+A data set may mix scenarios (a sequence of them, with one ``dt``): its windows are those of every
+scenario, and validation runs over every scenario's val split. A mixture trains one estimator for
+several kinds of motion (e.g. constant rate and free tumbling).
+
 The measurement schedule of the training windows can differ from the scenario's
 (``train_measurement_every``): training with a measurement at every step and evaluating with one
 every 10 is what the paper's data allow. A different schedule is a different noise realisation
@@ -16,7 +20,7 @@ of the same ground truth (noise draws are keyed by scheduled step, see
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -61,7 +65,8 @@ def _split(scenario: Scenario, split: str, every: int, dtype: torch.dtype, episo
 
 
 class TrainingData:
-    """Train windows and the validation sequence of a scenario's data set.
+    """Train windows and the validation sequences of a scenario's data set (or of a mixture:
+    ``scenario`` a sequence of scenarios; ``scenario`` is then the first, ``scenarios`` all).
 
     Args:
         window: samples per training window (paper: 512).
@@ -75,7 +80,7 @@ class TrainingData:
 
     def __init__(
         self,
-        scenario: str | Scenario,
+        scenario: str | Scenario | Sequence[str | Scenario],
         *,
         window: int = 512,
         stride: int | None = None,
@@ -83,7 +88,11 @@ class TrainingData:
         episodes: int = 1,
         dtype: torch.dtype = torch.float64,
     ) -> None:
-        self.scenario = get_scenario(scenario)
+        mixture = not isinstance(scenario, (str, Scenario))
+        self.scenarios = tuple(get_scenario(s) for s in (scenario if mixture else [scenario]))  # type: ignore[union-attr]
+        self.scenario = self.scenarios[0]
+        if not self.scenarios or len({s.dt for s in self.scenarios}) != 1:
+            raise ValueError(f"a mixture needs scenarios with one dt (got {[(s.name, s.dt) for s in self.scenarios]})")
         if window < 2:
             raise ValueError(f"window must be >= 2 samples (got {window})")
         stride = window if stride is None else stride
@@ -95,16 +104,12 @@ class TrainingData:
             raise ValueError(f"episodes must be >= 1 (got {episodes})")
         self.episodes = int(episodes)
         self.dtype = dtype
-        train = _split(self.scenario, "train", self.train_measurement_every, dtype, self.episodes)
-        length = train.measurements.shape[1]
-        if length < window:
-            raise ValueError(f"the train split has {length} samples, fewer than one window of {window}")
-        starts = torch.arange(0, length - window + 1, stride)
-        index = starts[:, None] + torch.arange(window)[None, :]
-        flat = lambda t: t[:, index].flatten(0, 1)  # noqa: E731  (episodes x windows, window, ...)
-        self.train = Sequences(flat(train.measurements), flat(train.mask), flat(train.truth))
-        self.train_full = train
-        self.val = _split(self.scenario, "val", self.scenario.measurement_every, dtype, self.episodes)
+        every = train_measurement_every
+        parts = [_windows(_split(s, "train", int(every or s.measurement_every), dtype, self.episodes), window, stride)
+                 for s in self.scenarios]
+        self.train = _concat([windows for windows, _ in parts])
+        train = self.train_full = _concat([full for _, full in parts])
+        self.val = _concat([_split(s, "val", s.measurement_every, dtype, self.episodes) for s in self.scenarios])
         positions = train.measurements[train.mask][:, 4:7]
         self.position_mean = positions.mean(0)
         self.position_std = positions.std(0).clamp_min(1e-9)
@@ -120,9 +125,10 @@ class TrainingData:
             yield self.train.select(order[start : start + windows_per_batch])
 
     def describe(self) -> dict[str, object]:
+        mixture = len(self.scenarios) > 1
         return {
-            "scenario": self.scenario.name,
-            "config_hash": self.scenario.config_hash(),
+            "scenario": "+".join(s.name for s in self.scenarios) if mixture else self.scenario.name,
+            "config_hash": [s.config_hash() for s in self.scenarios] if mixture else self.scenario.config_hash(),
             "dataset_seed": self.scenario.dataset_seed,
             "episodes": self.episodes,
             "window": self.window,
@@ -135,14 +141,33 @@ class TrainingData:
         }
 
 
+def _windows(split: Sequences, window: int, stride: int) -> tuple[Sequences, Sequences]:
+    """Windows of ``window`` samples every ``stride`` of every episode, and the split itself."""
+    length = split.measurements.shape[1]
+    if length < window:
+        raise ValueError(f"the train split has {length} samples, fewer than one window of {window}")
+    starts = torch.arange(0, length - window + 1, stride)
+    index = starts[:, None] + torch.arange(window)[None, :]
+    flat = lambda t: t[:, index].flatten(0, 1)  # noqa: E731  (episodes x windows, window, ...)
+    return Sequences(flat(split.measurements), flat(split.mask), flat(split.truth)), split
+
+
+def _concat(parts: Sequence[Sequences]) -> Sequences:
+    """The sequences of several parts (of one length) along the batch axis."""
+    if len(parts) == 1:
+        return parts[0]
+    return Sequences(*(torch.cat([getattr(p, f) for p in parts]) for f in ("measurements", "mask", "truth")))
+
+
 @lru_cache(maxsize=4)
-def _cached(scenario: Scenario, window: int, stride: int | None, every: int | None, episodes: int) -> TrainingData:
+def _cached(scenario: Scenario | tuple[Scenario, ...], window: int, stride: int | None, every: int | None, episodes: int) -> TrainingData:
     return TrainingData(scenario, window=window, stride=stride, train_measurement_every=every, episodes=episodes)
 
 
-def training_data(scenario: Scenario, config: object) -> TrainingData:
+def training_data(scenario: Scenario | Sequence[Scenario], config: object) -> TrainingData:
     """The :class:`TrainingData` of ``scenario`` with ``config``'s data protocol (``window``,
     ``stride``, ``train_measurement_every``, ``episodes``: a
     :class:`~fkn_bench.training.TrainConfig`); the last few are kept (a sweep's trials share them)."""
     c = config
-    return _cached(scenario, int(c.window), c.stride, c.train_measurement_every, int(c.episodes))  # type: ignore[attr-defined]
+    key = scenario if isinstance(scenario, Scenario) else tuple(scenario)
+    return _cached(key, int(c.window), c.stride, c.train_measurement_every, int(c.episodes))  # type: ignore[attr-defined]

@@ -24,10 +24,12 @@ OBJECTIVES: tuple[str, ...] = ("supervised", "nll")
 
 
 def aligned_state_error(means: Tensor, truth: Tensor) -> Tensor:
-    """``means - truth`` ``(..., 13)`` with the true quaternion's sign matched to the estimate."""
+    """``means - truth`` ``(..., 13)`` with the true quaternion's sign matched to the estimate
+    (states augmented beyond the 13 of the truth, e.g. with inertia ratios, are compared on their
+    first 13 components)."""
     dot = (means[..., :4] * truth[..., :4]).sum(-1, keepdim=True)
     q_true = torch.where(dot < 0, -truth[..., :4], truth[..., :4])
-    return torch.cat((means[..., :4] - q_true, means[..., 4:] - truth[..., 4:]), dim=-1)
+    return torch.cat((means[..., :4] - q_true, means[..., 4 : truth.shape[-1]] - truth[..., 4:]), dim=-1)
 
 
 def state_mse(means: Tensor, truth: Tensor, loss_cut: int) -> Tensor:

@@ -21,10 +21,11 @@ per-epoch history, an ``on_epoch`` callback, and with ``out=DIR`` these files:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,7 +34,6 @@ import numpy as np
 import pandas as pd
 import torch
 
-from fkn_bench.filters import make_filter
 from fkn_bench.io import atomic_path
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario, get_scenario
@@ -117,6 +117,8 @@ class TrainingOutcome:
     test: dict[str, Any]
     seconds: float
     estimator_config: dict[str, Any]
+    scenarios: tuple[Scenario, ...] = ()
+    family: str = ""
 
     @property
     def checkpoint(self) -> Path:
@@ -135,7 +137,8 @@ class TrainingOutcome:
         """What ``fkn-bench train`` reports."""
         return {
             "estimator": self.estimator,
-            "scenario": self.scenario.name,
+            "scenario": "+".join(s.name for s in self.scenarios) or self.scenario.name,
+            "family": self.family or self.scenario.model_family,
             "out": str(self.out),
             "checkpoint": str(self.checkpoint),
             "artifact": str(self.artifact),
@@ -159,7 +162,7 @@ def split_metrics(model: NoiseModel, settings: TrainConfig, scenario: Scenario) 
     with torch.no_grad(), torch_threads(settings.threads):
         noise = model.parameter_set.to_noise(model.deployed_raw())
         z, mask = torch.as_tensor(episode.measurements), torch.as_tensor(episode.valid)
-        result = make_filter(settings.variant).run(noise, z, mask, dt=scenario.dt, store_covariances=False, store_innovations=False)
+        result = settings.build_filter(scenario).run(noise, z, mask, dt=scenario.dt, store_covariances=False, store_innovations=False)
         truth = torch.as_tensor(episode.truth)
         mse = float(state_mse(result.means, truth, cut))
         per_component = aligned_state_error(result.means[:, cut:], truth[:, cut:]).square().mean((0, 1)).sqrt().numpy()
@@ -173,7 +176,7 @@ def split_metrics(model: NoiseModel, settings: TrainConfig, scenario: Scenario) 
 
 def fit(
     estimator: str,
-    scenario: str | Scenario = "ds1",
+    scenario: str | Scenario | Sequence[str | Scenario] = "ds1",
     config: Any = None,
     *,
     out: str | Path | None = None,
@@ -181,13 +184,15 @@ def fit(
     progress: bool = True,
     plots: bool = True,
     on_epoch: OnEpoch | None = None,
+    family: str | None = None,
 ) -> TrainingOutcome:
     """Train the registered trainable ``estimator`` on ``scenario``'s data set (module docstring).
 
     Args:
         estimator: registry name of a trainable estimator.
         scenario: training scenario (name or object); its train and val splits are used, the
-            test split scores the result.
+            test split scores the result. A sequence of scenarios trains on their mixture (see
+            :class:`~fkn_bench.training.TrainingData`; the test metrics are the mean over them).
         config: the estimator's training config, or options for its :attr:`Trainable.config`
             (None: the defaults).
         out: output directory (created); None: no files, no test metrics.
@@ -196,15 +201,23 @@ def fit(
         plots: write the two training figures.
         on_epoch: ``on_epoch(epoch, history)`` after every epoch (and its checkpoint); see
             :data:`~fkn_bench.training.trainer.OnEpoch`.
+        family: the model family the artefact is for (default: the scenarios' common
+            ``model_family``, else ``default``).
     """
     declared = trainable(estimator)
-    scenario = get_scenario(scenario)
+    scenarios = [get_scenario(s) for s in ([scenario] if isinstance(scenario, (str, Scenario)) else scenario)]
+    scenario = scenarios[0]
+    label = "+".join(s.name for s in scenarios)
+    if family is None:
+        family = scenario.model_family if len({s.model_family for s in scenarios}) == 1 else "default"
     config = declared.config(config or {}) if config is None or isinstance(config, Mapping) else config
+    if config.train_config().process_model == "rigid-body" and config.train_config().inertia is None:
+        config = dataclasses.replace(config, inertia=scenario.inertia)  # deployed with the inertia trained on
     settings: TrainConfig = config.train_config()
     began = time.perf_counter()
-    data = training_data(scenario, settings)
+    data = training_data(scenario if len(scenarios) == 1 else scenarios, settings)
     model = declared.build(config, data)
-    trainer = Trainer(model, make_filter(settings.variant), data, settings)
+    trainer = Trainer(model, settings.build_filter(scenario), data, settings)
     directory = None if out is None else Path(out)
     checkpoint = None if directory is None else directory / "checkpoint.pt"
     if directory is not None:
@@ -215,7 +228,7 @@ def fit(
         document = load_checkpoint(checkpoint)
         if document["estimator"] != estimator or document["config"] != config.to_dict():
             raise CheckpointError(f"cannot resume {checkpoint}: it was trained with another estimator or a different config")
-        if document["scenario"] != scenario.to_dict():
+        if document["scenario"] != _scenario_record(scenarios):
             raise CheckpointError(f"cannot resume {checkpoint}: it was trained on a different scenario")
         trainer.load_state_dict(document["trainer"])
 
@@ -224,7 +237,7 @@ def fit(
             save_checkpoint(checkpoint, {
                 "estimator": estimator,
                 "config": config.to_dict(),
-                "scenario": scenario.to_dict(),
+                "scenario": _scenario_record(scenarios),
                 "data": data.describe(),
                 "state_dict": model.state_dict(),
                 "trainer": trainer.state_dict(),
@@ -243,7 +256,7 @@ def fit(
     history = pd.DataFrame([record.flat() for record in trainer.history])
     outcome = TrainingOutcome(
         estimator, model, config, scenario, history, trainer.best_epoch, trainer.best_loss, directory, {},
-        time.perf_counter() - began, deployed_estimator_config(model, settings.variant),
+        time.perf_counter() - began, deployed_estimator_config(model, settings), tuple(scenarios), family,
     )
     if directory is None:
         return outcome
@@ -252,12 +265,12 @@ def fit(
     with atomic_path(directory / "history.csv") as tmp:
         history.to_csv(tmp, index=False)
     if plots and len(history):
-        label = "innovation NLL" if settings.objective == "nll" else "13-state RMSE"
-        plot_losses(history, directory / "loss.png", title=f"{estimator} on {scenario.name} ({label})",
+        loss = "innovation NLL" if settings.objective == "nll" else "13-state RMSE"
+        plot_losses(history, directory / "loss.png", title=f"{estimator} on {label} ({loss})",
                     best_epoch=trainer.best_epoch)
         plot_parameters(history, directory / "parameters.png",
-                        title=f"{estimator}: learned standard deviations ({scenario.name})")
-    outcome.test = split_metrics(model, settings, scenario)
+                        title=f"{estimator}: learned standard deviations ({label})")
+    outcome.test = _mean_metrics([split_metrics(model, settings, s) for s in scenarios], scenarios)
     outcome.seconds = time.perf_counter() - began
     training = {
         "objective": settings.objective,
@@ -275,8 +288,27 @@ def fit(
         **outcome.test,
         "history": {str(c): history[c].tolist() for c in history.columns if c != "seconds"},
     }
-    write_artifact(outcome.artifact, estimator=estimator, family=scenario.model_family,
-                   scenario={"name": scenario.name, "config_hash": scenario.config_hash()},
+    write_artifact(outcome.artifact, estimator=estimator, family=family,
+                   scenario={"name": label, "config_hash": "+".join(s.config_hash() for s in scenarios)},
                    estimator_config=outcome.estimator_config,
                    parameters=model.parameter_set.to_dict(model.deployed_raw().detach()), training=training)
     return outcome
+
+
+def _scenario_record(scenarios: Sequence[Scenario]) -> Any:
+    """What a checkpoint stores of its training scenario(s) (one dict, or a list for a mixture)."""
+    return scenarios[0].to_dict() if len(scenarios) == 1 else [s.to_dict() for s in scenarios]
+
+
+def _mean_metrics(metrics: Sequence[dict[str, Any]], scenarios: Sequence[Scenario]) -> dict[str, Any]:
+    """One scenario's test metrics, or for a mixture their mean with the per-scenario RMSEs."""
+    if len(metrics) == 1:
+        return metrics[0]
+    names = list(metrics[0]["test_rmse_components"])
+    return {
+        "test_rmse": float(np.mean([m["test_rmse"] for m in metrics])),
+        "test_rmse_components": {k: float(np.mean([m["test_rmse_components"][k] for m in metrics])) for k in names},
+        "test_rmse_by_scenario": {s.name: m["test_rmse"] for s, m in zip(scenarios, metrics)},
+        "test_seed": metrics[0]["test_seed"],
+        "loss_cut": metrics[0]["loss_cut"],
+    }

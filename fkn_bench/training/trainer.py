@@ -29,7 +29,7 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from fkn_bench.filters import VARIANTS, KalmanFilter, ParameterSet
+from fkn_bench.filters import MODELS, VARIANTS, KalmanFilter, ParameterSet, make_filter, make_model
 from fkn_bench.runtime import torch_threads
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
@@ -88,6 +88,11 @@ class TrainConfig:
 
     Attributes:
         variant: the filter variant trained through (ekf, ukf, mekf).
+        process_model: the filter's process model (:data:`fkn_bench.filters.MODELS`:
+            ``constant-velocity``, the paper's; ``rigid-body``; ``rigid-body-ratios``).
+        inertia: principal moments (kg m^2) of the rigid-body models: known inertia
+            (``rigid-body``; None takes the training scenario's when training starts) or the prior
+            mean of the estimated ratios (``rigid-body-ratios``; None: isotropic).
         window, stride, train_measurement_every, episodes: the training windows (see
             :class:`~fkn_bench.training.TrainingData`).
         objective: ``supervised`` (13-state MSE vs truth) or ``nll`` (innovation NLL).
@@ -108,6 +113,8 @@ class TrainConfig:
     """
 
     variant: str = "ekf"
+    process_model: str = "constant-velocity"
+    inertia: tuple[float, float, float] | None = None
     window: int = 800
     stride: int | None = None
     train_measurement_every: int | None = 10
@@ -132,6 +139,12 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"variant must be one of {list(VARIANTS)} (got {self.variant!r})")
+        if self.process_model not in MODELS:
+            raise ValueError(f"process_model must be one of {list(MODELS)} (got {self.process_model!r})")
+        if self.inertia is not None:
+            self.inertia = tuple(float(v) for v in self.inertia)  # type: ignore[assignment]
+        if not (self.process_model == "rigid-body" and self.inertia is None):  # else: the scenario's
+            self.build_filter()  # the variant takes the model, and the model its inertia (else ValueError)
         if self.window < 2 or self.loss_cut >= self.window:
             raise ValueError(f"need window >= 2 and loss_cut < window (got {self.window}, {self.loss_cut})")
         if self.objective not in OBJECTIVES:
@@ -147,7 +160,22 @@ class TrainConfig:
             raise ValueError(f"loss_cut must be >= 0 (got {self.loss_cut!r})")
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        """The fields; the process model's only when it is not the paper's (so that the configs
+        of earlier runs, in checkpoints, artefacts and sweep studies, read the same)."""
+        values = asdict(self)
+        if self.process_model == "constant-velocity" and self.inertia is None:
+            del values["process_model"], values["inertia"]
+        elif values["inertia"] is not None:
+            values["inertia"] = list(values["inertia"])
+        return values
+
+    def build_filter(self, scenario: Any = None) -> KalmanFilter:
+        """The filter variant on the process model; a known-inertia model without ``inertia``
+        takes ``scenario.inertia``."""
+        inertia = self.inertia
+        if inertia is None and self.process_model == "rigid-body" and scenario is not None:
+            inertia = scenario.inertia
+        return make_filter(self.variant, model=make_model(self.process_model, inertia=inertia))
 
     def train_config(self) -> TrainConfig:
         return self

@@ -155,7 +155,7 @@ def test_committed_artifacts_run_out_of_the_box(name: str, family: str, tmp_path
     assert artifact["estimator"] == name and artifact["family"] == family
     assert artifact["training"]["objective"] == TUNED_OBJECTIVES[name] and artifact["scenario"]["name"] == family
     assert {"git_commit", "python", "command"} <= set(artifact["provenance"])
-    scenario = get_scenario("tumble-fast" if family == "ds2" else "ds1-noise5x")  # family members
+    scenario = get_scenario("ds2" if family == "ds2" else "ds1-noise5x")  # family members
     assert scenario.model_family == family
     estimator = make_estimator(name, scenario=scenario)
     assert estimator.metadata["artifact"] == f"fkn_bench.baselines/params/{name}-{family}.json"  # location-independent

@@ -77,15 +77,15 @@ def test_tumble_scenarios() -> None:
     for s in (slow, fast):
         _paper_defaults(s)
         assert s.dynamics == "free" and s.inertia == ASTROBEE_INERTIA and s.measurement_every == 10
-    assert slow.omega0 == (0.02, 0.04, 0.06) and slow.model_family == "ds1"
-    assert fast.omega0 == (0.10, 0.20, 0.30) and fast.model_family == "ds2"
+    assert slow.omega0 == (0.02, 0.04, 0.06) and slow.model_family == "tumble"
+    assert fast.omega0 == (0.10, 0.20, 0.30) and fast.model_family == "tumble"
 
 
 def test_free_tumble_stress_scenarios() -> None:
     flip, wrong = get_scenario("tumble-flip"), get_scenario("tumble-inertia-error")
     for s in (flip, wrong):
         _paper_defaults(s)
-        assert s.dynamics == "free" and s.inertia == ASTROBEE_INERTIA and s.model_family == "ds2"
+        assert s.dynamics == "free" and s.inertia == ASTROBEE_INERTIA and s.model_family == "tumble"
     assert flip.omega0_frame == "body" and flip.omega0 == (0.6, 0.1, 0.05) and flip.inertia_error == 0.0
     assert wrong.inertia_error == 0.1 and wrong.omega0 == get_scenario("tumble-fast").omega0
 
