@@ -5,10 +5,15 @@ groups with estimate, measurement and truth; every component with its 2-sigma un
 the group errors over time with the settling time marked. With ``--results DIR`` (written by
 ``fkn-bench run --out``) also one bar chart per scenario comparing the estimators stored there.
 
-Example::
+With ``--ratios`` instead: the inertia-ratio error over time of an estimator that estimates the
+ratios (default ``rigid-body-ekf-ratios``), over ``--seeds`` episodes from their first sample, with
+the share of seeds below 0.02 at 600 s.
+
+Examples::
 
     fkn-bench plot --estimator manual-ekf --scenario ds1 --seed 0 --steps 500 --out figures \\
         --results leaderboards/results
+    fkn-bench plot --ratios --scenario tumble-fast --seeds 20 --out figures
 """
 
 from __future__ import annotations
@@ -35,6 +40,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--cut", type=int, default=100, metavar="STEPS", help="scored window start (default: 100)")
     parser.add_argument("--results", metavar="DIR", help="also draw comparison bar charts from these results")
     parser.add_argument("--out", default="figures", metavar="DIR", help="output directory (default: figures)")
+    parser.add_argument("--ratios", action="store_true",
+                        help="draw the inertia-ratio error over time instead (estimator default: rigid-body-ekf-ratios)")
+    parser.add_argument("--seeds", type=int, default=20, metavar="N", help="--ratios: episodes 0 .. N-1 (default: 20)")
+    parser.add_argument("--duration", type=float, default=1000.0, metavar="S",
+                        help="--ratios: seconds from the episode start (default: 1000)")
     add_scenario_file_option(parser)
     parser.set_defaults(handler=run)
 
@@ -52,9 +62,11 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.metrics import MetricSettings
     from fkn_bench.scenarios import get_scenario
 
-    check_minimum(args, seed=0, steps=2, cut=0)
+    check_minimum(args, seed=0, steps=2, cut=0, seeds=1)
     load_scenario_files(args)
     scenario = get_scenario(args.scenario)
+    if args.ratios:
+        return _ratios(args, scenario)
     with usage_errors(UnknownEstimatorError, SelectionError):
         resolved = select_estimators([args.estimator] if args.estimator else None, [scenario]).resolved[0]
     results = None
@@ -77,4 +89,21 @@ def run(args: argparse.Namespace) -> int:
             written.append(save_figure(figure, out / f"comparison-{safe_name(name)}.png"))
     for path in written:
         print(path)
+    return 0
+
+
+def _ratios(args: argparse.Namespace, scenario) -> int:  # noqa: ANN001
+    from fkn_bench.harness.estimators import resolve_estimator
+    from fkn_bench.harness.grid import safe_name
+    from fkn_bench.harness.plots import save_figure
+    from fkn_bench.harness.ratios import ratio_convergence, ratio_figure
+
+    with usage_errors(ValueError):
+        result = ratio_convergence(resolve_estimator(args.estimator or "rigid-body-ekf-ratios", scenario), scenario,
+                                   args.seeds, args.duration)
+    path = save_figure(ratio_figure([result]), Path(args.out) / f"ratios-{safe_name(result.estimator)}-{safe_name(scenario.name)}.png")
+    for time in (100.0, 300.0, 600.0):
+        print(f"{result.estimator} on {scenario.name}: {result.share_below(0.02, time):.0%} of {args.seeds} seeds "
+              f"have inertia-ratio error < 0.02 at {time:g} s")
+    print(path)
     return 0
