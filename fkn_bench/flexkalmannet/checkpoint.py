@@ -10,6 +10,8 @@ the learned-parameter artefact (see :mod:`fkn_bench.training.pipeline`).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +24,8 @@ from fkn_bench.scenarios import Scenario
 from fkn_bench.training import Trainable, TrainingData, TrainingOutcome, fit
 from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint
 
-__all__ = ["build_model", "model_from_checkpoint", "REFERENCE_SAMPLES", "TRAINABLE", "train_flexkalmannet"]
+__all__ = ["build_model", "model_from_checkpoint", "REFERENCE_SAMPLES", "TRAINABLE", "RIGID_BODY_TRAINABLE",
+           "train_flexkalmannet"]
 
 REFERENCE_SAMPLES = 2048
 """Training measurements (a fixed random subset) over which deployed parameters are averaged."""
@@ -67,13 +70,15 @@ def build_model(config: FlexKalmanNetConfig, data: TrainingData) -> FlexKalmanNe
 
 
 def model_from_checkpoint(path: str | Path) -> tuple[FlexKalmanNet, FlexKalmanNetConfig, Scenario, dict[str, Any]]:
-    """Rebuild the trained model of a checkpoint: ``(model, config, scenario, document)``."""
+    """Rebuild the trained model of a checkpoint: ``(model, config, scenario, document)`` (for a
+    mixture's checkpoint, ``scenario`` is its first scenario)."""
     document = load_checkpoint(path)
-    if document["estimator"] != "flexkalmannet":
+    if document["estimator"] not in ("flexkalmannet", "flexkalmannet-rigid-body"):
         raise CheckpointError(f"{path} is a checkpoint of {document['estimator']!r}, not of flexkalmannet")
     try:
         config = FlexKalmanNetConfig.from_dict(document["config"])
-        scenario = Scenario.from_dict(document["scenario"])
+        recorded = document["scenario"]
+        scenario = Scenario.from_dict(recorded[0] if isinstance(recorded, list) else recorded)
     except (TypeError, ValueError) as exc:
         raise CheckpointError(f"{path}: invalid config in checkpoint: {exc}") from None
     state = document["state_dict"]
@@ -93,6 +98,15 @@ def model_from_checkpoint(path: str | Path) -> tuple[FlexKalmanNet, FlexKalmanNe
 
 TRAINABLE = Trainable(config=FlexKalmanNetConfig.from_options, build=build_model)
 """FlexKalmanNet's training declaration (its registry entry's ``trainable``)."""
+
+
+def _rigid_body_config(options: Mapping[str, Any]) -> FlexKalmanNetConfig:
+    return FlexKalmanNetConfig.from_options({"process_model": "rigid-body-ratios", **options})
+
+
+RIGID_BODY_TRAINABLE = Trainable(config=_rigid_body_config, build=build_model)
+"""``flexkalmannet-rigid-body``: FlexKalmanNet through the rigid-body model with estimated inertia
+ratios (the training option ``process_model`` defaults to ``rigid-body-ratios``)."""
 
 
 def train_flexkalmannet(

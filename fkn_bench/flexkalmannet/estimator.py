@@ -34,7 +34,10 @@ class FlexKalmanNetEstimator(TrainedKalmanEstimator):
     :class:`KalmanEstimator` plus ``metadata``), also built from a checkpoint."""
 
     default_name = "flexkalmannet"
-    descriptions = {"flexkalmannet": "FlexKalmanNet: EKF with noise parameters learned by a network"}
+    descriptions = {
+        "flexkalmannet": "FlexKalmanNet: EKF with noise parameters learned by a network",
+        "flexkalmannet-rigid-body": "FlexKalmanNet through the rigid-body model (inertia ratios estimated)",
+    }
 
     @classmethod
     def from_checkpoint(cls, path: str | Path) -> FlexKalmanNetEstimator:

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from fkn_bench.estimators.registry import register_estimator
-from fkn_bench.flexkalmannet.checkpoint import TRAINABLE
-from fkn_bench.flexkalmannet.estimator import flexkalmannet_factory
+from fkn_bench.flexkalmannet.checkpoint import RIGID_BODY_TRAINABLE, TRAINABLE
+from fkn_bench.flexkalmannet.estimator import FlexKalmanNetEstimator, flexkalmannet_factory
+from fkn_bench.training.artifacts import artifact_factory
 
 __all__: list[str] = []
 
@@ -13,4 +14,10 @@ register_estimator(
     flexkalmannet_factory,
     description="FlexKalmanNet: EKF with noise parameters learned by a fully connected network",
     trainable=TRAINABLE,
+)
+register_estimator(
+    "flexkalmannet-rigid-body",
+    artifact_factory("flexkalmannet-rigid-body", FlexKalmanNetEstimator),
+    description="FlexKalmanNet through the torque-free rigid-body model with estimated inertia ratios",
+    trainable=RIGID_BODY_TRAINABLE,
 )
