@@ -87,6 +87,9 @@ def run_cell(spec: CellSpec) -> CellRecord:
         except Exception as exc:  # noqa: BLE001 - an estimator's failure is a result
             return _failure(spec, exc)
         notes: dict[str, Any] = {}
+        trained_on = (getattr(estimator, "metadata", None) or {}).get("scenario")
+        if trained_on:  # a learned or tuned estimator: the training set its parameters come from
+            notes["trained_on"] = trained_on.get("name") if isinstance(trained_on, dict) else str(trained_on)
         try:
             online_steps = min(spec.online_steps, episodes.n_steps)
             us_online = time_online(estimator, episodes.measurements[0, :online_steps], dt)

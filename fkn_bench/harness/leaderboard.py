@@ -103,7 +103,7 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
         st = s["statistics"]["state_rmse"]
         rows.append([
             str(i) if math.isfinite(_score(s)) else _DASH,
-            s["estimator"],
+            s["estimator"] + (f" (trained on {s['trained_on']})" if s.get("trained_on") else ""),
             _fmt(s["state_rmse"], 4),
             f"{_fmt(st['median'], 4)} [{_fmt(st['q25'], 3)}, {_fmt(st['q75'], 3)}]",
             *(_fmt(s[k]) for k in (*GROUP_RMSE_KEYS.values(), "settling_time_s")),
@@ -126,7 +126,8 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
         "error growth, or NEES above the 99.9% chi-square quantile through the final window). ANEES: average "
         "NEES of the 12-dim error over seeds and scored steps (12 for a consistent filter); NEES in 95% bounds: "
         "share of steps whose average over the seeds is inside the two-sided 95% chi-square interval. µs/step: "
-        "wall time of one online step, and of one sequence step in the batched run (machine-dependent).",
+        "wall time of one online step, and of one sequence step in the batched run (machine-dependent). "
+        "(trained on X): the data set a learned or tuned estimator's parameters were fitted to.",
     ]
     if quoted:
         notes.append(

@@ -112,6 +112,7 @@ def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str,
             key: summarize(_column(table, group, metric, runs)).as_dict() for key, (group, metric) in STATISTIC_METRICS.items()
         },
         "errors": sorted({c.error for c in cells if c.error}),
+        "trained_on": next((c.notes["trained_on"] for c in cells if c.notes.get("trained_on")), None),
     }
 
 
