@@ -28,10 +28,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="results directory written by fkn-bench run --out (default: leaderboards/results)")
     parser.add_argument("--out", default="leaderboards", metavar="DIR",
                         help="where to write the leaderboards (default: leaderboards)")
+    parser.add_argument("--cross", action="store_true",
+                        help="instead: run every learned or tuned estimator with every family's committed parameters "
+                             "on every named scenario and write the cross-scenario table (cross-scenario.md/.csv)")
+    parser.add_argument("--seeds", type=int, default=20, metavar="N", help="--cross: seeds 0 .. N-1 (default: 20)")
     parser.set_defaults(handler=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.cross:
+        return _cross(args)
     from fkn_bench.harness.leaderboard import write_leaderboards
     from fkn_bench.harness.store import ResultStore, StoreError
 
@@ -44,5 +50,29 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(str(exc)) from None
     print(f"fkn-bench leaderboard: wrote {len(paths)} files from {len(results)} cells to {args.out}", file=sys.stderr)
     for path in paths:
+        print(path)
+    return 0
+
+
+CROSS_ESTIMATORS = ("flexkalmannet", "flexkalmannet-rigid-body", "nll-tuned-ekf", "direct-tuned-ekf")
+CROSS_FAMILIES = ("ds1", "ds2", "tumble", "default")
+
+
+def _cross(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from fkn_bench.harness.cross import cross_scores, cross_table
+    from fkn_bench.harness.tables import markdown_table
+    from fkn_bench.io import write_bytes_atomic
+    from fkn_bench.scenarios import scenario_names
+
+    if args.seeds < 1:
+        raise UsageError(f"--seeds must be a positive integer (got {args.seeds})")
+    scenarios = scenario_names()
+    table = cross_table(cross_scores(CROSS_ESTIMATORS, CROSS_FAMILIES, scenarios, args.seeds), scenarios)
+    out = Path(args.out)
+    header = f"# Cross-scenario table ({args.seeds} seeds)\n\nRegenerate: `fkn-bench leaderboard --cross --seeds {args.seeds}`\n\n"
+    for path, text in ((out / "cross-scenario.md", header + markdown_table(table)), (out / "cross-scenario.csv", table.to_csv())):
+        write_bytes_atomic(path, text.encode())
         print(path)
     return 0
