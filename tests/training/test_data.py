@@ -43,3 +43,16 @@ def test_bad_windows_are_refused() -> None:
         TrainingData(SHORT, window=1)
     with pytest.raises(ValueError, match="fewer than one window"):
         TrainingData(SHORT, window=5000)
+
+
+def test_a_mixture_holds_the_windows_and_val_splits_of_every_scenario() -> None:
+    fast = get_scenario("tumble-fast", n_steps=4000)
+    one, two = TrainingData(SHORT, window=800), TrainingData(fast, window=800)
+    mixed = TrainingData([SHORT, fast], window=800)
+    assert mixed.scenario.name == "ds1" and [s.name for s in mixed.scenarios] == ["ds1", "tumble-fast"]
+    assert mixed.n_windows == one.n_windows + two.n_windows
+    torch.testing.assert_close(mixed.train.truth, torch.cat((one.train.truth, two.train.truth)), rtol=0, atol=0)
+    torch.testing.assert_close(mixed.val.truth, torch.cat((one.val.truth, two.val.truth)), rtol=0, atol=0)
+    assert mixed.describe()["scenario"] == "ds1+tumble-fast" and len(mixed.describe()["config_hash"]) == 2
+    with pytest.raises(ValueError, match="one dt"):
+        TrainingData([get_scenario("ds1"), get_scenario("ds1").replace(name="fast", dt=0.05)], window=800)

@@ -71,3 +71,21 @@ def test_invalid_configs_are_refused(data: TrainingData) -> None:
         TrainConfig(lr=0.0)
     with pytest.raises(ValueError, match="loss_cut"):
         make_trainer(data, loss_cut=200)
+
+
+def test_the_process_model_option() -> None:
+    from fkn_bench.filters import PoseTwistModel, RigidBodyModel
+    from fkn_bench.scenarios import ASTROBEE_INERTIA, get_scenario
+
+    default = TrainConfig()
+    assert "process_model" not in default.to_dict() and type(default.build_filter().model) is PoseTwistModel
+    ratios = TrainConfig(process_model="rigid-body-ratios")
+    assert ratios.to_dict()["process_model"] == "rigid-body-ratios" and ratios.build_filter().model.state_dim == 15
+    known = TrainConfig(process_model="rigid-body")  # the inertia comes from the training scenario
+    model = known.build_filter(get_scenario("tumble-fast")).model
+    assert isinstance(model, RigidBodyModel) and model.inertia == ASTROBEE_INERTIA
+    assert TrainConfig(process_model="rigid-body", inertia=[1.0, 2.0, 2.5]).to_dict()["inertia"] == [1.0, 2.0, 2.5]
+    with pytest.raises(ValueError, match="process_model must be one of"):
+        TrainConfig(process_model="spinning")
+    with pytest.raises(ValueError, match="constant-rate model only"):
+        TrainConfig(variant="mekf", process_model="rigid-body-ratios")
