@@ -74,7 +74,7 @@ def rigid_body_estimator(variant: str, *, ratios: bool) -> Any:
     return factory
 
 
-for _variant in ("ekf", "ukf"):
+for _variant in ("ekf", "ukf", "mekf"):
     register_estimator(
         f"rigid-body-{_variant}",
         rigid_body_estimator(_variant, ratios=False),

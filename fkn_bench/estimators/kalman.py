@@ -37,15 +37,16 @@ def filter_result_to_estimates(result: Any, variant: Any, *, extras: Mapping[str
     states = numpy(result.means)
     extras = dict(extras or {})
     native = numpy(result.covariances)
-    if states.shape[-1] > 13:  # an augmented state (inertia ratios): the pose and twist are reported
+    extra = states.shape[-1] - 13
+    if extra:  # an augmented state (inertia ratios, last): the pose and twist are reported
         extras.setdefault("inertia_ratios", states[..., 13:].copy())
         states = states[..., :13]
-        native = None if native is None else native[..., :13, :13]
+        native = None if native is None else native[..., : native.shape[-1] - extra, : native.shape[-1] - extra]
     means = with_unit_quaternion(states)
     q = means[..., :4]
     covariances = error_covariances = native
     if native is not None:
-        if variant.covariance_dim == 12:
+        if native.shape[-1] == 12:  # the multiplicative EKF's error covariance
             covariances = state_covariance_from_error(q, native)
         else:
             error_covariances = error_covariance_from_state(q, native)
@@ -173,7 +174,8 @@ class KalmanEstimator(RecursiveEstimator):
 
     def _online_report(self, state: Any) -> tuple[ArrayF, ArrayF]:
         mean, covariance = state.mean[0], state.covariance[0]
-        return (mean[:13], covariance[:13, :13]) if mean.shape[0] > 13 else (mean, covariance)
+        extra = mean.shape[0] - 13  # augmented states (inertia ratios, last) are not reported
+        return (mean[:13], covariance[:-extra, :-extra]) if extra else (mean, covariance)
 
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:

@@ -13,6 +13,12 @@ m/s per step (process) and rad, m (measurement).
 Predict (world-frame rate ``w``, constant over a step): ``q' = exp(w dt / 2) (x) q``,
 ``r' = r + v dt``; error transition ``dtheta' = R(w dt) dtheta + dt J(w dt) dw``,
 ``dr' = dr + dt dv`` with ``J`` the left Jacobian of SO(3).
+Other process models (e.g. :class:`~fkn_bench.filters.rigid_body.RigidBodyModel`) are propagated
+by the model itself: the mean is ``f(x)`` (renormalised) and the error transition is the model's
+Jacobian ``F`` seen through the error: ``Phi = T(q') F M(q)``, with ``M`` the additive perturbation of
+an error (``dq = 1/2 [0, dtheta] (x) q = 1/2 Theta(q) dtheta``, the identity elsewhere) and ``T``
+the error of an additive perturbation (``dtheta = 2 Theta(q')^T dq``). States beyond the 13 (e.g.
+inertia ratios) are additive, and the error state then has ``n - 1`` components.
 Update with ``z = [q_z, r_z]``: ``q_z`` is sign-aligned with ``q``, the innovation is
 ``[log(q_z (x) q*), r_z - r]`` (6-dim, ``H = [I6 0]``), the Joseph form gives the error estimate
 and covariance, and the reset ``q <- exp(dtheta / 2) (x) q`` maps the covariance with
@@ -89,14 +95,15 @@ class MultiplicativeEKF(KalmanFilter):
     name = "mekf"
 
     def __init__(self, *, model: PoseTwistModel | None = None) -> None:
-        if model is not None and type(model) is not PoseTwistModel:
-            raise ValueError(f"the multiplicative EKF propagates the paper's constant-rate model only (got {type(model).__name__})")
         self.model = model if model is not None else PoseTwistModel()
-        self.layout = MEKF_MANUAL_LAYOUT
+        if not isinstance(self.model, PoseTwistModel):
+            raise ValueError(f"the multiplicative EKF needs a pose-twist state [q, r, w, v, ...] (got {type(self.model).__name__})")
+        self._exact = type(self.model) is PoseTwistModel  # the constant rate: exact exponential propagation
+        self.layout = MEKF_MANUAL_LAYOUT if self._exact else _error_layout(self.model.layout, self.model.state_dim - 13)
 
     @property
     def covariance_dim(self) -> int:
-        return 12
+        return self.model.state_dim - 1
 
     @property
     def innovation_dim(self) -> int:
@@ -116,6 +123,8 @@ class MultiplicativeEKF(KalmanFilter):
         return xp.concat((top, broadcast(lower[3:], (batch, 9, 12))), axis=1)
 
     def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
+        if not self._exact:
+            return self._model_predict(state, process_noise, dt)
         x, P = state.mean, state.covariance
         xp = namespace(x)
         dq = qx.from_rotation_vector(dt * x[:, 7:10])
@@ -125,6 +134,25 @@ class MultiplicativeEKF(KalmanFilter):
         PhiP = Phi @ P
         P_pred = add_matmul(process_noise, PhiP, Phi.swapaxes(1, 2))
         return FilterState(mean, symmetrize(P_pred))
+
+    def _model_predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
+        """Any other model: its mean and Jacobian, the Jacobian mapped to the error state."""
+        x, P = state.mean, state.covariance
+        xp = namespace(x)
+        mean, F = self.model.transition(x, dt)
+        q = mean[:, 0:4] / xp.sqrt((mean[:, 0:4] * mean[:, 0:4]).sum(1, keepdims=True))
+        mean = xp.concat((q, mean[:, 4:]), axis=1)
+        n = x.shape[1]
+        eye = constant(x, ("eye", n - 4), lambda: np.eye(n - 4))
+        zeros = xp.zeros((x.shape[0], 4, n - 4), dtype=x.dtype)
+        into = xp.concat((xp.concat((0.5 * qx.theta_matrix(x[:, 0:4]), zeros), axis=2),  # M: error -> additive
+                          broadcast(xp.concat((xp.zeros((n - 4, 3), dtype=x.dtype), eye), axis=1), (x.shape[0], n - 4, n - 1))),
+                         axis=1)
+        out = xp.concat((xp.concat((2.0 * qx.theta_matrix(q).swapaxes(1, 2), zeros[:, :3]), axis=2),  # T: additive -> error
+                         broadcast(xp.concat((xp.zeros((n - 4, 4), dtype=x.dtype), eye), axis=1), (x.shape[0], n - 4, n))),
+                        axis=1)
+        Phi = out @ F @ into
+        return FilterState(mean, symmetrize(add_matmul(process_noise, Phi @ P, Phi.swapaxes(1, 2))))
 
     def update(self, state: FilterState, z: Array, measurement_noise: Array) -> tuple[FilterState, Array, Array]:
         x, P = state.mean, state.covariance
@@ -136,7 +164,7 @@ class MultiplicativeEKF(KalmanFilter):
         def reset(dx: Array) -> tuple[Array, slice, Array]:
             return dx, slice(0, 3), eye(dx, 3) + 0.5 * qx.skew(dx[:, 0:3])
 
-        error = xp.zeros((x.shape[0], 12), dtype=x.dtype)
+        error = xp.zeros((x.shape[0], x.shape[1] - 1), dtype=x.dtype)
         # P_post comes back symmetrised (the reset's G P G^T is part of joseph_update's product)
         dx, P_post, S, _ = joseph_update(error, P, nu, measurement_noise, observed=slice(0, 6), normalize=reset)
         q_post = qx.multiply(qx.from_rotation_vector(dx[:, 0:3]), q)
@@ -146,6 +174,19 @@ class MultiplicativeEKF(KalmanFilter):
             q_post = q_post / xp.sqrt((q_post * q_post).sum(1, keepdims=True))
         mean = xp.concat((q_post, x[:, 4:] + dx[:, 3:]), axis=1)
         return FilterState(mean, P_post), nu, S
+
+
+def _error_layout(additive: NoiseLayout, extra: int) -> NoiseLayout:
+    """The error-state layout of another model: the manual tuning's, the rate's process noise from
+    the model's own layout, then the model's extra additive components (e.g. inertia ratios)."""
+    error, tail = MEKF_MANUAL_LAYOUT, slice(len(additive.q_default) - extra, None)
+    q_default = error.q_default[:6] + additive.q_default[7:10] + error.q_default[9:]
+    return NoiseLayout(
+        q_labels=error.q_labels + additive.q_labels[tail], q_units=error.q_units + additive.q_units[tail],
+        q_default=q_default + additive.q_default[tail], r_labels=error.r_labels, r_units=error.r_units,
+        r_default=error.r_default, p0_labels=error.p0_labels + additive.p0_labels[tail],
+        p0_units=error.p0_units + additive.p0_units[tail], p0_default=error.p0_default + additive.p0_default[tail],
+    )
 
 
 def _lower_rows(dt: float) -> np.ndarray:

@@ -84,7 +84,8 @@ def test_rigid_body_estimators() -> None:
     np.testing.assert_array_equal(rebuilt.estimate(episodes.measurements, episodes.valid, 0.1).means, batch.means)
     with pytest.raises(ValueError, match="unknown process model"):
         KalmanEstimator(model="spinning-top")
-    with pytest.raises(ValueError, match="constant-rate model only"):
-        KalmanEstimator(variant="mekf", model="rigid-body", inertia=ASTROBEE_INERTIA)
+    mekf = KalmanEstimator(variant="mekf", model="rigid-body-ratios")
+    estimates = mekf.estimate(episodes.measurements, episodes.valid, 0.1)
+    assert estimates.error_covariances.shape == (2, 300, 12, 12) and estimates.extras["inertia_ratios"].shape == (2, 300, 2)
     with pytest.raises(ValueError, match="q_std needs 15 values"):
         KalmanEstimator(model="rigid-body-ratios", q_std=[0.01] * 13)

@@ -87,5 +87,4 @@ def test_the_process_model_option() -> None:
     assert TrainConfig(process_model="rigid-body", inertia=[1.0, 2.0, 2.5]).to_dict()["inertia"] == [1.0, 2.0, 2.5]
     with pytest.raises(ValueError, match="process_model must be one of"):
         TrainConfig(process_model="spinning")
-    with pytest.raises(ValueError, match="constant-rate model only"):
-        TrainConfig(variant="mekf", process_model="rigid-body-ratios")
+    assert TrainConfig(variant="mekf", process_model="rigid-body-ratios").build_filter().covariance_dim == 14
