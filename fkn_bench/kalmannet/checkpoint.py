@@ -37,6 +37,8 @@ def build_model(config: KalmanNetConfig, data: TrainingData | None = None, *, mo
             out_mult=config.out_mult,
             network_dtype=getattr(torch, config.network_dtype),
             detach_every=config.detach_every,
+            initial_gain=config.initial_gain,
+            output_scale=config.output_scale,
         )
     return net
 

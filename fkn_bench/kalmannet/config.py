@@ -20,7 +20,7 @@ from fkn_bench.training.pipeline import options_with_file
 
 __all__ = ["KalmanNetConfig"]
 
-_MODEL_FIELDS = ("manifold", "in_mult", "out_mult", "network_dtype", "detach_every")
+_MODEL_FIELDS = ("manifold", "in_mult", "out_mult", "network_dtype", "detach_every", "initial_gain", "output_scale")
 _NOT_OPTIONS = ("variant", "objective", "optimizer", "lbfgs_iterations", "lbfgs_history")
 
 
@@ -44,6 +44,8 @@ class KalmanNetConfig(TrainConfig):
     out_mult: int = 10
     network_dtype: str = "float32"
     detach_every: int | None = 400
+    initial_gain: float | None = 0.5
+    output_scale: float = 0.1
     lr: float = 1e-3
     max_grad_norm: float | None = 1.0
     windows_per_batch: int = 16

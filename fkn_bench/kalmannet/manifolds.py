@@ -27,6 +27,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from fkn_bench.filters.models import StateSpaceModel
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import namespace
@@ -67,15 +69,25 @@ class Manifold:
         """Component-wise error ``(..., n)`` used by the training loss (sign-safe for a quaternion)."""
         return estimate - truth
 
+    def observed_gain(self) -> np.ndarray:
+        """``G (n', m')``: the gain that moves the observed part of the state onto the
+        measurement and leaves the rest (``H G = I`` in tangent coordinates); a starting point
+        for the learned gain (``initial_gain * G``)."""
+        raise NotImplementedError
+
 
 class Euclidean(Manifold):
     """Plain vector differences and additive corrections (KalmanNet's own, eq. 15)."""
 
     name = "euclidean"
 
-    def __init__(self, state_dim: int, measurement_dim: int) -> None:
-        self.state_dim = self.state_tangent_dim = int(state_dim)
-        self.measurement_dim = self.measurement_tangent_dim = int(measurement_dim)
+    def __init__(self, H: np.ndarray) -> None:
+        self.H = np.asarray(H, dtype=np.float64)
+        self.measurement_dim, self.state_dim = self.H.shape
+        self.state_tangent_dim, self.measurement_tangent_dim = self.state_dim, self.measurement_dim
+
+    def observed_gain(self) -> np.ndarray:
+        return np.linalg.pinv(self.H)  # H G = I for a full-row-rank H
 
     def measurement_difference(self, a: Array, b: Array) -> Array:
         return a - b
@@ -114,6 +126,9 @@ class PoseTangent(Manifold):
         q = qx.multiply(qx.from_rotation_vector(delta[:, 0:3]), x[:, 0:4])  # Exp(dtheta) (x) q-, world frame
         return xp.concat((q, x[:, 4:] + delta[:, 3:]), axis=1)
 
+    def observed_gain(self) -> np.ndarray:
+        return np.eye(12, 6)  # [I6; 0]: attitude and position observed, rates not
+
     def state_error(self, estimate: Array, truth: Array) -> Array:
         """``estimate - truth`` with the true quaternion's sign matched to the estimate (the
         project's 13-state error, :func:`fkn_bench.training.objectives.aligned_state_error`)."""
@@ -135,5 +150,5 @@ def manifold_for(model: StateSpaceModel, kind: str = "auto") -> Manifold:
             raise ValueError(f"the pose tangent space needs 13 states and 7 measurements (model has {n} and {m})")
         return PoseTangent()
     if kind == "euclidean":
-        return Euclidean(n, m)
+        return Euclidean(model.H)
     raise ValueError(f"manifold must be 'auto', 'pose-tangent' or 'euclidean' (got {kind!r})")

@@ -72,9 +72,23 @@ class GainNetwork(nn.Module):
         n, m: tangent dimensions (the gain is ``n x m``).
         in_mult, out_mult: the paper's input and output multipliers (its code's defaults 5, 40).
         dtype: the network's dtype (features are cast to it, the gain is returned in it).
+        initial_gain: ``(n, m)`` gain the network starts near (FC2's output bias), or None (the
+            paper: PyTorch's default initialisation everywhere).
+        output_scale: factor on FC2's output-layer weights at initialisation (1: PyTorch's
+            default), so that the starting gain is ``initial_gain`` plus a small learned part.
     """
 
-    def __init__(self, n: int, m: int, *, in_mult: int = 5, out_mult: int = 40, dtype: torch.dtype = torch.float32) -> None:
+    def __init__(
+        self,
+        n: int,
+        m: int,
+        *,
+        in_mult: int = 5,
+        out_mult: int = 40,
+        dtype: torch.dtype = torch.float32,
+        initial_gain: Tensor | None = None,
+        output_scale: float = 1.0,
+    ) -> None:
         super().__init__()
         if n < 1 or m < 1 or in_mult < 1 or out_mult < 1:
             raise ValueError(f"n, m, in_mult and out_mult must be >= 1 (got {n}, {m}, {in_mult}, {out_mult})")
@@ -89,6 +103,14 @@ class GainNetwork(nn.Module):
         self.gru_s = nn.GRUCell(m2 + 2 * m * in_mult, m2)
         hidden_fc2 = (n2 + m2) * out_mult
         self.fc2 = nn.Sequential(nn.Linear(n2 + m2, hidden_fc2), nn.ReLU(), nn.Linear(hidden_fc2, n * m))
+        if initial_gain is not None or output_scale != 1.0:
+            with torch.no_grad():
+                last = self.fc2[-1]
+                last.weight.mul_(output_scale)
+                if initial_gain is not None:
+                    if tuple(initial_gain.shape) != (n, m):
+                        raise ValueError(f"initial_gain must be ({n}, {m}) (got {tuple(initial_gain.shape)})")
+                    last.bias.copy_(initial_gain.reshape(-1))
         self.fc3 = _dense(m2 + n * m, n2)
         self.fc4 = _dense(2 * n2, n2)
         self.register_buffer("prior_q", torch.eye(n).reshape(-1))

@@ -112,6 +112,10 @@ class KalmanNet(SequenceModel):
         detach_every: truncated back-propagation through time: while gradients are recorded,
             the recurrent state (estimate, memories, hidden states) is detached every this many
             time steps (None: full back-propagation through the sequence).
+        initial_gain, output_scale: the gain network starts near ``initial_gain * G`` (``G`` the
+            manifold's :meth:`~Manifold.observed_gain`) with FC2's output weights scaled by
+            ``output_scale`` (None and 1: the paper's default initialisation; see
+            :class:`~fkn_bench.kalmannet.network.GainNetwork`).
     """
 
     def __init__(
@@ -123,6 +127,8 @@ class KalmanNet(SequenceModel):
         out_mult: int = 40,
         network_dtype: torch.dtype = torch.float32,
         detach_every: int | None = None,
+        initial_gain: float | None = None,
+        output_scale: float = 1.0,
     ) -> None:
         super().__init__()
         self.model = model
@@ -130,8 +136,10 @@ class KalmanNet(SequenceModel):
         if detach_every is not None and detach_every < 1:
             raise ValueError(f"detach_every must be >= 1 or None (got {detach_every})")
         self.detach_every = detach_every
+        start = None if initial_gain is None else initial_gain * torch.from_numpy(self.manifold.observed_gain())
         self.network = GainNetwork(self.manifold.state_tangent_dim, self.manifold.measurement_tangent_dim,
-                                   in_mult=in_mult, out_mult=out_mult, dtype=network_dtype)
+                                   in_mult=in_mult, out_mult=out_mult, dtype=network_dtype, initial_gain=start,
+                                   output_scale=output_scale)
 
     # ------------------------------------------------------------------ steps (pure)
     def prior(self, batch: int, dtype: torch.dtype = torch.float64) -> KalmanNetState:
