@@ -9,9 +9,9 @@ Fig. 4, ``in_mult`` and ``out_mult`` its input and output multipliers):
 ==========  =================================  ==============================  =============
 layer       input                              output                          activation
 ==========  =================================  ==============================  =============
-FC5         F4 (n)                             n * in_mult                     ReLU
+FC5         F3 (n)                             n * in_mult                     ReLU
 Q-GRU       FC5 (n * in_mult)                  hidden n^2                      GRU
-FC6         F3 (n)                             n * in_mult                     ReLU
+FC6         F4 (n)                             n * in_mult                     ReLU
 Sigma-GRU   [Q-GRU, FC6] (n^2 + n * in_mult)   hidden n^2                      GRU
 FC1         Sigma-GRU (n^2)                    m^2                             ReLU
 FC7         [F1, F2] (2m)                      2m * in_mult                    ReLU
@@ -130,8 +130,8 @@ class GainNetwork(nn.Module):
         """One step: normalised features ``F1 (B, m)``, ``F2 (B, m)``, ``F3 (B, n)``, ``F4 (B, n)``
         and the hidden states -> the gain ``(B, n, m)`` and the next hidden states."""
         f1, f2, f3, f4 = (f.to(self.dtype) for f in (f1, f2, f3, f4))
-        h_q = self.gru_q(self.fc5(f4), hidden.q)
-        h_sigma = self.gru_sigma(torch.cat((h_q, self.fc6(f3)), dim=-1), hidden.sigma)
+        h_q = self.gru_q(self.fc5(f3), hidden.q)  # Q: the state's evolution (F3)
+        h_sigma = self.gru_sigma(torch.cat((h_q, self.fc6(f4)), dim=-1), hidden.sigma)  # Sigma: Q and the update (F4)
         h_s = self.gru_s(torch.cat((self.fc1(h_sigma), self.fc7(torch.cat((f1, f2), dim=-1))), dim=-1), hidden.s)
         gain = self.fc2(torch.cat((h_sigma, h_s), dim=-1))
         backward = self.fc3(torch.cat((h_s, gain), dim=-1))

@@ -11,8 +11,8 @@ from fkn_bench.kalmannet import GainNetwork, Hidden, normalize_features
 def test_layers_have_the_papers_dimensions() -> None:
     n, m, in_mult, out_mult = 12, 6, 5, 10
     net = GainNetwork(n, m, in_mult=in_mult, out_mult=out_mult)
-    assert (net.gru_q.input_size, net.gru_q.hidden_size) == (n * in_mult, n * n)  # Q-GRU <- FC5(F4)
-    assert (net.gru_sigma.input_size, net.gru_sigma.hidden_size) == (n * n + n * in_mult, n * n)  # <- [Q, FC6(F3)]
+    assert (net.gru_q.input_size, net.gru_q.hidden_size) == (n * in_mult, n * n)  # Q-GRU <- FC5(F3)
+    assert (net.gru_sigma.input_size, net.gru_sigma.hidden_size) == (n * n + n * in_mult, n * n)  # <- [Q, FC6(F4)]
     assert (net.gru_s.input_size, net.gru_s.hidden_size) == (m * m + 2 * m * in_mult, m * m)  # <- [FC1, FC7(F1, F2)]
     assert (net.fc1[0].in_features, net.fc1[0].out_features) == (n * n, m * m)
     assert (net.fc7[0].in_features, net.fc7[0].out_features) == (2 * m, 2 * m * in_mult)
