@@ -43,8 +43,12 @@ def build_model(config: KalmanNetConfig, data: TrainingData | None = None, *, mo
     return net
 
 
-def model_from_checkpoint(path: str | Path) -> tuple[KalmanNet, KalmanNetConfig, Scenario, dict[str, Any]]:
-    """Rebuild the trained KalmanNet of a checkpoint: ``(model, config, scenario, document)``."""
+def model_from_checkpoint(
+    path: str | Path, *, model: StateSpaceModel | None = None
+) -> tuple[KalmanNet, KalmanNetConfig, Scenario, dict[str, Any]]:
+    """Rebuild the trained KalmanNet of a checkpoint: ``(model, config, scenario, document)``, on
+    the process ``model`` it was trained with (default the pose-twist model; the checkpoint records
+    the class name and a mismatch is refused)."""
     document = load_checkpoint(path)
     if document["estimator"] != "kalmannet":
         raise CheckpointError(f"{path} is a checkpoint of {document['estimator']!r}, not of kalmannet")
@@ -53,7 +57,10 @@ def model_from_checkpoint(path: str | Path) -> tuple[KalmanNet, KalmanNetConfig,
         scenario = Scenario.from_dict(document["scenario"])
     except (TypeError, ValueError) as exc:
         raise CheckpointError(f"{path}: invalid config in checkpoint: {exc}") from None
-    net = build_model(config)
+    net = build_model(config, model=model)
+    trained_on = (document.get("deployed") or {}).get("process_model")
+    if trained_on is not None and trained_on != type(net.model).__name__:
+        raise CheckpointError(f"{path} was trained on process model {trained_on}, not {type(net.model).__name__}")
     try:
         net.load_state_dict(document["state_dict"])
     except RuntimeError as exc:

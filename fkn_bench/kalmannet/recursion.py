@@ -232,6 +232,7 @@ class KalmanNet(SequenceModel):
         net = self.network
         return {
             "architecture": "KalmanNet architecture 2 (Revach et al. 2022)",
+            "process_model": type(self.model).__name__,
             "manifold": self.manifold.name,
             "state_tangent_dim": net.n,
             "measurement_tangent_dim": net.m,

@@ -17,6 +17,11 @@ per-epoch history, an ``on_epoch`` callback, and with ``out=DIR`` these files:
   :mod:`fkn_bench.training.artifacts`), with the test-split metrics and the per-epoch history
   (``training.history``: every column of ``history.csv`` but the seconds), so that a committed
   artefact can be checked against a short retraining.
+
+A trainable whose module is a :class:`~fkn_bench.training.trainer.SequenceModel` (KalmanNet: a
+network inside the filter loop, no noise parameters) gets the same files but ``parameters.png``;
+its ``parameters.json`` holds the module's description, its ``estimator_config`` names the
+checkpoint (the weights), and ``history.csv`` the gradient steps taken, clipped and skipped.
 """
 
 from __future__ import annotations

@@ -14,6 +14,14 @@ L-BFGS one epoch is one ``torch.optim.LBFGS`` step (up to ``lbfgs_iterations`` i
 strong-Wolfe line search) on all training windows at once. Validation runs the variant with the deployed parameters over the whole val split and reports the 13-state RMSE
 (supervised objective) or the innovation NLL (``nll``, which uses no ground truth for model
 selection; the RMSE is logged as a diagnostic only).
+
+A :class:`SequenceModel` (KalmanNet) brings its own differentiable recursion instead: the loop
+calls its ``sequence_mse`` where it would run the variant, and everything else (optimiser,
+scheduler, early stopping, seeds, resume) is the same. With ``max_grad_norm`` set, gradient norms
+are clipped, the steps whose norm was above it are counted, and a batch whose gradient norm is
+not finite is skipped (and counted) instead of stepping the weights to NaN
+(:attr:`Trainer.gradient_steps`; a SequenceModel's history records the counts per epoch, the
+artefact their totals).
 """
 
 from __future__ import annotations
