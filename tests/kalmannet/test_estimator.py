@@ -12,6 +12,7 @@ import torch
 from fkn_bench.estimators import make_estimator
 from fkn_bench.estimators.conformance import check_input_rules, hostile_measurements
 from fkn_bench.estimators.registry import estimator_spec
+from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
 from fkn_bench.kalmannet import TRAINABLE, KalmanNetConfig, KalmanNetEstimator, build_model
 from fkn_bench.metrics import score_run
 from fkn_bench.runtime import torch_threads
@@ -89,3 +90,44 @@ def test_registered_trainable_and_unavailable_without_weights() -> None:
         make_estimator("kalmannet", scenario=get_scenario("ds1"))
     with pytest.raises(ValueError, match="either checkpoint=PATH or network="):
         KalmanNetEstimator()
+
+
+class _InterfaceOnly(StateSpaceModel):
+    """Another process model of the pose state, seen only through the common interface (what a
+    rigid-body model offers): it delegates each hook to the pose-twist model."""
+
+    state_dim, measurement_dim = 13, 7
+
+    def __init__(self) -> None:
+        self._inner = PoseTwistModel()
+
+    def transition(self, x, dt):  # noqa: ANN001, ANN201
+        return self._inner.transition(x, dt)
+
+    def measure(self, x):  # noqa: ANN001, ANN201
+        return self._inner.measure(x)
+
+    def sanitize(self, measurements, mask):  # noqa: ANN001, ANN201
+        return self._inner.sanitize(measurements, mask)
+
+    def align(self, z, x_pred):  # noqa: ANN001, ANN201
+        return self._inner.align(z, x_pred)
+
+    def normalize(self, x):  # noqa: ANN001, ANN201
+        return self._inner.normalize(x)
+
+    def initial_state(self, z):  # noqa: ANN001, ANN201
+        return self._inner.initial_state(z)
+
+    def prior_state(self, batch, dtype):  # noqa: ANN001, ANN201
+        return self._inner.prior_state(batch, dtype)
+
+
+def test_any_process_model_with_the_common_interface_works_unchanged(hostile) -> None:
+    config = KalmanNetConfig(network_dtype="float64", out_mult=2)
+    z, mask = torch.from_numpy(hostile.measurements[:, :100]), torch.from_numpy(hostile.mask[:, :100])
+    with torch.no_grad():
+        reference = build_model(config).run_means(z, mask, dt=hostile.dt)
+        other = build_model(config, model=_InterfaceOnly())
+        assert other.describe()["manifold"] == "pose-tangent" and other.describe()["process_model"] == "_InterfaceOnly"
+        torch.testing.assert_close(other.run_means(z, mask, dt=hostile.dt), reference, rtol=0, atol=1e-12)
