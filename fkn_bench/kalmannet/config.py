@@ -3,7 +3,7 @@
 The data protocol and optimisation fields are :class:`~fkn_bench.training.TrainConfig`'s (the
 benchmark's protocol, shared with FlexKalmanNet and the tuned EKFs); KalmanNet adds the network's
 fields and changes a few defaults (below). It trains with Adam on the supervised objective (the
-paper's MSE against the true state; section IV-D), so ``variant``, ``objective``, ``optimizer``
+paper's MSE against the true state, its training algorithm), so ``variant``, ``objective``, ``optimizer``
 and the L-BFGS settings are not among its options.
 """
 

@@ -1,5 +1,5 @@
-"""A linear Gaussian benchmark of KalmanNet's paper (section V-A, a linear model in canonical
-form, at a small size): data, the Kalman filter on it, and KalmanNet trained by the shared Trainer.
+"""A linear Gaussian benchmark of KalmanNet's paper (its linear-model experiments, a
+model in canonical form, at a small size): data, the Kalman filter on it, and KalmanNet trained by the shared Trainer.
 
 ``x' = A x + w``, ``A = [[1, 1], [0, 1]]``, ``w ~ N(0, q^2 I)``; ``y = x + v``, ``v ~ N(0, r^2 I)``
 (``H = I``), ``q = 0.1``, ``r = 1`` (``q^2 / r^2 = -20 dB``), 50-step sequences from

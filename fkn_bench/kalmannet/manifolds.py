@@ -1,6 +1,6 @@
 """Where KalmanNet's differences and corrections live: plain vectors, or the pose's tangent space.
 
-KalmanNet (Revach et al. 2022, eq. 15 and section IV-B) forms four differences of measurements
+KalmanNet (Revach et al. 2022, section "KalmanNet": its input features and update) forms four differences of measurements
 and states and applies its learned gain to the innovation additively,
 ``x_t|t = x_t|t-1 + K_t dy_t``. For a state with a unit quaternion an additive difference is not
 sign-safe (``q`` and ``-q`` are one attitude) and an additive correction leaves the unit sphere.
@@ -77,7 +77,7 @@ class Manifold:
 
 
 class Euclidean(Manifold):
-    """Plain vector differences and additive corrections (KalmanNet's own, eq. 15)."""
+    """Plain vector differences and additive corrections (KalmanNet's own update)."""
 
     name = "euclidean"
 

@@ -1,10 +1,10 @@
-"""KalmanNet's gain network, architecture 2 (Revach et al. 2022, section IV-C, Fig. 4).
+"""KalmanNet's gain network, architecture 2 (Revach et al. 2022, "Architecture 2" and its figure).
 
 Three GRUs track quantities shaped like the Kalman filter's second-order moments: ``Q`` (the
 process noise), ``Sigma`` (the predicted state covariance) and ``S`` (the innovation covariance),
 with hidden sizes ``n^2``, ``n^2`` and ``m^2`` (``n``: state tangent dimension, ``m``: measurement
 tangent dimension). Fully connected layers FC1-FC7 connect them (dimensions as in the paper's
-Fig. 4, ``in_mult`` and ``out_mult`` its input and output multipliers):
+figure, ``in_mult`` and ``out_mult`` its input and output multipliers):
 
 ==========  =================================  ==============================  =============
 layer       input                              output                          activation
@@ -25,11 +25,11 @@ FC2's output is the gain ``K_t`` (``n x m``, row-major). FC3 and FC4 are the "ba
 FC4's output replaces the Sigma-GRU's hidden state for the next step, as the covariance update
 ``Sigma_t|t = Sigma_t|t-1 - K S K^T`` does in the Kalman filter. The features are
 ``F1`` observation difference, ``F2`` innovation, ``F3`` forward-evolution difference and ``F4``
-forward-update difference (paper, section IV-B), each L2-normalised before entering the network
+forward-update difference (the paper's input features), each L2-normalised before entering the network
 (:func:`normalize_features`).
 
-The hidden states start at ``Q = I``, ``Sigma = 0``, ``S = I`` (flattened), the priors of the
-authors' description; they are buffers of the module, so a trained network carries them.
+The hidden states start at ``Q = I``, ``Sigma = 0``, ``S = I`` (flattened), the priors the
+authors' implementation uses by default; they are buffers of the module, so a trained network carries them.
 The recurrent state is never kept on the module: :meth:`GainNetwork.forward` takes the hidden
 states and returns the new ones (a pure step), so that several sequences, the batch path and the
 online path can run the same weights.
@@ -55,7 +55,7 @@ class Hidden(NamedTuple):
 
 
 def normalize_features(feature: Tensor, eps: float = 1e-12) -> Tensor:
-    """``f / max(|f|_2, eps)`` over the last axis (paper, section IV-B: each input feature is
+    """``f / max(|f|_2, eps)`` over the last axis (the paper's input features: each one is
     L2-normalised; a zero feature stays zero, with finite gradients)."""
     return functional.normalize(feature, p=2.0, dim=-1, eps=eps)
 

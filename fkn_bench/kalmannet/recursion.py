@@ -1,16 +1,16 @@
 """KalmanNet's filter recursion: pure step functions on a small immutable state, and ``run``.
 
-KalmanNet (Revach et al. 2022, section IV, Algorithm 1) keeps the Kalman filter's flow and
+KalmanNet (Revach et al. 2022, section "KalmanNet") keeps the Kalman filter's flow and
 replaces the gain: predict with the (known) model, ``x_t|t-1 = f(x_t-1|t-1)`` and
-``y_t|t-1 = h(x_t|t-1)`` (eq. 5a-b); compute the gain ``K_t`` with the network from the features
-(section IV-B)
+``y_t|t-1 = h(x_t|t-1)`` (the KF's prediction); compute the gain ``K_t`` with the network from the features
+(the paper's input features)
 
 * F1, observation difference ``dy~_t = y_t - y_t-1``,
 * F2, innovation ``dy_t = y_t - y_t|t-1``,
 * F3, forward-evolution difference ``dx~_t = x_t-1|t-1 - x_t-2|t-2``,
 * F4, forward-update difference ``dx^_t = x_t-1|t-1 - x_t-1|t-2`` (the previous correction),
 
-each L2-normalised; and update ``x_t|t = x_t|t-1 + K_t dy_t`` (eq. 15). Differences and the
+each L2-normalised; and update ``x_t|t = x_t|t-1 + K_t dy_t`` (the KF's update with the learned gain). Differences and the
 correction are taken on a :class:`~fkn_bench.kalmannet.manifolds.Manifold` (the pose's tangent
 space for the 13-state pose model: rotation vectors for the attitude, ``Exp`` for the
 correction, the posterior quaternion renormalised by the model's ``normalize``).
@@ -150,7 +150,7 @@ class KalmanNet(SequenceModel):
                               self.network.initial_hidden(batch))
 
     def predict(self, state: KalmanNetState, dt: float) -> KalmanNetState:
-        """The state predicted over ``dt`` seconds by the model (eq. 5a); memories unchanged."""
+        """The state predicted over ``dt`` seconds by the model (the KF's prediction); memories unchanged."""
         return state._replace(mean=self.model.predict(state.mean, dt))
 
     def initial(self, state: KalmanNetState, z: Tensor) -> KalmanNetState:
@@ -168,7 +168,7 @@ class KalmanNet(SequenceModel):
         return f1, innovation, state.evolution, state.correction
 
     def update(self, state: KalmanNetState, z: Tensor) -> KalmanNetState:
-        """The measurement update of every row with usable measurements ``z (B, m)`` (eq. 15):
+        """The measurement update of every row with usable measurements ``z (B, m)``:
         ``x+ = x- [+] K dy``, then the model's ``normalize`` (unit quaternion)."""
         prior = state.mean
         z = self.model.align(z, prior)

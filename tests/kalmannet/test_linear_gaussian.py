@@ -1,6 +1,6 @@
-"""KalmanNet against its paper's claims on a linear Gaussian model (Revach et al. 2022,
-section V-A and Fig. 6): where the Kalman filter is optimal, trained KalmanNet comes close to it
-(the paper: it "coincides" with the MMSE; here within 0.5 dB after 15 small epochs), and with
+"""KalmanNet against its paper's claims on a linear Gaussian model (Revach et al. 2022, its
+linear-model experiments): where the Kalman filter is optimal, trained KalmanNet reaches its MSE
+(the paper reports it matching the MMSE; here within 0.5 dB after 15 small epochs), and with
 mismatched noise statistics it beats the mismatched Kalman filter. The model, data and training
 are :mod:`fkn_bench.kalmannet.linear` (``python -m fkn_bench.kalmannet.linear`` prints the numbers)."""
 

@@ -1,4 +1,4 @@
-"""KalmanNet's gain network has architecture 2's layout (Revach et al. 2022, Fig. 4), starts
+"""KalmanNet's gain network has architecture 2's layout (Revach et al. 2022, its figure of architecture 2), starts
 from the documented priors, and is a pure step (no recurrent state kept on the module)."""
 
 from __future__ import annotations
