@@ -69,7 +69,9 @@ class Estimate:
         time: time of the estimate, s.
         mean: ``(13,)`` state estimate (unit quaternion).
         native_covariance: the covariance the filter carries: ``(13, 13)`` of the state for
-            additive filters, ``(12, 12)`` of the error for the multiplicative EKF.
+            additive filters, ``(12, 12)`` of the error for the multiplicative EKF; None for an
+            estimator that carries none (KalmanNet; ``covariance`` and ``error_covariance`` are
+            then None too).
         initialised: False before the first usable measurement.
         updated: True when this step used a measurement.
     Properties ``covariance`` (13x13 state) and ``error_covariance`` (12x12 error
@@ -78,23 +80,25 @@ class Estimate:
 
     time: float
     mean: ArrayF
-    native_covariance: ArrayF
+    native_covariance: ArrayF | None
     initialised: bool
     updated: bool
 
-    def __init__(self, time: float, mean: ArrayF, native_covariance: ArrayF, initialised: bool, updated: bool) -> None:
-        mean.flags.writeable = native_covariance.flags.writeable = False  # one dict update: per step
+    def __init__(self, time: float, mean: ArrayF, native_covariance: ArrayF | None, initialised: bool, updated: bool) -> None:
+        mean.flags.writeable = False  # one dict update: per step
+        if native_covariance is not None:
+            native_covariance.flags.writeable = False
         self.__dict__.update(time=time, mean=mean, native_covariance=native_covariance, initialised=initialised, updated=updated)
 
     @functools.cached_property
-    def covariance(self) -> ArrayF:
-        if self.native_covariance.shape == (13, 13):
+    def covariance(self) -> ArrayF | None:
+        if self.native_covariance is None or self.native_covariance.shape == (13, 13):
             return self.native_covariance
         return state_covariance_from_error(self.mean[:4], self.native_covariance)
 
     @functools.cached_property
-    def error_covariance(self) -> ArrayF:
-        if self.native_covariance.shape == (12, 12):
+    def error_covariance(self) -> ArrayF | None:
+        if self.native_covariance is None or self.native_covariance.shape == (12, 12):
             return self.native_covariance
         return error_covariance_from_state(self.mean[:4], self.native_covariance)
 

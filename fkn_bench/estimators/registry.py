@@ -52,7 +52,8 @@ ENTRY_POINT_GROUP = "fkn_bench.estimators"
 EstimatorFactory = Callable[..., Estimator]
 
 # modules whose import registers the built-in estimators (imported lazily: they pull in torch)
-_BUILTIN_MODULES: tuple[str, ...] = ("fkn_bench.estimators.builtin", "fkn_bench.flexkalmannet.registration", "fkn_bench.baselines.registration")
+_BUILTIN_MODULES: tuple[str, ...] = ("fkn_bench.estimators.builtin", "fkn_bench.flexkalmannet.registration", "fkn_bench.baselines.registration",
+                                      "fkn_bench.kalmannet.registration")
 
 
 class UnknownEstimatorError(KeyError):

@@ -17,6 +17,11 @@ per-epoch history, an ``on_epoch`` callback, and with ``out=DIR`` these files:
   :mod:`fkn_bench.training.artifacts`), with the test-split metrics and the per-epoch history
   (``training.history``: every column of ``history.csv`` but the seconds), so that a committed
   artefact can be checked against a short retraining.
+
+A trainable whose module is a :class:`~fkn_bench.training.trainer.SequenceModel` (KalmanNet: a
+network inside the filter loop, no noise parameters) gets the same files but ``parameters.png``;
+its ``parameters.json`` holds the module's description, its ``estimator_config`` names the
+checkpoint (the weights), and ``history.csv`` the gradient steps taken, clipped and skipped.
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ from fkn_bench.training.artifacts import deployed_estimator_config, run_provenan
 from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from fkn_bench.training.data import TrainingData, training_data
 from fkn_bench.training.objectives import aligned_state_error, state_mse
-from fkn_bench.training.trainer import NoiseModel, OnEpoch, TrainConfig, Trainer
+from fkn_bench.training.trainer import NoiseModel, OnEpoch, SequenceModel, TrainConfig, Trainer
 
 __all__ = ["Trainable", "TrainingOutcome", "fit", "options_with_file", "read_toml", "split_metrics", "trainable"]
 
@@ -58,13 +63,14 @@ class Trainable:
             artefacts; its keys are the options a sweep may search) and
             ``train_config() -> TrainConfig`` (data protocol, filter variant, objective,
             optimiser). ``config({})`` is the default configuration.
-        build: ``(config, data) -> NoiseModel``: the module whose parameters are trained,
-            initialised (seeded by the config).
+        build: ``(config, data) -> NoiseModel | SequenceModel``: the module whose parameters are
+            trained, initialised (seeded by the config); a
+            :class:`~fkn_bench.training.trainer.SequenceModel` brings its own recursion.
         notes: extra entries of the artefact's ``training`` record.
     """
 
     config: Callable[[Mapping[str, Any]], Any]
-    build: Callable[[Any, TrainingData], NoiseModel]
+    build: Callable[[Any, TrainingData], NoiseModel | SequenceModel]
     notes: Mapping[str, Any] = field(default_factory=dict)
 
 
@@ -107,7 +113,7 @@ class TrainingOutcome:
     """What a training run produced (``out`` is None for a run without files, e.g. a sweep trial)."""
 
     estimator: str
-    model: NoiseModel
+    model: NoiseModel | SequenceModel
     config: Any
     scenario: Scenario
     history: pd.DataFrame
@@ -150,7 +156,15 @@ class TrainingOutcome:
         }
 
 
-def split_metrics(model: NoiseModel, settings: TrainConfig, scenario: Scenario) -> dict[str, Any]:
+def _deployed(model: NoiseModel | SequenceModel) -> dict[str, Any]:
+    """What the trained module deploys, JSON-compatible: the learned parameters, or a
+    :class:`SequenceModel`'s own description."""
+    if isinstance(model, SequenceModel):
+        return model.describe()
+    return model.parameter_set.to_dict(model.deployed_raw().detach())
+
+
+def split_metrics(model: NoiseModel | SequenceModel, settings: TrainConfig, scenario: Scenario) -> dict[str, Any]:
     """13-state RMSE (FlexKalmanNet's test loss) and per-component RMSE of the deployed
     parameters on the test split of the data set, scored after the loss cut, with the scenario's
     measurement schedule."""
@@ -160,12 +174,16 @@ def split_metrics(model: NoiseModel, settings: TrainConfig, scenario: Scenario) 
     episode = generate_episodes(scenario, [scenario.dataset_seed], split="test")
     cut = settings.loss_cut
     with torch.no_grad(), torch_threads(settings.threads):
-        noise = model.parameter_set.to_noise(model.deployed_raw())
         z, mask = torch.as_tensor(episode.measurements), torch.as_tensor(episode.valid)
-        result = settings.build_filter(scenario).run(noise, z, mask, dt=scenario.dt, store_covariances=False, store_innovations=False)
+        if isinstance(model, SequenceModel):
+            means = model.run_means(z, mask, dt=scenario.dt)
+        else:
+            noise = model.parameter_set.to_noise(model.deployed_raw())
+            means = settings.build_filter(scenario).run(noise, z, mask, dt=scenario.dt, store_covariances=False,
+                                                        store_innovations=False).means
         truth = torch.as_tensor(episode.truth)
-        mse = float(state_mse(result.means, truth, cut))
-        per_component = aligned_state_error(result.means[:, cut:], truth[:, cut:]).square().mean((0, 1)).sqrt().numpy()
+        mse = float(state_mse(means, truth, cut))
+        per_component = aligned_state_error(means[:, cut:], truth[:, cut:]).square().mean((0, 1)).sqrt().numpy()
     return {
         "test_rmse": math.sqrt(mse),
         "test_rmse_components": dict(zip(STATE_NAMES, np.round(per_component, 8).tolist())),
@@ -241,7 +259,7 @@ def fit(
                 "data": data.describe(),
                 "state_dict": model.state_dict(),
                 "trainer": trainer.state_dict(),
-                "deployed": model.parameter_set.to_dict(model.deployed_raw().detach()),
+                "deployed": _deployed(model),
                 "best_epoch": trainer.best_epoch,
                 "provenance": run_provenance(),
             })
@@ -256,7 +274,9 @@ def fit(
     history = pd.DataFrame([record.flat() for record in trainer.history])
     outcome = TrainingOutcome(
         estimator, model, config, scenario, history, trainer.best_epoch, trainer.best_loss, directory, {},
-        time.perf_counter() - began, deployed_estimator_config(model, settings), tuple(scenarios), family,
+        time.perf_counter() - began,
+        {"checkpoint": None if checkpoint is None else str(checkpoint)} if isinstance(model, SequenceModel)
+        else deployed_estimator_config(model, settings), tuple(scenarios), family,
     )
     if directory is None:
         return outcome
@@ -268,8 +288,9 @@ def fit(
         loss = "innovation NLL" if settings.objective == "nll" else "13-state RMSE"
         plot_losses(history, directory / "loss.png", title=f"{estimator} on {label} ({loss})",
                     best_epoch=trainer.best_epoch)
-        plot_parameters(history, directory / "parameters.png",
-                        title=f"{estimator}: learned standard deviations ({label})")
+        if not isinstance(model, SequenceModel):  # a network's own recursion has no standard deviations
+            plot_parameters(history, directory / "parameters.png",
+                            title=f"{estimator}: learned standard deviations ({label})")
     outcome.test = _mean_metrics([split_metrics(model, settings, s) for s in scenarios], scenarios)
     outcome.seconds = time.perf_counter() - began
     training = {
@@ -285,13 +306,14 @@ def fit(
         "seconds_total": outcome.seconds,
         "seconds_per_epoch": float(history["seconds"].mean()) if len(history) else None,
         "loss_evaluations": trainer.evaluations if settings.optimizer == "lbfgs" else None,
+        "gradient_steps": dict(trainer.gradient_steps),
         **outcome.test,
         "history": {str(c): history[c].tolist() for c in history.columns if c != "seconds"},
     }
     write_artifact(outcome.artifact, estimator=estimator, family=family,
                    scenario={"name": label, "config_hash": "+".join(s.config_hash() for s in scenarios)},
                    estimator_config=outcome.estimator_config,
-                   parameters=model.parameter_set.to_dict(model.deployed_raw().detach()), training=training)
+                   parameters=_deployed(model), training=training)
     return outcome
 
 

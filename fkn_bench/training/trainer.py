@@ -14,6 +14,14 @@ L-BFGS one epoch is one ``torch.optim.LBFGS`` step (up to ``lbfgs_iterations`` i
 strong-Wolfe line search) on all training windows at once. Validation runs the variant with the deployed parameters over the whole val split and reports the 13-state RMSE
 (supervised objective) or the innovation NLL (``nll``, which uses no ground truth for model
 selection; the RMSE is logged as a diagnostic only).
+
+A :class:`SequenceModel` (KalmanNet) brings its own differentiable recursion instead: the loop
+calls its ``sequence_mse`` where it would run the variant, and everything else (optimiser,
+scheduler, early stopping, seeds, resume) is the same. With ``max_grad_norm`` set, gradient norms
+are clipped, the steps whose norm was above it are counted, and a batch whose gradient norm is
+not finite is skipped (and counted) instead of stepping the weights to NaN
+(:attr:`Trainer.gradient_steps`; a SequenceModel's history records the counts per epoch, the
+artefact their totals).
 """
 
 from __future__ import annotations
@@ -34,7 +42,7 @@ from fkn_bench.runtime import torch_threads
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
 
-__all__ = ["NoiseModel", "DirectParameters", "TrainConfig", "Trainer", "EpochRecord", "OnEpoch"]
+__all__ = ["NoiseModel", "SequenceModel", "DirectParameters", "TrainConfig", "Trainer", "EpochRecord", "OnEpoch"]
 
 
 class NoiseModel(nn.Module, ABC):
@@ -49,6 +57,27 @@ class NoiseModel(nn.Module, ABC):
     @abstractmethod
     def deployed_raw(self) -> Tensor:
         """The constant unconstrained parameters ``(size,)`` used after training."""
+
+
+class SequenceModel(nn.Module, ABC):
+    """A trained module that brings its own differentiable recursion over a batch of sequences
+    (e.g. KalmanNet, whose network computes the gain inside the filter loop) instead of giving
+    noise parameters to a filter variant. The :class:`Trainer` calls :meth:`sequence_mse` where it
+    would run ``variant.run`` for a :class:`NoiseModel`; the supervised objective only."""
+
+    @abstractmethod
+    def sequence_mse(self, sequences: Sequences, *, dt: float, loss_cut: int) -> Tensor:
+        """Mean squared state error over steps ``loss_cut:`` of ``sequences`` (a scalar tensor,
+        differentiable with respect to the module's parameters)."""
+
+    @abstractmethod
+    def run_means(self, measurements: Tensor, mask: Tensor, *, dt: float) -> Tensor:
+        """State estimates ``(B, T, n)`` for measurements ``(B, T, m)`` with validity ``(B, T)``."""
+
+    @abstractmethod
+    def describe(self) -> dict[str, Any]:
+        """JSON-compatible description of the trained module (the checkpoint's ``deployed`` and
+        the artefact's ``parameters``)."""
 
 
 class DirectParameters(NoiseModel):
@@ -205,9 +234,10 @@ exception it raises (e.g. ``optuna.TrialPruned``) ends the training and propagat
 
 
 class Trainer:
-    """Trains a :class:`NoiseModel` through ``variant`` on ``data`` (see module docstring)."""
+    """Trains a :class:`NoiseModel` through ``variant`` (or a :class:`SequenceModel` through its
+    own recursion) on ``data`` (see module docstring)."""
 
-    def __init__(self, model: NoiseModel, variant: KalmanFilter, data: TrainingData, config: TrainConfig) -> None:
+    def __init__(self, model: NoiseModel | SequenceModel, variant: KalmanFilter, data: TrainingData, config: TrainConfig) -> None:
         if config.loss_cut >= data.window:
             raise ValueError(f"loss_cut ({config.loss_cut}) must be smaller than the window ({data.window})")
         self.model, self.variant, self.data, self.config = model, variant, data, config
@@ -228,11 +258,18 @@ class Trainer:
         self.best_state: dict[str, Tensor] = copy.deepcopy(model.state_dict())
         self.epochs_without_improvement = 0
         self.evaluations = 0  # loss evaluations of the L-BFGS steps
+        # Adam steps taken, of them with the gradient norm clipped, and batches skipped for a
+        # non-finite gradient norm (counted when max_grad_norm is set)
+        self.gradient_steps = {"taken": 0, "clipped": 0, "skipped_nonfinite": 0}
 
     # ------------------------------------------------------------------ losses
-    def loss(self, sequences: Sequences, raw: Tensor) -> tuple[Tensor, Tensor]:
+    def loss(self, sequences: Sequences, raw: Tensor | None) -> tuple[Tensor, Tensor]:
         """Objective on ``sequences`` with parameters ``raw``, and the 13-state MSE (the same
-        tensor for the supervised objective; a diagnostic for ``nll``)."""
+        tensor for the supervised objective; a diagnostic for ``nll``). A :class:`SequenceModel`
+        runs its own recursion (``raw`` is None)."""
+        if isinstance(self.model, SequenceModel):
+            mse = self.model.sequence_mse(sequences, dt=self.data.scenario.dt, loss_cut=self.config.loss_cut)
+            return mse, mse
         noise = self.model.parameter_set.to_noise(raw)
         nll = self.config.objective == "nll"
         result = self.variant.run(noise, sequences.measurements, sequences.mask, dt=self.data.scenario.dt,
@@ -250,15 +287,19 @@ class Trainer:
         """``(validation loss, validation 13-state RMSE)`` with the deployed parameters; the loss
         (square root of the MSE, or the NLL) selects the best epoch."""
         with torch.no_grad():
-            raw = self.model.deployed_raw().expand(self.data.val.batch_size, -1)
+            own = isinstance(self.model, SequenceModel)
+            raw = None if own else self.model.deployed_raw().expand(self.data.val.batch_size, -1)
             loss, mse = self.loss(self.data.val, raw)
         return self._reported(float(loss)), math.sqrt(float(mse))
 
     # ------------------------------------------------------------------ epochs
+    def _window_raw(self, batch: Sequences) -> Tensor | None:
+        return None if isinstance(self.model, SequenceModel) else self.model.window_raw(batch)
+
     def _backward(self, batch: Sequences) -> Tensor:
         """The training loss on ``batch``, its gradients computed (FloatingPointError when not finite)."""
         self.optimizer.zero_grad(set_to_none=True)
-        loss = self.loss(batch, self.model.window_raw(batch))[0]
+        loss = self.loss(batch, self._window_raw(batch))[0]
         if not torch.isfinite(loss):
             raise FloatingPointError(f"non-finite training loss at epoch {len(self.history) + 1}: lower the learning rate")
         loss.backward()
@@ -276,7 +317,7 @@ class Trainer:
         start = self.optimizer.step(closure)  # type: ignore[arg-type]
         self.model.eval()
         with torch.no_grad():  # the loss at the parameters the step ended with
-            end, _ = self.loss(batch, self.model.window_raw(batch))
+            end, _ = self.loss(batch, self._window_raw(batch))
         return self._reported(float(end if torch.isfinite(end) else start))
 
     def run_epoch(self) -> float:
@@ -288,16 +329,24 @@ class Trainer:
         total, count = 0.0, 0
         for batch in self.data.batches(self.config.windows_per_batch, self.generator):
             loss = self._backward(batch)
-            if self.config.max_grad_norm is not None:
-                nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm)
-            self.optimizer.step()
             total += float(loss.detach()) * batch.batch_size
             count += batch.batch_size
+            if self.config.max_grad_norm is not None:
+                norm = float(nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm))
+                if not math.isfinite(norm):  # a non-finite gradient: no step (the weights stay finite)
+                    self.gradient_steps["skipped_nonfinite"] += 1
+                    continue
+                self.gradient_steps["clipped"] += norm > self.config.max_grad_norm
+            self.optimizer.step()
+            self.gradient_steps["taken"] += 1
         self.model.eval()
         return self._reported(total / count)
 
     def deployed_parameters(self) -> dict[str, float]:
-        """The deployed standard deviations by name (e.g. ``sigma_Q_qw``)."""
+        """The deployed standard deviations by name (e.g. ``sigma_Q_qw``); for a
+        :class:`SequenceModel`, the gradient-step counts so far (steps taken, clipped, skipped)."""
+        if isinstance(self.model, SequenceModel):
+            return {f"gradient_steps_{k}": float(v) for k, v in self.gradient_steps.items()}
         with torch.no_grad():
             raw = self.model.deployed_raw()
         entries = self.model.parameter_set.to_dict(raw)["entries"]
@@ -348,6 +397,7 @@ class Trainer:
             **{name: getattr(self, name).state_dict() for name in self._MODULES},
             "generator": self.generator.get_state(),
             "history": [asdict(r) for r in self.history],
+            "gradient_steps": dict(self.gradient_steps),
             **{name: getattr(self, name) for name in self._VALUES},
         }
 
@@ -356,5 +406,6 @@ class Trainer:
             getattr(self, name).load_state_dict(state[name])
         self.generator.set_state(state["generator"])
         self.history = [EpochRecord(**r) for r in state["history"]]
+        self.gradient_steps.update(state.get("gradient_steps", {}))
         for name in self._VALUES:
             setattr(self, name, state[name])

@@ -1,0 +1,80 @@
+"""KalmanNet's model: built fresh from a config for training, or rebuilt from a training
+checkpoint (:mod:`fkn_bench.training.checkpoint`; its ``state_dict`` holds the network's
+weights). Training is the shared pipeline (:func:`fkn_bench.training.fit`) with KalmanNet's
+declaration :data:`TRAINABLE`.
+
+The process model is the config's (``process_model``: the paper's constant rate by default, or the
+rigid body) unless ``build_model`` is given another
+:class:`~fkn_bench.filters.models.StateSpaceModel` (KalmanNet uses only its common interface).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from fkn_bench.filters.models import StateSpaceModel
+from fkn_bench.kalmannet.config import KalmanNetConfig
+from fkn_bench.kalmannet.recursion import KalmanNet
+from fkn_bench.scenarios import Scenario
+from fkn_bench.training import Trainable, TrainingData
+from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint
+
+__all__ = ["build_model", "model_from_checkpoint", "TRAINABLE"]
+
+
+def build_model(config: KalmanNetConfig, data: TrainingData | None = None, *, model: StateSpaceModel | None = None) -> KalmanNet:
+    """A fresh KalmanNet (weights seeded by ``config.seed``; the global generator is left as it
+    was). ``data`` is not needed (the network sees normalised differences only)."""
+    if model is None:  # the config's process model (a known inertia not given: the training scenario's)
+        model = config.build_filter(None if data is None else data.scenario).model
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        net = KalmanNet(
+            model,
+            manifold=config.manifold,
+            in_mult=config.in_mult,
+            out_mult=config.out_mult,
+            network_dtype=getattr(torch, config.network_dtype),
+            detach_every=config.detach_every,
+            initial_gain=config.initial_gain,
+            output_scale=config.output_scale,
+        )
+    return net
+
+
+def model_from_checkpoint(
+    path: str | Path, *, model: StateSpaceModel | None = None
+) -> tuple[KalmanNet, KalmanNetConfig, Scenario, dict[str, Any]]:
+    """Rebuild the trained KalmanNet of a checkpoint: ``(model, config, scenario, document)``, on
+    the process ``model`` it was trained with (default the pose-twist model; the checkpoint records
+    the class name and a mismatch is refused)."""
+    document = load_checkpoint(path)
+    if document["estimator"] != "kalmannet":
+        raise CheckpointError(f"{path} is a checkpoint of {document['estimator']!r}, not of kalmannet")
+    try:
+        config = KalmanNetConfig.from_dict(document["config"])
+        recorded = document["scenario"]
+        scenario = Scenario.from_dict(recorded[0] if isinstance(recorded, list) else recorded)
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(f"{path}: invalid config in checkpoint: {exc}") from None
+    net = build_model(config, model=model)
+    trained_on = (document.get("deployed") or {}).get("process_model")
+    if trained_on is not None and trained_on != type(net.model).__name__:
+        raise CheckpointError(f"{path} was trained on process model {trained_on}, not {type(net.model).__name__}")
+    try:
+        net.load_state_dict(document["state_dict"])
+    except RuntimeError as exc:
+        raise CheckpointError(f"{path}: weights do not match the checkpoint's config: {exc}") from None
+    net.eval()
+    return net, config, scenario, document
+
+
+TRAINABLE = Trainable(
+    config=KalmanNetConfig.from_options,
+    build=build_model,
+    notes={"trained_module": "KalmanNet gain network (architecture 2): see checkpoint.pt for the weights"},
+)
+"""KalmanNet's training declaration (its registry entry's ``trainable``)."""

@@ -1,0 +1,243 @@
+"""KalmanNet's filter recursion: pure step functions on a small immutable state, and ``run``.
+
+KalmanNet (Revach et al. 2022, section "KalmanNet") keeps the Kalman filter's flow and
+replaces the gain: predict with the (known) model, ``x_t|t-1 = f(x_t-1|t-1)`` and
+``y_t|t-1 = h(x_t|t-1)`` (the KF's prediction); compute the gain ``K_t`` with the network from the features
+(the paper's input features)
+
+* F1, observation difference ``dy~_t = y_t - y_t-1``,
+* F2, innovation ``dy_t = y_t - y_t|t-1``,
+* F3, forward-evolution difference ``dx~_t = x_t-1|t-1 - x_t-2|t-2``,
+* F4, forward-update difference ``dx^_t = x_t-1|t-1 - x_t-1|t-2`` (the previous correction),
+
+each L2-normalised; and update ``x_t|t = x_t|t-1 + K_t dy_t`` (the KF's update with the learned gain). Differences and the
+correction are taken on a :class:`~fkn_bench.kalmannet.manifolds.Manifold` (the pose's tangent
+space for the 13-state pose model: rotation vectors for the attitude, ``Exp`` for the
+correction, the posterior quaternion renormalised by the model's ``normalize``).
+
+The benchmark's conventions (those of :meth:`fkn_bench.filters.KalmanFilter.run`):
+
+* Measurements are cleaned once by the model's ``sanitize``: non-finite or unusable ones are
+  skipped, so no NaN reaches the arithmetic. A measurement is sign-aligned with the prediction
+  (the model's ``align``) before it is differenced.
+* Each sequence initialises at its first usable measurement (``model.initial_state``); before it,
+  the model's prior state, propagated. A step without a usable measurement only predicts: the
+  network is not run and its hidden states are kept. With measurements at some steps only
+  (every 10th in the benchmark), "previous" in F1, F3 and F4 means the previous *update*: F1 is
+  the difference to the last used measurement, F3 the difference between the posteriors of the
+  last two updates, F4 the last update's correction (posterior minus its prior). With a
+  measurement at every step this is the paper's definition. At the first update after the
+  initialisation F3 and F4 are zero (the initial state is its own prior and predecessor).
+* The network runs in its own dtype (float32 or float64); features are computed and the gain is
+  applied in the measurements' dtype (float64 by default).
+
+The state is a :class:`KalmanNetState` (an immutable value); :meth:`KalmanNet.predict`,
+:meth:`~KalmanNet.initial` and :meth:`~KalmanNet.update` are pure, and the same functions run the
+batch (training, ``estimate``) and the online path (batch of one).
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import torch
+from torch import Tensor
+
+from fkn_bench.filters.base import check_dt
+from fkn_bench.filters.models import StateSpaceModel
+from fkn_bench.kalmannet.manifolds import Manifold, manifold_for
+from fkn_bench.kalmannet.network import GainNetwork, Hidden, normalize_features
+from fkn_bench.training.data import Sequences
+from fkn_bench.training.trainer import SequenceModel
+
+__all__ = ["KalmanNet", "KalmanNetState", "KalmanNetRun"]
+
+
+class KalmanNetState(NamedTuple):
+    """A batch of KalmanNet states at one time (``B`` sequences).
+
+    Attributes:
+        mean: ``(B, n)`` current estimate (prior after a prediction, posterior after an update).
+        last_posterior: ``(B, n)`` posterior of the last update (or the initial state).
+        evolution: ``(B, n')`` F3 of the next update: the last update's posterior minus the
+            posterior before it (zero after the initialisation).
+        correction: ``(B, n')`` F4 of the next update: the last update's correction
+            ``K dy``, which is its posterior minus its prior (``x [+] d [-] x = d``; zero after
+            the initialisation). Stored, not recomputed: the difference of two equal states
+            would be rounding noise, which the features' normalisation would blow up to unit
+            length.
+        last_measurement: ``(B, m)`` last measurement used (sanitised, sign-aligned).
+        hidden: the three GRUs' hidden states (network dtype).
+    """
+
+    mean: Tensor
+    last_posterior: Tensor
+    evolution: Tensor
+    correction: Tensor
+    last_measurement: Tensor
+    hidden: Hidden
+
+
+class KalmanNetRun(NamedTuple):
+    """Result of :meth:`KalmanNet.run` (batch first): ``means (B, T, n)``, ``updated (B, T)`` (a
+    measurement update happened), ``initialised (B, T)`` and the ``final`` state."""
+
+    means: Tensor
+    updated: Tensor
+    initialised: Tensor
+    final: KalmanNetState
+
+
+def _select(rows: Tensor, a: KalmanNetState, b: KalmanNetState) -> KalmanNetState:
+    """``a`` in the batch rows where ``rows (B,)`` is True, ``b`` elsewhere."""
+    pick = lambda u, v: torch.where(rows[:, None], u, v)  # noqa: E731
+    return KalmanNetState(*(pick(u, v) for u, v in zip(a[:5], b[:5])), Hidden(*(pick(u, v) for u, v in zip(a.hidden, b.hidden))))
+
+
+def _detached(state: KalmanNetState) -> KalmanNetState:
+    return KalmanNetState(*(t.detach() for t in state[:5]), Hidden(*(t.detach() for t in state.hidden)))
+
+
+class KalmanNet(SequenceModel):
+    """KalmanNet (architecture 2) on a state-space model (see module docstring).
+
+    Args:
+        model: the process and measurement model; only its ``predict``, ``measure``, ``align``,
+            ``normalize``, ``sanitize``, ``initial_state``, ``prior_state``, ``state_dim`` and
+            ``measurement_dim`` are used (any :class:`~fkn_bench.filters.models.StateSpaceModel`).
+        manifold: ``"auto"`` (pose tangent space for the 13-state pose model, else Euclidean),
+            ``"pose-tangent"`` or ``"euclidean"``; or a :class:`Manifold`.
+        in_mult, out_mult: the paper's input and output multipliers of the gain network.
+        network_dtype: the network's dtype.
+        detach_every: truncated back-propagation through time: while gradients are recorded,
+            the recurrent state (estimate, memories, hidden states) is detached every this many
+            time steps (None: full back-propagation through the sequence).
+        initial_gain, output_scale: the gain network starts near ``initial_gain * G`` (``G`` the
+            manifold's :meth:`~Manifold.observed_gain`) with FC2's output weights scaled by
+            ``output_scale`` (None and 1: the paper's default initialisation; see
+            :class:`~fkn_bench.kalmannet.network.GainNetwork`).
+    """
+
+    def __init__(
+        self,
+        model: StateSpaceModel,
+        *,
+        manifold: str | Manifold = "auto",
+        in_mult: int = 5,
+        out_mult: int = 40,
+        network_dtype: torch.dtype = torch.float32,
+        detach_every: int | None = None,
+        initial_gain: float | None = None,
+        output_scale: float = 1.0,
+    ) -> None:
+        super().__init__()
+        self.model = model
+        self.manifold = manifold if isinstance(manifold, Manifold) else manifold_for(model, manifold)
+        if detach_every is not None and detach_every < 1:
+            raise ValueError(f"detach_every must be >= 1 or None (got {detach_every})")
+        self.detach_every = detach_every
+        start = None if initial_gain is None else initial_gain * torch.from_numpy(self.manifold.observed_gain())
+        self.network = GainNetwork(self.manifold.state_tangent_dim, self.manifold.measurement_tangent_dim,
+                                   in_mult=in_mult, out_mult=out_mult, dtype=network_dtype, initial_gain=start,
+                                   output_scale=output_scale)
+
+    # ------------------------------------------------------------------ steps (pure)
+    def prior(self, batch: int, dtype: torch.dtype = torch.float64) -> KalmanNetState:
+        """The state reported before a sequence's first usable measurement."""
+        mean = self.model.prior_state(batch, dtype)
+        tangent = mean.new_zeros(batch, self.manifold.state_tangent_dim)
+        return KalmanNetState(mean, mean, tangent, tangent, mean.new_zeros(batch, self.manifold.measurement_dim),
+                              self.network.initial_hidden(batch))
+
+    def predict(self, state: KalmanNetState, dt: float) -> KalmanNetState:
+        """The state predicted over ``dt`` seconds by the model (the KF's prediction); memories unchanged."""
+        return state._replace(mean=self.model.predict(state.mean, dt))
+
+    def initial(self, state: KalmanNetState, z: Tensor) -> KalmanNetState:
+        """The state initialised from usable measurements ``z (B, m)`` (hidden states at their priors)."""
+        mean = self.model.initial_state(z)
+        tangent = mean.new_zeros(z.shape[0], self.manifold.state_tangent_dim)
+        return KalmanNetState(mean, mean, tangent, tangent, z, self.network.initial_hidden(z.shape[0]))
+
+    def features(self, state: KalmanNetState, z: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """``(F1, F2, F3, F4)`` at a predicted ``state`` for usable measurements ``z`` (``z``
+        sign-aligned with the prediction first), not yet normalised; F2 is the innovation."""
+        prior = state.mean
+        f1 = self.manifold.measurement_difference(z, state.last_measurement)
+        innovation = self.manifold.measurement_difference(z, self.model.measure(prior))
+        return f1, innovation, state.evolution, state.correction
+
+    def update(self, state: KalmanNetState, z: Tensor) -> KalmanNetState:
+        """The measurement update of every row with usable measurements ``z (B, m)``:
+        ``x+ = x- [+] K dy``, then the model's ``normalize`` (unit quaternion)."""
+        prior = state.mean
+        z = self.model.align(z, prior)
+        f1, innovation, f3, f4 = self.features(state, z)
+        gain, hidden = self.network(*(normalize_features(f) for f in (f1, innovation, f3, f4)), state.hidden)
+        delta = (gain.to(prior.dtype) @ innovation[:, :, None])[:, :, 0]
+        posterior = self.model.normalize(self.manifold.correct(prior, delta))[0]
+        evolution = self.manifold.state_difference(posterior, state.last_posterior)
+        return KalmanNetState(posterior, posterior, evolution, delta, z, hidden)
+
+    # ------------------------------------------------------------------ sequences
+    def run(self, measurements: Tensor, mask: Tensor, *, dt: float) -> KalmanNetRun:
+        """Filter a batch: ``measurements (B, T, m)`` (entries outside ``mask`` are ignored and
+        may be NaN), ``mask (B, T)`` -> :class:`KalmanNetRun`. float64 unless the measurements
+        are of another floating dtype."""
+        if measurements.dim() != 3 or measurements.shape[-1] != self.manifold.measurement_dim:
+            raise ValueError(f"measurements must have shape (B, T, {self.manifold.measurement_dim}) (got {tuple(measurements.shape)})")
+        if mask.shape != measurements.shape[:2]:
+            raise ValueError(f"mask must have shape {tuple(measurements.shape[:2])} (got {tuple(mask.shape)})")
+        batch, steps, _ = measurements.shape
+        if batch == 0 or steps == 0:
+            raise ValueError(f"measurements hold no sequences or no time steps (shape {tuple(measurements.shape)})")
+        dt = check_dt(dt)
+        z_all, usable = self.model.sanitize(measurements, mask.bool())
+        has_any = usable.any(1)
+        first = torch.where(has_any, usable.to(torch.int8).argmax(1), torch.full_like(has_any, -1, dtype=torch.long))
+        starts = first[:, None] == torch.arange(steps)[None, :]  # (B, T) the initialisation step
+        updates = usable & ~starts
+        start_any, update_any, update_all = starts.any(0).tolist(), updates.any(0).tolist(), updates.all(0).tolist()
+        truncate = self.detach_every if torch.is_grad_enabled() else None
+        state = self.prior(batch, measurements.dtype)
+        initialised = torch.zeros(batch, dtype=torch.bool)
+        means, initialised_steps = [], []
+        for t in range(steps):
+            if truncate is not None and t > 0 and t % truncate == 0:
+                state = _detached(state)
+            if t > 0:
+                state = self.predict(state, dt)
+            if start_any[t]:
+                state = _select(starts[:, t], self.initial(state, z_all[:, t]), state)
+                initialised = initialised | starts[:, t]
+            if update_any[t]:
+                posterior = self.update(state, z_all[:, t])
+                state = posterior if update_all[t] else _select(updates[:, t], posterior, state)
+            means.append(state.mean)
+            initialised_steps.append(initialised)
+        return KalmanNetRun(torch.stack(means, 1), updates, torch.stack(initialised_steps, 1), state)
+
+    def run_means(self, measurements: Tensor, mask: Tensor, *, dt: float) -> Tensor:
+        return self.run(measurements, mask, dt=dt).means
+
+    def sequence_mse(self, sequences: Sequences, *, dt: float, loss_cut: int) -> Tensor:
+        """Mean squared state error (the manifold's, sign-safe for the quaternion) over steps
+        ``loss_cut:``: the supervised objective of :class:`~fkn_bench.training.Trainer`."""
+        means = self.run_means(sequences.measurements, sequences.mask, dt=dt)
+        if loss_cut >= means.shape[1]:
+            raise ValueError(f"loss_cut {loss_cut} leaves no steps of {means.shape[1]}")
+        return self.manifold.state_error(means[:, loss_cut:], sequences.truth[:, loss_cut:]).square().mean()
+
+    def describe(self) -> dict[str, Any]:
+        net = self.network
+        return {
+            "architecture": "KalmanNet architecture 2 (Revach et al. 2022)",
+            "process_model": type(self.model).__name__,
+            "manifold": self.manifold.name,
+            "state_tangent_dim": net.n,
+            "measurement_tangent_dim": net.m,
+            "in_mult": net.in_mult,
+            "out_mult": net.out_mult,
+            "network_dtype": str(net.dtype).removeprefix("torch."),
+            "weights": int(sum(p.numel() for p in net.parameters())),
+        }

@@ -1,0 +1,73 @@
+"""KalmanNet trains through the shared pipeline (``fit``, what ``fkn-bench train --estimator
+kalmannet`` runs): files, history with the gradient-step counts, artefact, a trained estimator
+from it; and identical runs are identical (fixed seeds)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+from fkn_bench.estimators import make_estimator
+from fkn_bench.kalmannet import KalmanNetConfig, KalmanNetEstimator, model_from_checkpoint
+from fkn_bench.scenarios import get_scenario
+from fkn_bench.training import fit
+from fkn_bench.training.artifacts import read_artifact
+
+SHORT = get_scenario("ds1", n_steps=2000)
+OPTIONS = {"window": 200, "loss_cut": 50, "episodes": 1, "epochs": 2, "windows_per_batch": 4, "out_mult": 2,
+           "detach_every": 100}
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> list:
+    return [fit("kalmannet", SHORT, OPTIONS, out=tmp_path_factory.mktemp(f"run{i}"), progress=False, plots=False) for i in range(2)]
+
+
+def test_fit_trains_kalmannet_and_writes_its_files(runs: list) -> None:
+    outcome = runs[0]
+    for name in ("checkpoint.pt", "history.csv", "parameters.json"):
+        assert (outcome.out / name).is_file(), name
+    history = pd.read_csv(outcome.out / "history.csv")
+    assert list(history["epoch"]) == [1, 2] and np.isfinite(history[["train_loss", "val_loss", "val_rmse"]]).all().all()
+    steps = history[["gradient_steps_taken", "gradient_steps_clipped", "gradient_steps_skipped_nonfinite"]].iloc[-1]
+    windows = 8  # 1600 train samples / 200
+    assert steps["gradient_steps_taken"] == 2 * windows / 4 and steps["gradient_steps_skipped_nonfinite"] == 0
+    training = read_artifact(outcome.artifact)["training"]
+    assert training["gradient_steps"]["taken"] == steps["gradient_steps_taken"]
+    assert training["config"]["detach_every"] == 100 and np.isfinite(training["test_rmse"])
+    assert read_artifact(outcome.artifact)["parameters"]["architecture"].startswith("KalmanNet architecture 2")
+
+
+def test_identical_runs_are_identical(runs: list) -> None:
+    first, second = runs
+    columns = [c for c in first.history.columns if c != "seconds"]
+    pd.testing.assert_frame_equal(first.history[columns], second.history[columns], check_exact=True)
+    a, b = (model_from_checkpoint(o.checkpoint)[0].state_dict() for o in runs)
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    assert first.test == second.test
+
+
+def test_the_trained_network_deploys_as_an_estimator(runs: list) -> None:
+    outcome = runs[0]
+    from_artifact = make_estimator("kalmannet", scenario=SHORT, parameters=str(outcome.artifact))
+    from_checkpoint = make_estimator("kalmannet", checkpoint=str(outcome.checkpoint))
+    assert isinstance(from_artifact, KalmanNetEstimator) and from_checkpoint.to_config()["checkpoint"] == str(outcome.checkpoint)
+    from fkn_bench.envs import generate_episodes
+
+    episodes = generate_episodes(SHORT, [SHORT.dataset_seed], split="test")
+    estimates = from_artifact.estimate(episodes.measurements, episodes.valid, SHORT.dt)
+    with torch.no_grad():
+        direct = outcome.model.run_means(torch.as_tensor(episodes.measurements), torch.as_tensor(episodes.valid), dt=SHORT.dt)
+    np.testing.assert_allclose(estimates.means[..., 4:], direct.numpy()[..., 4:], rtol=0, atol=1e-12)
+
+
+def test_config_refuses_what_kalmannet_does_not_train_with() -> None:
+    with pytest.raises(ValueError, match="unknown KalmanNet config keys"):
+        KalmanNetConfig.from_options({"variant": "ukf"})
+    with pytest.raises(ValueError, match="detach_every"):
+        KalmanNetConfig(detach_every=0)
+    assert KalmanNetConfig.from_options({}).to_dict()["max_grad_norm"] == 1.0
