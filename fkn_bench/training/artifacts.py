@@ -195,9 +195,12 @@ def artifact_factory(name: str, cls: type[TrainedKalmanEstimator] = TrainedKalma
         family = artifact_family(name, scenario)
         path = artifact_path(name, family)
         if not path.is_file():
+            from fkn_bench.scenarios import scenario_names
+
+            data = f"--scenario {family}" if family in scenario_names() else f"--scenario S1 --scenario S2 ... --family {family}"
             raise ArtifactError(
                 f"no committed {name} parameters for model family '{family}' ({path}); train them with "
-                f"`fkn-bench train --estimator {name} --scenario {family} --write-artifact`"
+                f"`fkn-bench train --estimator {name} {data} --write-artifact`"
             )
         return cls.from_artifact(path, name=name)
 
