@@ -4,7 +4,13 @@ with a ``Trainable`` declaration) to a scenario.
 Writes a checkpoint, the training history (CSV), the two training figures (PNG) and the learned
 parameters (JSON) into ``--out`` (default ``runs/<estimator>-<scenario>``); ``--write-artifact``
 also installs the parameters as the committed artefact the estimator runs from by default
-(``baselines/params/<estimator>-<family>.json``).
+(``baselines/params/<estimator>-<family>.json``). Repeat ``--scenario`` to train on a mixture of
+scenarios; ``--family`` names the family the artefact is for (``default``: recordings and user
+scenarios). ``--model`` picks the filter's process model. Examples::
+
+    fkn-bench train --estimator flexkalmannet --scenario ds1 --write-artifact
+    fkn-bench train --estimator flexkalmannet --model rigid-body-ratios --scenario tumble-fast \\
+        --scenario tumble-flip --scenario tumble-slow --family tumble
 """
 
 from __future__ import annotations
@@ -88,7 +94,8 @@ def run(args: argparse.Namespace) -> int:
           f"best epoch {summary['best_epoch']}, {summary['seconds']:.1f} s")
     if "test_rmse" in summary:
         print(f"  test 13-state RMSE {summary['test_rmse']:.5f} (test split of seed {summary.get('test_seed')})")
-    print(f"  outputs in {summary['out']} (checkpoint, history.csv, loss.png, parameters.png, parameters.json)")
+    written = [p.name for p in sorted(Path(summary["out"]).iterdir()) if p.suffix in (".pt", ".csv", ".png", ".json")]
+    print(f"  outputs in {summary['out']} ({', '.join(written)})")
     if "installed_artifact" in summary:
         print(f"  installed {summary['installed_artifact']}")
     sys.stdout.flush()
