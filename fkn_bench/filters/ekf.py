@@ -52,9 +52,9 @@ def joseph_update(
     ``(x+, P+, S, K)``, ``P+`` symmetrised, and ``S`` exactly symmetric when ``P`` and ``R`` are.
     """
     xp = namespace(x)
-    numpy, (batch, n) = xp is np, x.shape
-    if numpy and batch == 1 and observed is not None:
-        return _joseph_one(x, P, nu, R, observed, normalize)
+    if xp is np:
+        return _joseph_numpy(x, P, nu, R, H, observed, normalize)
+    batch, n = x.shape
     if observed is not None:
         PHt = P[:, :, observed]
         S = P[:, observed, observed] + R  # a block of P plus R: exactly symmetric, as they are
@@ -62,30 +62,13 @@ def joseph_update(
         assert H is not None
         PHt = P @ H.swapaxes(0, 1)
         S = symmetrize(H @ PHt + R)
-    # S is symmetric positive definite (R is): K = P H^T S^-1 (torch: one product with the inverse)
+    # S is symmetric positive definite (R is): K = P H^T S^-1, one product with the inverse
     K = divide_spd(PHt, S)  # (B, n, m)
-    if numpy:
-        x_post = x + (K[0] @ nu[0] if batch == 1 else (K @ nu[:, :, None])[:, :, 0])
-    else:
-        x_post = add_matmul(x[:, :, None], K, nu[:, :, None])[:, :, 0]
+    x_post = add_matmul(x[:, :, None], K, nu[:, :, None])[:, :, 0]
     TK = K
     block = N = None
     if normalize is not None:
         x_post, block, N = normalize(x_post)
-    if numpy:  # numpy (online): the same product as G blockdiag(P, R) G^T with G = [T A | T K]
-        m = K.shape[2]  # [A | K] = [I 0] - K [H | -I]; for H = [I 0] by slices (exact)
-        G = constant(x, ("I|0", n, m), lambda: np.eye(n, n + m))
-        if observed is None:
-            G = G - K @ np.concatenate((H, -np.eye(m)), axis=1)
-        else:
-            G = broadcast(G, (batch, n, n + m))
-            G[:, :, observed] -= K
-            G[:, :, n:] = K
-        if block is not None and N is not None:
-            G[:, block] = N @ G[:, block]
-        D = np.zeros((batch, n + m, n + m))
-        D[:, :n, :n], D[:, n:, n:] = P, R
-        return x_post, symmetrize(G @ D @ G.swapaxes(1, 2)), S, K
     # torch: T K and T A = T - (T K) H with T the identity but for the block N, out of place
     if block is not None and N is not None:
         TK = xp.concat((K[:, : block.start], N @ K[:, block], K[:, block.stop :]), axis=1)
@@ -95,25 +78,45 @@ def joseph_update(
     return x_post, symmetrize(P_post), S, K
 
 
-def _joseph_one(x: np.ndarray, P: np.ndarray, nu: np.ndarray, R: np.ndarray, observed: slice, normalize: Any) -> tuple:
-    """:func:`joseph_update` of one numpy row (the online step) for ``H = [I 0]``: the same
-    operations on 2-D arrays (``np.dot``: less dispatch than ``@``, the same BLAS calls), with
-    ``K^T = S^-1 H P`` from LAPACK's Cholesky solver."""
-    n, m = x.shape[1], nu.shape[1]
-    P0, R0 = P[0], (R if R.ndim == 2 else R[0])
-    S = P0[observed, observed] + R0  # a block of P plus R: exactly symmetric, as they are
-    Kt = solve_spd(S, P0[observed])  # (m, n); H P = (P H^T)^T for symmetric P
-    x_post, block, N = x + np.dot(nu, Kt), None, None
+def _joseph_numpy(x: np.ndarray, P: np.ndarray, nu: np.ndarray, R: np.ndarray, H: Array | None,
+                  observed: slice | None, normalize: Any) -> tuple:
+    """:func:`joseph_update` on numpy arrays (the online step and the adaptive filters' batches):
+    ``P+ = G blockdiag(P, R) G^T`` with ``G = [T A | T K]`` and ``[A | K] = [I 0] - K [H | -I]``
+    (for ``H = [I 0]`` by slices: exact). One row (online) runs on 2-D arrays with ``np.dot``
+    (less dispatch per operation than 3-D ``@``, the same BLAS calls) and ``K^T = S^-1 H P`` from
+    LAPACK's Cholesky solver; a batch on 3-D arrays."""
+    batch, n = x.shape
+    m = nu.shape[1]
+    one = batch == 1
+    mm = np.dot if one else np.matmul
+    if one:
+        P, R = P[0], (R if R.ndim == 2 else R[0])
+    PHt = P[..., :, observed] if observed is not None else mm(P, H.T)
+    # S is symmetric positive definite (R is); a block of P plus R is exactly symmetric, as they are
+    S = P[..., observed, observed] + R if observed is not None else symmetrize(mm(H, PHt) + R)
+    if one:
+        Kt = solve_spd(S, P[observed] if observed is not None else PHt.T)  # (m, n); H P = (P H^T)^T
+        K = Kt.T
+        x_post = x + np.dot(nu, Kt)
+    else:
+        K = divide_spd(PHt, S)  # (B, n, m)
+        x_post = x + (K @ nu[:, :, None])[:, :, 0]
+    block = N = None
     if normalize is not None:
         x_post, block, N = normalize(x_post)
-    G = constant(x, ("I|0", n, m), lambda: np.eye(n, n + m)).copy()  # [I - K H | K]
-    G[:, observed] -= Kt.T
-    G[:, n:] = Kt.T
+    G = constant(x, ("I|0", n, m), lambda: np.eye(n, n + m))
+    if observed is None:
+        G = G - mm(K, np.concatenate((H, -np.eye(m)), axis=1))
+    else:
+        G = G.copy() if one else broadcast(G, (batch, n, n + m))
+        G[..., :, observed] -= K
+        G[..., :, n:] = K
     if block is not None and N is not None:
-        G[block] = np.dot(N[0], G[block])
-    D = np.zeros((n + m, n + m))
-    D[:n, :n], D[n:, n:] = P0, R0
-    return x_post, symmetrize(np.dot(np.dot(G, D), G.T))[None], S[None], Kt.T[None]
+        G[..., block, :] = mm(N[0] if one else N, G[..., block, :])
+    D = np.zeros(P.shape[:-2] + (n + m, n + m))
+    D[..., :n, :n], D[..., n:, n:] = P, R
+    P_post = symmetrize(mm(mm(G, D), G.swapaxes(-1, -2)))
+    return (x_post, P_post[None], S[None], K[None]) if one else (x_post, P_post, S, K)
 
 
 def _pad_columns(M: Array, columns: slice, n: int) -> Array:
