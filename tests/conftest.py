@@ -7,7 +7,10 @@ passed its threshold with the other worker running the suite). A test marked ``e
 therefore holds an exclusive lock for its whole run (setup, call, teardown) and every other test
 a shared one, fixtures of wider scope included (they are built inside the setup of the first test
 that needs them): while a timed test runs, the other worker waits between its tests, and the
-timing sees the machine the thresholds were calibrated on. Without xdist (``-n 0``), or where
+timing sees the machine the thresholds were calibrated on. Keep the ``exclusive_cpu`` tests in
+``tests/gates/test_speed_gate.py``: xdist's ``loadfile`` hands out the files with the most tests
+first, so they run at the start, beside short tests; one in another file ran beside the
+accuracy gate's 70-second fixture and left its worker idle that long. Without xdist (``-n 0``), or where
 ``fcntl`` does not exist (Windows), no lock is taken.
 """
 
@@ -48,3 +51,26 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
             yield
         finally:
             fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def _restoring_the_scenario_registry() -> Iterator[None]:
+    from fkn_bench.scenarios import registry
+
+    saved = dict(registry._REGISTRY)
+    yield
+    registry._REGISTRY.clear()
+    registry._REGISTRY.update(saved)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _scenario_registry_restored_after_the_module() -> Iterator[None]:
+    """Scenarios a test file registers (a TOML file it loads, a sweep it runs; in a fixture of any
+    scope) are gone after it, so that no later file on the same xdist worker sees them in
+    ``scenario_names()``."""
+    yield from _restoring_the_scenario_registry()
+
+
+@pytest.fixture(autouse=True)
+def _scenario_registry_restored_after_the_test() -> Iterator[None]:
+    """The same after each test, for the tests of a file that follow it."""
+    yield from _restoring_the_scenario_registry()

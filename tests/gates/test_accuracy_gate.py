@@ -1,17 +1,18 @@
 """The accuracy gate (:mod:`fkn_bench.gates.accuracy`), run by the default test command.
 
 ``test_committed_results_reproduce[<estimator>]`` recomputes seeds 0 and 1 of every registered
-estimator on every named scenario and compares every deterministic metric with the committed
+estimator on every named scenario (the rigid-body ones in ``test_accuracy_gate_rigid_body.py``;
+``conftest.py`` says how the gate is split) and compares every deterministic metric with the committed
 ``leaderboards/results`` (tolerances in the module's docstring). A registered estimator without
 committed results fails here with the command that adds them, unless it is listed in
-:data:`EXCLUDED`. The other tests show the gate at work on small grids: a worse estimator fails
+``EXCLUDED`` in ``conftest.py``. The other tests show the gate at work on small grids: a worse estimator fails
 with a readable table, an intended change passes once accepted.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -23,40 +24,22 @@ from fkn_bench.gates import accuracy
 from fkn_bench.gates.accuracy import ACCEPT_COMMAND, ADD_COMMAND, Tolerance, run_accuracy_gate, tolerance_for
 
 REPO = Path(__file__).resolve().parents[2]
-RESULTS = REPO / "leaderboards" / "results"
 
-EXCLUDED: dict[str, str] = {}
-"""Estimators the gate leaves out on purpose, ``{name: reason}`` (README, "Add your estimator to
-the gates"). Everything else that is registered and builds for a scenario must have committed
-results for it."""
+def test_committed_results_reproduce(constant_rate_report: accuracy.AccuracyReport, gated_estimator: str,
+                                     gate_check: Callable) -> None:
+    gate_check(constant_rate_report, gated_estimator)
 
 
-@pytest.fixture(scope="session")
-def committed_report() -> accuracy.AccuracyReport:
-    report = run_accuracy_gate(RESULTS, exclude=EXCLUDED)
-    print("\n" + report.summary())
-    return report
+def test_no_orphaned_committed_results(constant_rate_report: accuracy.AccuracyReport) -> None:
+    orphaned = [p for p in constant_rate_report.problems if p.kind == "orphaned"]
+    assert not orphaned, constant_rate_report.message(orphaned[0].estimator)
 
 
-@pytest.mark.parametrize("estimator", [n for n in estimator_names() if n not in EXCLUDED])
-def test_committed_results_reproduce(committed_report: accuracy.AccuracyReport, estimator: str) -> None:
-    compared = [c for c in committed_report.compared if c[0] == estimator]
-    if not compared and not committed_report.problems_of(estimator):
-        reasons = sorted({reason for name, _, reason in committed_report.skipped if name == estimator})
-        pytest.skip(f"{estimator} builds for no named scenario ({'; '.join(reasons)})")
-    assert committed_report.passed(estimator), committed_report.message(estimator)
-
-
-def test_no_orphaned_committed_results(committed_report: accuracy.AccuracyReport) -> None:
-    orphaned = [p for p in committed_report.problems if p.kind == "orphaned"]
-    assert not orphaned, committed_report.message(orphaned[0].estimator)
-
-
-def test_every_named_scenario_is_covered(committed_report: accuracy.AccuracyReport) -> None:
+def test_every_named_scenario_is_covered(constant_rate_report: accuracy.AccuracyReport) -> None:
     from fkn_bench.scenarios import scenario_names
 
-    assert {s for _, s, _ in committed_report.compared} == set(scenario_names())
-    assert all(len(seeds) == accuracy.GATE_SEEDS for _, _, seeds in committed_report.compared)
+    assert {s for _, s, _ in constant_rate_report.compared} == set(scenario_names())
+    assert all(len(seeds) == accuracy.GATE_SEEDS for _, _, seeds in constant_rate_report.compared)
 
 
 # ---------------------------------------------------------------------------------- the gate at work
@@ -212,7 +195,7 @@ def test_configurations_do_not_depend_on_the_checkout_location() -> None:
     from fkn_bench.training.artifacts import artifact_path
 
     package_root = str(artifact_path("x", "y").parents[2])
-    for name in [n for n in estimator_names() if n not in EXCLUDED]:
+    for name in estimator_names():
         for scenario in ("ds1", "ds2"):
             try:
                 config = make_estimator(name, scenario=get_scenario(scenario)).to_config()

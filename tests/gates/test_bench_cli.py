@@ -64,10 +64,3 @@ def test_gate_measures_one_check(capsys: pytest.CaptureFixture) -> None:
     (outcome,) = json.loads(capsys.readouterr().out)
     assert outcome["check"] == "online-step:manual-ekf" and outcome["passed"]
     assert outcome["attempts"][0]["ratio"] >= outcome["min_ratio"]
-
-
-@pytest.mark.exclusive_cpu  # timed (tests/conftest.py)
-def test_gate_calibration_prints_ratios_and_a_threshold(capsys: pytest.CaptureFixture) -> None:
-    assert main(["bench", "gate", "--check", "online-step:manual-ekf", "--calibrate", "2", "--json"]) == 0
-    entry = json.loads(capsys.readouterr().out)["online-step:manual-ekf"]
-    assert entry["n"] == 2 and entry["doubled_max"] < entry["suggested_min_ratio"] < entry["min"]

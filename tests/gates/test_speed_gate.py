@@ -106,3 +106,15 @@ def test_thresholds_separate_the_measured_ratios() -> None:
         measured = speed.MEASURED.get(check.name)
         assert measured is not None, f"{check.name}: record its measured ratios in speed.MEASURED"
         assert measured["doubled_max"] < check.min_ratio < measured["min"], check.name
+
+
+def test_gate_calibration_prints_ratios_and_a_threshold(capsys: pytest.CaptureFixture) -> None:
+    """``fkn-bench bench gate --calibrate`` (here, with the other timed tests: all ``exclusive_cpu``
+    tests sit in this file, which xdist starts first, so none waits behind a long test elsewhere)."""
+    import json
+
+    from fkn_bench.cli import main
+
+    assert main(["bench", "gate", "--check", "online-step:manual-ekf", "--calibrate", "2", "--json"]) == 0
+    entry = json.loads(capsys.readouterr().out)["online-step:manual-ekf"]
+    assert entry["n"] == 2 and entry["doubled_max"] < entry["suggested_min_ratio"] < entry["min"]

@@ -1,0 +1,91 @@
+"""The committed-results gate, split in two halves that pytest-xdist (``--dist loadfile``) runs on
+its two workers: ``test_accuracy_gate.py`` gates the estimators of the paper's constant-rate model
+(and runs the checks over the whole registry: orphans, coverage), ``test_accuracy_gate_rigid_body.py``
+the estimators on the rigid-body model. Each half's report is a session fixture, built on the
+worker that runs its file.
+
+The estimators on the rigid-body model are gated on part of the named scenarios (:data:`GATED_ON`):
+the rigid-body EKF (known and estimated inertia) and FlexKalmanNet on it on ds1, ds2 and the free
+tumbles, the rigid-body UKF and MEKF on the free tumbles. What the other scenarios exercise (the
+measurement stream's dropouts, gaps, sign flips and noise) is the filters' shared handling, gated
+on every scenario by the estimators of the paper's model, and the UKF and MEKF steps are gated
+everywhere by ``manual-ukf`` and ``manual-mekf``. (The gate's cost is the batched filters'
+per-step overhead: about 1.5 s per pair on the rigid-body model, nearly the same for one seed or
+two; gating all 70 of their pairs took 175 s of the test command's 300.)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from fkn_bench.gates import accuracy
+
+RESULTS = Path(__file__).resolve().parents[2] / "leaderboards" / "results"
+
+EXCLUDED: dict[str, str] = {}
+"""Estimators the gate leaves out on purpose, ``{name: reason}`` (README, "Add your estimator to
+the gates"). Everything else that is registered and builds for a scenario must have committed
+results for it."""
+
+FREE_TUMBLES = ("tumble-fast", "tumble-flip", "tumble-slow", "tumble-inertia-error")
+GATED_ON = {
+    **{name: ("ds1", "ds2", *FREE_TUMBLES) for name in ("rigid-body-ekf", "rigid-body-ekf-ratios", "flexkalmannet-rigid-body")},
+    **{name: FREE_TUMBLES for name in ("rigid-body-ukf", "rigid-body-ukf-ratios", "rigid-body-mekf", "rigid-body-mekf-ratios")},
+}
+"""The estimators on the rigid-body model are gated on part of the named scenarios (module docstring)."""
+
+
+def _rigid_body(name: str) -> bool:
+    return name.startswith("rigid-body-")
+
+
+def _in_half(name: str, path: Path) -> bool:
+    """Whether the gate file ``path`` gates estimator ``name``."""
+    return name not in EXCLUDED and _rigid_body(name) == path.name.endswith("_rigid_body.py")
+
+
+def pytest_generate_tests(metafunc: pytest.Metafunc) -> None:
+    """``gated_estimator``: every registered estimator of the test file's half of the gate."""
+    if "gated_estimator" in metafunc.fixturenames:
+        from fkn_bench.estimators import estimator_names
+
+        metafunc.parametrize("gated_estimator", [n for n in estimator_names() if _in_half(n, metafunc.definition.path)])
+
+
+@pytest.fixture(scope="session")
+def constant_rate_report() -> accuracy.AccuracyReport:
+    """The gate over every registered estimator but the rigid-body ones (orphans checked too)."""
+    from fkn_bench.estimators import estimator_names
+
+    others = {n: "gated by test_accuracy_gate_rigid_body.py" for n in estimator_names() if _rigid_body(n)}
+    report = accuracy.run_accuracy_gate(RESULTS, exclude={**EXCLUDED, **others}, scenarios_of=GATED_ON)
+    print("\n" + report.summary())
+    return report
+
+
+@pytest.fixture(scope="session")
+def rigid_body_report() -> accuracy.AccuracyReport:
+    """The gate over the rigid-body estimators (the UKF/MEKF combinations on the free tumbles)."""
+    from fkn_bench.estimators import estimator_names
+
+    names = [n for n in estimator_names() if _rigid_body(n) and n not in EXCLUDED]
+    report = accuracy.run_accuracy_gate(RESULTS, estimators=names, scenarios_of=GATED_ON)
+    print("\n" + report.summary())
+    return report
+
+
+def check_estimator(report: accuracy.AccuracyReport, estimator: str) -> None:
+    """Pass, skip (the estimator builds for no named scenario) or fail with the gate's message."""
+    compared = [c for c in report.compared if c[0] == estimator]
+    if not compared and not report.problems_of(estimator):
+        reasons = sorted({reason for name, _, reason in report.skipped if name == estimator})
+        pytest.skip(f"{estimator} builds for no named scenario ({'; '.join(reasons)})")
+    assert report.passed(estimator), report.message(estimator)
+
+
+@pytest.fixture
+def gate_check():
+    """:func:`check_estimator`, for the test files (which cannot import this module)."""
+    return check_estimator

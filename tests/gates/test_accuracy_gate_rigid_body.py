@@ -1,0 +1,21 @@
+"""The accuracy gate's second half: the Kalman filters on the rigid-body model (``conftest.py`` says
+how the gate is split and why the rigid-body UKF and MEKF are gated on the free tumbles only)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from fkn_bench.gates import accuracy
+
+
+def test_committed_results_reproduce(rigid_body_report: accuracy.AccuracyReport, gated_estimator: str,
+                                     gate_check: Callable) -> None:
+    gate_check(rigid_body_report, gated_estimator)
+
+
+def test_every_free_tumble_is_covered(rigid_body_report: accuracy.AccuracyReport) -> None:
+    tumbles = {"tumble-fast", "tumble-flip", "tumble-slow", "tumble-inertia-error"}
+    gated = {e for e, _, _ in rigid_body_report.compared}
+    assert gated >= {"rigid-body-ekf", "rigid-body-ekf-ratios", "rigid-body-ukf", "rigid-body-mekf"}
+    for name in gated:
+        assert tumbles <= {s for e, s, _ in rigid_body_report.compared if e == name}, name
