@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from fkn_bench.cli import UsageError
 from fkn_bench.cli.options import add_command
@@ -38,12 +39,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.cross:
         return _cross(args)
-    from fkn_bench.harness.leaderboard import write_leaderboards
+    from fkn_bench.harness.leaderboard import NOTES_FILE, write_leaderboards
     from fkn_bench.harness.store import ResultStore, StoreError
 
     try:
         results = ResultStore(args.results).load()
-        paths = write_leaderboards(results, args.out)
+        notes = Path(args.results) / NOTES_FILE
+        paths = write_leaderboards(results, args.out, notes.read_text(encoding="utf-8") if notes.is_file() else None)
     except StoreError as exc:
         raise UsageError(f"{exc} (write results with: fkn-bench run --all --out {args.results})") from None
     except ValueError as exc:  # results that cannot be combined (mixed settings)
@@ -59,8 +61,6 @@ CROSS_FAMILIES = ("ds1", "ds2", "tumble", "default")
 
 
 def _cross(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     from fkn_bench.harness.cross import cross_scores, cross_table
     from fkn_bench.harness.tables import markdown_table
     from fkn_bench.io import write_bytes_atomic

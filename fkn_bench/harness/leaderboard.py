@@ -8,7 +8,10 @@ shown beside it, never folded into it. The paper's numbers appear as labelled, u
 "(quoted)" rows where they apply (:mod:`fkn_bench.harness.reference`).
 
 Every file is a pure function of the stored results (no dates, no machine facts of the process
-that builds it), so rebuilding from the same results gives byte-identical files. Layout::
+that builds it), so rebuilding from the same results gives byte-identical files. The one text
+written by people, ``NOTES.md`` in the results directory (:data:`NOTES_FILE`: findings, targets
+met and missed, each number with the command that produced it), is copied into the index's
+"Notes" section. Layout::
 
     README.md            index: overview matrix, links, definitions, provenance
     <scenario>.md/.html  ranking, per-component RMSE, consistency and stability
@@ -238,7 +241,11 @@ def _scenario_csv(ranked: Sequence[dict[str, Any]]) -> str:
     return rows_to_csv(frame, float_format=CSV_FLOAT_FORMAT)
 
 
-def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]]) -> str:
+NOTES_FILE = "NOTES.md"
+"""Hand-written notes in a results directory, copied into the leaderboard index."""
+
+
+def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]], notes: str | None) -> str:
     positions: dict[str, list[int]] = {}
     scores: dict[tuple[str, str], float] = {}
     for scenario in scenarios:
@@ -284,6 +291,8 @@ def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[di
         "",
         markdown_table(overview).rstrip("\n"),
         "",
+        *(["## Notes", "", f"(From [`results/{NOTES_FILE}`](results/{NOTES_FILE}), written by people; every number "
+           "comes with the command that produced it.)", "", notes.strip(), ""] if notes else []),
         "## Scenarios",
         "",
         *links,
@@ -336,8 +345,9 @@ def _provenance(results: Results, scenarios: Sequence[str]) -> str:
     return json.dumps(to_jsonable(document), indent=2, sort_keys=True) + "\n"
 
 
-def build_leaderboards(results: Results) -> dict[str, str]:
-    """Every leaderboard file as ``{relative path: text}`` (see module docstring)."""
+def build_leaderboards(results: Results, notes: str | None = None) -> dict[str, str]:
+    """Every leaderboard file as ``{relative path: text}`` (see module docstring); ``notes``
+    (Markdown) becomes the index's "Notes" section."""
     if not len(results):
         raise ValueError("no results to build leaderboards from")
     scenarios = scenario_order(results.scenarios())
@@ -345,13 +355,13 @@ def build_leaderboards(results: Results) -> dict[str, str]:
     ranked = {scenario: ranked_summaries(results, scenario) for scenario in scenarios}
     for scenario in scenarios:
         files.update(_scenario_files(results, scenario, ranked[scenario]))
-    files["README.md"] = _index(results, scenarios, ranked)
+    files["README.md"] = _index(results, scenarios, ranked, notes)
     files["results.csv"] = rows_to_csv(deterministic_rows(results.rows), float_format=CSV_FLOAT_FORMAT)
     files["provenance.json"] = _provenance(results, scenarios)
     return files
 
 
-def write_leaderboards(results: Results, out_dir: str | Path) -> list[Path]:
+def write_leaderboards(results: Results, out_dir: str | Path, notes: str | None = None) -> list[Path]:
     """Build and write every leaderboard file (atomically) under ``out_dir``; returns the paths."""
     out = Path(out_dir)
-    return [write_text_atomic(out / name, text) for name, text in sorted(build_leaderboards(results).items())]
+    return [write_text_atomic(out / name, text) for name, text in sorted(build_leaderboards(results, notes).items())]

@@ -61,6 +61,26 @@ def test_index_and_provenance(files: dict[str, str]) -> None:
     assert set(provenance["estimators"]) == {"manual-ekf", "oracle-ekf"}
 
 
+def test_notes_written_by_people_become_a_section_of_the_index(small_results_dir: Path, files: dict[str, str],
+                                                                capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
+    from fkn_bench.cli import main
+    from fkn_bench.harness.leaderboard import NOTES_FILE
+
+    assert "## Notes" not in files["README.md"]
+    noted = build_leaderboards(ResultStore(small_results_dir).load(), notes="### Finding\n\nA number (`cmd`).\n")
+    index = noted["README.md"]
+    assert index.index("## Overview") < index.index("## Notes") < index.index("### Finding") < index.index("## Scenarios")
+    assert {k: v for k, v in noted.items() if k != "README.md"} == {k: v for k, v in files.items() if k != "README.md"}
+    # the command reads them from the results directory
+    results = tmp_path / "results"
+    import shutil
+
+    shutil.copytree(small_results_dir, results)
+    (results / NOTES_FILE).write_text("### Finding\n\nA number (`cmd`).\n")
+    assert main(["leaderboard", "--results", str(results), "--out", str(tmp_path / "out")]) == 0
+    assert (tmp_path / "out" / "README.md").read_text() == index
+
+
 def test_results_csv_is_the_deterministic_record(files: dict[str, str]) -> None:
     rows = pd.read_csv(io.StringIO(files["results.csv"]))
     assert "cost" not in set(rows.group)
