@@ -33,7 +33,10 @@ The benchmark's conventions (those of :meth:`fkn_bench.filters.KalmanFilter.run`
 
 The state is a :class:`KalmanNetState` (an immutable value); :meth:`KalmanNet.predict`,
 :meth:`~KalmanNet.initial` and :meth:`~KalmanNet.update` are pure, and the same functions run the
-batch (training, ``estimate``) and the online path (batch of one).
+batch (training, ``estimate``) and the online path (batch of one). What does not depend on the
+gain network (the model and manifold, the features, truncated back-propagation, the batch loop
+over any state of named tuples) is :class:`ManifoldRecursion`, which Recursive KalmanNet
+(:mod:`fkn_bench.kalmannet.recursive`) shares.
 """
 
 from __future__ import annotations
