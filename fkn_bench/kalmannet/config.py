@@ -113,8 +113,8 @@ class RecursiveKalmanNetConfig(KalmanNetConfig):
     KalmanNet's fields, read for its two recurrent branches (each ``FC-in -> GRU -> FC-out ->
     linear``, :class:`~fkn_bench.kalmannet.recursive.GRUBranch`): ``in_mult`` (FC-in width per
     input), ``hidden_mult`` (GRU hidden size per output), ``out_mult`` (FC-out width per hidden
-    unit; the paper's code uses 10, 10 and 20: 23 million weights on the pose model, and the
-    defaults 5, 2 and 2 give 0.4 million), ``initial_gain`` and ``output_scale`` (the gain branch
+    unit; the paper's code uses 10, 10 and 20: 30 million weights on the pose model, and the
+    defaults 5, 2 and 2 give 0.45 million), ``initial_gain`` and ``output_scale`` (the gain branch
     starts near ``initial_gain`` times the observed gain, as KalmanNet's; both branches' output
     weights scaled by ``output_scale``). Added:
 
