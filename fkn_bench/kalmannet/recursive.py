@@ -60,6 +60,11 @@ Deviations from the paper (and its public code), each for a reason:
   a sequence initialises at its first usable measurement as every estimator does.
 * The error covariance is not reset after the quaternion correction (the paper has no
   manifold; the reset's effect is second order in the correction).
+
+One difference from KalmanNet's recursion: the mean is predicted together with the covariance,
+by the multiplicative EKF's prediction step (the exact rotation over ``dt`` on the constant-rate
+model, where KalmanNet takes the model's first-order ``predict``; the model's transition with the
+quaternion renormalised on the rigid body), so that mean and covariance come from one transition.
 """
 
 from __future__ import annotations
