@@ -12,7 +12,7 @@ import pytest
 import torch
 
 from fkn_bench.envs import generate_episodes
-from fkn_bench.estimators import make_estimator
+from fkn_bench.estimators import load_estimator, make_estimator
 from fkn_bench.estimators.conformance import check_input_rules, hostile_measurements
 from fkn_bench.estimators.registry import estimator_spec
 from fkn_bench.kalmannet import (
@@ -194,11 +194,13 @@ def test_identical_runs_are_identical(runs: dict[str, list]) -> None:
     assert first.test == second.test
 
 
-def test_the_trained_network_deploys_as_an_estimator(runs: dict[str, list]) -> None:
+def test_the_trained_network_deploys_as_an_estimator(runs: dict[str, list], tmp_path) -> None:  # noqa: ANN001
     outcome = runs["gaussian-nll"][0]
     estimator = make_estimator("recursive-kalmannet", scenario=SHORT, parameters=str(outcome.artifact))
     assert isinstance(estimator, RecursiveKalmanNetEstimator)
     assert estimator.to_config()["checkpoint"] == str(outcome.checkpoint)
+    reloaded = load_estimator(estimator.save(tmp_path / "rkn.json"))
+    assert isinstance(reloaded, RecursiveKalmanNetEstimator) and reloaded.to_config() == estimator.to_config()
     episodes = generate_episodes(SHORT, [SHORT.dataset_seed], split="test")
     estimates = estimator.estimate(episodes.measurements, episodes.valid, SHORT.dt)
     with torch.no_grad():
