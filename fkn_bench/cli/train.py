@@ -39,7 +39,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--model", dest="process_model", metavar="MODEL",
                         help="process model: constant-velocity (the paper's), rigid-body (the scenario's "
                              "inertia) or rigid-body-ratios (inertia ratios estimated)")
-    parser.add_argument("--objective", choices=("supervised", "nll"), help="training objective")
+    parser.add_argument("--objective", choices=("supervised", "nll", "gaussian-nll"),
+                        help="training objective (gaussian-nll: estimators with a covariance of their own, "
+                             "recursive-kalmannet)")
     parser.add_argument("--config", metavar="TOML", help="configuration file (options below override it)")
     parser.add_argument("--epochs", type=int, help="maximum epochs")
     parser.add_argument("--lr", type=float, help="learning rate")

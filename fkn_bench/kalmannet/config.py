@@ -13,12 +13,12 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Self
 
 from fkn_bench.training import TrainConfig
 from fkn_bench.training.pipeline import options_with_file
 
-__all__ = ["KalmanNetConfig"]
+__all__ = ["KalmanNetConfig", "RecursiveKalmanNetConfig"]
 
 _MODEL_FIELDS = ("manifold", "in_mult", "out_mult", "network_dtype", "detach_every", "initial_gain", "output_scale")
 _NOT_OPTIONS = ("variant", "objective", "optimizer", "lbfgs_iterations", "lbfgs_history")
@@ -55,6 +55,12 @@ class KalmanNetConfig(TrainConfig):
     max_grad_norm: float | None = 1.0
     windows_per_batch: int = 16
 
+    objectives: ClassVar[tuple[str, ...]] = ("supervised",)
+    _label: ClassVar[str] = "KalmanNet"
+    _table: ClassVar[str] = "kalmannet"  # the TOML table of its options
+    _model_fields: ClassVar[tuple[str, ...]] = _MODEL_FIELDS
+    _not_options: ClassVar[tuple[str, ...]] = _NOT_OPTIONS
+
     def __post_init__(self) -> None:
         if self.manifold not in ("auto", "pose-tangent", "euclidean"):
             raise ValueError(f"manifold must be 'auto', 'pose-tangent' or 'euclidean' (got {self.manifold!r})")
@@ -65,32 +71,87 @@ class KalmanNetConfig(TrainConfig):
                 raise ValueError(f"{name} must be >= 1 (got {getattr(self, name)!r})")
         if self.detach_every is not None and self.detach_every < 1:
             raise ValueError(f"detach_every must be >= 1 or None (got {self.detach_every!r})")
-        if self.objective != "supervised" or self.optimizer != "adam":
-            raise ValueError("KalmanNet trains with Adam on the supervised objective")
+        if self.objective not in self.objectives or self.optimizer != "adam":
+            raise ValueError(f"{self._label} trains with Adam on the {' or '.join(self.objectives)} objective")
         super().__post_init__()
 
     def to_dict(self) -> dict[str, Any]:
         """The options: the model fields, then the data and optimisation fields."""
-        values = {k: v for k, v in super().to_dict().items() if k not in _NOT_OPTIONS}
-        return {**{k: values.pop(k) for k in _MODEL_FIELDS}, **values}
+        values = {k: v for k, v in super().to_dict().items() if k not in self._not_options}
+        return {**{k: values.pop(k) for k in self._model_fields}, **values}
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> KalmanNetConfig:
-        known = {f.name for f in dataclasses.fields(cls)} - set(_NOT_OPTIONS)
+    def from_dict(cls, data: Mapping[str, Any]) -> Self:
+        known = {f.name for f in dataclasses.fields(cls)} - set(cls._not_options)
         unknown = sorted(set(data) - known)
         if unknown:
-            raise ValueError(f"unknown KalmanNet config keys {unknown}; valid: {sorted(known)}")
+            raise ValueError(f"unknown {cls._label} config keys {unknown}; valid: {sorted(known)}")
         return cls(**dict(data))
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> KalmanNetConfig:
-        """Read a TOML file whose top level (or ``[kalmannet]`` table) holds config keys."""
+    def from_toml(cls, path: str | Path) -> Self:
+        """Read a TOML file whose top level (or ``[kalmannet]`` table; ``[recursive-kalmannet]``
+        for :class:`RecursiveKalmanNetConfig`) holds config keys."""
         return cls.from_options({"config": str(path)})
 
     @classmethod
-    def from_options(cls, options: Mapping[str, Any]) -> KalmanNetConfig:
+    def from_options(cls, options: Mapping[str, Any]) -> Self:
         """The defaults, then the TOML file named by option ``config``, then the other options."""
-        return cls.from_dict(options_with_file(options, "kalmannet"))
+        return cls.from_dict(options_with_file(options, cls._table))
 
-    def replace(self, **changes: Any) -> KalmanNetConfig:
+    def replace(self, **changes: Any) -> Self:
         return dataclasses.replace(self, **changes)
+
+
+@dataclass
+class RecursiveKalmanNetConfig(KalmanNetConfig):
+    """Everything that defines a Recursive KalmanNet training run (Mortada, Falcon, Kahil,
+    Clavaud & Michel, "Recursive KalmanNet: Deep Learning-Augmented Kalman Filtering for State
+    Estimation with Consistent Uncertainty Quantification", EUSIPCO 2025; flat, for TOML files
+    and sweeps; TOML table ``[recursive-kalmannet]``).
+
+    KalmanNet's fields, read for its two recurrent branches (each ``FC-in -> GRU -> FC-out ->
+    linear``, :class:`~fkn_bench.kalmannet.recursive.GRUBranch`): ``in_mult`` (FC-in width per
+    input), ``hidden_mult`` (GRU hidden size per output), ``out_mult`` (FC-out width per hidden
+    unit; the paper's code uses 10, 10 and 20: 30 million weights on the pose model, and the
+    defaults 5, 2 and 2 give 0.45 million), ``initial_gain`` and ``output_scale`` (the gain branch
+    starts near ``initial_gain`` times the observed gain, as KalmanNet's; both branches' output
+    weights scaled by ``output_scale``). Added:
+
+    * ``objective``: ``gaussian-nll`` (the paper's loss: the Gaussian negative log-likelihood of
+      the true state under the estimate and its covariance, every step after ``loss_cut``) or
+      ``supervised`` (the 13-state MSE, KalmanNet's; the covariance branch then gets no gradient);
+    * ``initial_std``: the standard deviation (tangent units: rad, m, rad/s, m/s) on the diagonal
+      of the covariance branch's Cholesky factor at initialisation;
+    * ``std_floor``: ``std_floor^2 I`` is added to every posterior covariance (positive definite
+      by construction, however the network's factor degenerates);
+    * ``process_std``: the starting value of a learned diagonal process noise (per tangent
+      component, unit per square root of a second) added to the covariance over the prediction
+      steps between measurements (None: none, the paper's ``F P F^T``; see the deviations in
+      :mod:`fkn_bench.kalmannet.recursive`).
+    """
+
+    hidden_mult: int = 2
+    out_mult: int = 2
+    initial_std: float = 0.01
+    std_floor: float = 1e-4
+    process_std: float | None = 1e-3
+    objective: str = "gaussian-nll"
+
+    objectives: ClassVar[tuple[str, ...]] = ("gaussian-nll", "supervised")
+    _label: ClassVar[str] = "Recursive KalmanNet"
+    _table: ClassVar[str] = "recursive-kalmannet"
+    _model_fields: ClassVar[tuple[str, ...]] = (
+        "manifold", "in_mult", "hidden_mult", "out_mult", "network_dtype", "detach_every", "initial_gain", "output_scale",
+        "initial_std", "std_floor", "process_std",
+    )
+    _not_options: ClassVar[tuple[str, ...]] = ("variant", "optimizer", "lbfgs_iterations", "lbfgs_history")
+
+    def __post_init__(self) -> None:
+        if int(self.hidden_mult) < 1:
+            raise ValueError(f"hidden_mult must be >= 1 (got {self.hidden_mult!r})")
+        if not (self.initial_std > 0 and self.std_floor > 0 and self.initial_std > self.std_floor):
+            raise ValueError(f"need initial_std > std_floor > 0 (got {self.initial_std!r}, {self.std_floor!r})")
+        if self.process_std is not None and not self.process_std > 0:
+            raise ValueError(f"process_std must be > 0 or None (got {self.process_std!r})")
+        super().__post_init__()

@@ -75,6 +75,11 @@ class Manifold:
         for the learned gain (``initial_gain * G``)."""
         raise NotImplementedError
 
+    def measurement_matrix(self) -> np.ndarray:
+        """``H (m', n')``: the measurement's tangent as a linear map of the state's (what a
+        covariance in tangent coordinates is observed through)."""
+        raise NotImplementedError
+
 
 class Euclidean(Manifold):
     """Plain vector differences and additive corrections (KalmanNet's own update)."""
@@ -88,6 +93,9 @@ class Euclidean(Manifold):
 
     def observed_gain(self) -> np.ndarray:
         return np.linalg.pinv(self.H)  # H G = I for a full-row-rank H
+
+    def measurement_matrix(self) -> np.ndarray:
+        return self.H
 
     def measurement_difference(self, a: Array, b: Array) -> Array:
         return a - b
@@ -128,6 +136,9 @@ class PoseTangent(Manifold):
 
     def observed_gain(self) -> np.ndarray:
         return np.eye(12, 6)  # [I6; 0]: attitude and position observed, rates not
+
+    def measurement_matrix(self) -> np.ndarray:
+        return np.eye(6, 12)  # [I6 0]: the pose error [dtheta, dr] of the state error
 
     def state_error(self, estimate: Array, truth: Array) -> Array:
         """``estimate - truth`` with the true quaternion's sign matched to the estimate (the

@@ -33,12 +33,16 @@ The benchmark's conventions (those of :meth:`fkn_bench.filters.KalmanFilter.run`
 
 The state is a :class:`KalmanNetState` (an immutable value); :meth:`KalmanNet.predict`,
 :meth:`~KalmanNet.initial` and :meth:`~KalmanNet.update` are pure, and the same functions run the
-batch (training, ``estimate``) and the online path (batch of one).
+batch (training, ``estimate``) and the online path (batch of one). What does not depend on the
+gain network (the model and manifold, the features, truncated back-propagation, the batch loop
+over any state of named tuples) is :class:`ManifoldRecursion`, which Recursive KalmanNet
+(:mod:`fkn_bench.kalmannet.recursive`) shares.
 """
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple, TypeVar
 
 import torch
 from torch import Tensor
@@ -50,7 +54,9 @@ from fkn_bench.kalmannet.network import GainNetwork, Hidden, normalize_features
 from fkn_bench.training.data import Sequences
 from fkn_bench.training.trainer import SequenceModel
 
-__all__ = ["KalmanNet", "KalmanNetState", "KalmanNetRun"]
+__all__ = ["KalmanNet", "KalmanNetState", "KalmanNetRun", "ManifoldRecursion"]
+
+StateT = TypeVar("StateT")
 
 
 class KalmanNetState(NamedTuple):
@@ -88,17 +94,122 @@ class KalmanNetRun(NamedTuple):
     final: KalmanNetState
 
 
-def _select(rows: Tensor, a: KalmanNetState, b: KalmanNetState) -> KalmanNetState:
-    """``a`` in the batch rows where ``rows (B,)`` is True, ``b`` elsewhere."""
-    pick = lambda u, v: torch.where(rows[:, None], u, v)  # noqa: E731
-    return KalmanNetState(*(pick(u, v) for u, v in zip(a[:5], b[:5])), Hidden(*(pick(u, v) for u, v in zip(a.hidden, b.hidden))))
+def _tree_map(fn: Callable[..., Tensor], *states: Any) -> Any:
+    """``fn`` applied to the tensors of states of one structure (named tuples of tensors and of
+    named tuples of tensors), the structure kept."""
+    first = states[0]
+    if isinstance(first, tuple):
+        return type(first)(*(_tree_map(fn, *parts) for parts in zip(*states)))
+    return fn(*states)
 
 
-def _detached(state: KalmanNetState) -> KalmanNetState:
-    return KalmanNetState(*(t.detach() for t in state[:5]), Hidden(*(t.detach() for t in state.hidden)))
+def _select(rows: Tensor, a: StateT, b: StateT) -> StateT:
+    """``a`` in the batch rows where ``rows (B,)`` is True, ``b`` elsewhere (any state structure)."""
+    return _tree_map(lambda u, v: torch.where(rows.reshape((-1,) + (1,) * (u.dim() - 1)), u, v), a, b)
 
 
-class KalmanNet(SequenceModel):
+def _detached(state: StateT) -> StateT:
+    return _tree_map(lambda t: t.detach(), state)
+
+
+class ManifoldRecursion(SequenceModel):
+    """What KalmanNet and Recursive KalmanNet share (see module docstring): the process model,
+    the :class:`Manifold` of differences and corrections, truncated back-propagation, the
+    features F1-F4 and the batch loop. A subclass brings its state (a named tuple with at least
+    KalmanNet's ``mean``, ``last_measurement``, ``evolution`` and ``correction``, possibly nested
+    named tuples of tensors) and the pure steps :meth:`prior`, :meth:`predict`, :meth:`initial`
+    and :meth:`update`; :meth:`recurse` runs them over a batch of sequences.
+
+    Args:
+        model: the process and measurement model (any :class:`~fkn_bench.filters.models.StateSpaceModel`).
+        manifold: ``"auto"``, ``"pose-tangent"`` or ``"euclidean"``; or a :class:`Manifold`.
+        detach_every: truncated back-propagation through time (None: full; see :class:`KalmanNet`).
+    """
+
+    def __init__(self, model: StateSpaceModel, *, manifold: str | Manifold = "auto", detach_every: int | None = None) -> None:
+        super().__init__()
+        self.model = model
+        self.manifold = manifold if isinstance(manifold, Manifold) else manifold_for(model, manifold)
+        if detach_every is not None and detach_every < 1:
+            raise ValueError(f"detach_every must be >= 1 or None (got {detach_every})")
+        self.detach_every = detach_every
+
+    # ------------------------------------------------------------------ steps (pure), by subclasses
+    def prior(self, batch: int, dtype: torch.dtype = torch.float64) -> Any:
+        raise NotImplementedError
+
+    def predict(self, state: Any, dt: float) -> Any:
+        raise NotImplementedError
+
+    def initial(self, state: Any, z: Tensor) -> Any:
+        raise NotImplementedError
+
+    def update(self, state: Any, z: Tensor) -> Any:
+        raise NotImplementedError
+
+    def features(self, state: Any, z: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        """``(F1, F2, F3, F4)`` at a predicted ``state`` for usable measurements ``z`` (``z``
+        sign-aligned with the prediction first), not yet normalised; F2 is the innovation."""
+        prior = state.mean
+        f1 = self.manifold.measurement_difference(z, state.last_measurement)
+        innovation = self.manifold.measurement_difference(z, self.model.measure(prior))
+        return f1, innovation, state.evolution, state.correction
+
+    # ------------------------------------------------------------------ sequences
+    def recurse(
+        self, measurements: Tensor, mask: Tensor, *, dt: float, record: Callable[[Any], tuple[Tensor, ...]]
+    ) -> tuple[tuple[Tensor, ...], Tensor, Tensor, Any]:
+        """Filter a batch: ``measurements (B, T, m)`` (entries outside ``mask`` are ignored and
+        may be NaN), ``mask (B, T)`` -> ``(records, updated (B, T), initialised (B, T), final
+        state)``, ``records`` the tensors ``record(state)`` of every step stacked on axis 1.
+        float64 unless the measurements are of another floating dtype."""
+        if measurements.dim() != 3 or measurements.shape[-1] != self.manifold.measurement_dim:
+            raise ValueError(f"measurements must have shape (B, T, {self.manifold.measurement_dim}) (got {tuple(measurements.shape)})")
+        if mask.shape != measurements.shape[:2]:
+            raise ValueError(f"mask must have shape {tuple(measurements.shape[:2])} (got {tuple(mask.shape)})")
+        batch, steps, _ = measurements.shape
+        if batch == 0 or steps == 0:
+            raise ValueError(f"measurements hold no sequences or no time steps (shape {tuple(measurements.shape)})")
+        dt = check_dt(dt)
+        z_all, usable = self.model.sanitize(measurements, mask.bool())
+        has_any = usable.any(1)
+        first = torch.where(has_any, usable.to(torch.int8).argmax(1), torch.full_like(has_any, -1, dtype=torch.long))
+        starts = first[:, None] == torch.arange(steps)[None, :]  # (B, T) the initialisation step
+        updates = usable & ~starts
+        start_any, update_any, update_all = starts.any(0).tolist(), updates.any(0).tolist(), updates.all(0).tolist()
+        truncate = self.detach_every if torch.is_grad_enabled() else None
+        state = self.prior(batch, measurements.dtype)
+        initialised = torch.zeros(batch, dtype=torch.bool)
+        records, initialised_steps = [], []
+        for t in range(steps):
+            if truncate is not None and t > 0 and t % truncate == 0:
+                state = _detached(state)
+            if t > 0:
+                state = self.predict(state, dt)
+            if start_any[t]:
+                state = _select(starts[:, t], self.initial(state, z_all[:, t]), state)
+                initialised = initialised | starts[:, t]
+            if update_any[t]:
+                posterior = self.update(state, z_all[:, t])
+                state = posterior if update_all[t] else _select(updates[:, t], posterior, state)
+            records.append(record(state))
+            initialised_steps.append(initialised)
+        stacked = tuple(torch.stack(parts, 1) for parts in zip(*records))
+        return stacked, updates, torch.stack(initialised_steps, 1), state
+
+    def run_means(self, measurements: Tensor, mask: Tensor, *, dt: float) -> Tensor:
+        return self.recurse(measurements, mask, dt=dt, record=lambda s: (s.mean,))[0][0]
+
+    def sequence_mse(self, sequences: Sequences, *, dt: float, loss_cut: int) -> Tensor:
+        """Mean squared state error (the manifold's, sign-safe for the quaternion) over steps
+        ``loss_cut:``: the supervised objective of :class:`~fkn_bench.training.Trainer`."""
+        means = self.run_means(sequences.measurements, sequences.mask, dt=dt)
+        if loss_cut >= means.shape[1]:
+            raise ValueError(f"loss_cut {loss_cut} leaves no steps of {means.shape[1]}")
+        return self.manifold.state_error(means[:, loss_cut:], sequences.truth[:, loss_cut:]).square().mean()
+
+
+class KalmanNet(ManifoldRecursion):
     """KalmanNet (architecture 2) on a state-space model (see module docstring).
 
     Args:
@@ -130,12 +241,7 @@ class KalmanNet(SequenceModel):
         initial_gain: float | None = None,
         output_scale: float = 1.0,
     ) -> None:
-        super().__init__()
-        self.model = model
-        self.manifold = manifold if isinstance(manifold, Manifold) else manifold_for(model, manifold)
-        if detach_every is not None and detach_every < 1:
-            raise ValueError(f"detach_every must be >= 1 or None (got {detach_every})")
-        self.detach_every = detach_every
+        super().__init__(model, manifold=manifold, detach_every=detach_every)
         start = None if initial_gain is None else initial_gain * torch.from_numpy(self.manifold.observed_gain())
         self.network = GainNetwork(self.manifold.state_tangent_dim, self.manifold.measurement_tangent_dim,
                                    in_mult=in_mult, out_mult=out_mult, dtype=network_dtype, initial_gain=start,
@@ -159,14 +265,6 @@ class KalmanNet(SequenceModel):
         tangent = mean.new_zeros(z.shape[0], self.manifold.state_tangent_dim)
         return KalmanNetState(mean, mean, tangent, tangent, z, self.network.initial_hidden(z.shape[0]))
 
-    def features(self, state: KalmanNetState, z: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-        """``(F1, F2, F3, F4)`` at a predicted ``state`` for usable measurements ``z`` (``z``
-        sign-aligned with the prediction first), not yet normalised; F2 is the innovation."""
-        prior = state.mean
-        f1 = self.manifold.measurement_difference(z, state.last_measurement)
-        innovation = self.manifold.measurement_difference(z, self.model.measure(prior))
-        return f1, innovation, state.evolution, state.correction
-
     def update(self, state: KalmanNetState, z: Tensor) -> KalmanNetState:
         """The measurement update of every row with usable measurements ``z (B, m)``:
         ``x+ = x- [+] K dy``, then the model's ``normalize`` (unit quaternion)."""
@@ -184,49 +282,8 @@ class KalmanNet(SequenceModel):
         """Filter a batch: ``measurements (B, T, m)`` (entries outside ``mask`` are ignored and
         may be NaN), ``mask (B, T)`` -> :class:`KalmanNetRun`. float64 unless the measurements
         are of another floating dtype."""
-        if measurements.dim() != 3 or measurements.shape[-1] != self.manifold.measurement_dim:
-            raise ValueError(f"measurements must have shape (B, T, {self.manifold.measurement_dim}) (got {tuple(measurements.shape)})")
-        if mask.shape != measurements.shape[:2]:
-            raise ValueError(f"mask must have shape {tuple(measurements.shape[:2])} (got {tuple(mask.shape)})")
-        batch, steps, _ = measurements.shape
-        if batch == 0 or steps == 0:
-            raise ValueError(f"measurements hold no sequences or no time steps (shape {tuple(measurements.shape)})")
-        dt = check_dt(dt)
-        z_all, usable = self.model.sanitize(measurements, mask.bool())
-        has_any = usable.any(1)
-        first = torch.where(has_any, usable.to(torch.int8).argmax(1), torch.full_like(has_any, -1, dtype=torch.long))
-        starts = first[:, None] == torch.arange(steps)[None, :]  # (B, T) the initialisation step
-        updates = usable & ~starts
-        start_any, update_any, update_all = starts.any(0).tolist(), updates.any(0).tolist(), updates.all(0).tolist()
-        truncate = self.detach_every if torch.is_grad_enabled() else None
-        state = self.prior(batch, measurements.dtype)
-        initialised = torch.zeros(batch, dtype=torch.bool)
-        means, initialised_steps = [], []
-        for t in range(steps):
-            if truncate is not None and t > 0 and t % truncate == 0:
-                state = _detached(state)
-            if t > 0:
-                state = self.predict(state, dt)
-            if start_any[t]:
-                state = _select(starts[:, t], self.initial(state, z_all[:, t]), state)
-                initialised = initialised | starts[:, t]
-            if update_any[t]:
-                posterior = self.update(state, z_all[:, t])
-                state = posterior if update_all[t] else _select(updates[:, t], posterior, state)
-            means.append(state.mean)
-            initialised_steps.append(initialised)
-        return KalmanNetRun(torch.stack(means, 1), updates, torch.stack(initialised_steps, 1), state)
-
-    def run_means(self, measurements: Tensor, mask: Tensor, *, dt: float) -> Tensor:
-        return self.run(measurements, mask, dt=dt).means
-
-    def sequence_mse(self, sequences: Sequences, *, dt: float, loss_cut: int) -> Tensor:
-        """Mean squared state error (the manifold's, sign-safe for the quaternion) over steps
-        ``loss_cut:``: the supervised objective of :class:`~fkn_bench.training.Trainer`."""
-        means = self.run_means(sequences.measurements, sequences.mask, dt=dt)
-        if loss_cut >= means.shape[1]:
-            raise ValueError(f"loss_cut {loss_cut} leaves no steps of {means.shape[1]}")
-        return self.manifold.state_error(means[:, loss_cut:], sequences.truth[:, loss_cut:]).square().mean()
+        (means,), updates, initialised, final = self.recurse(measurements, mask, dt=dt, record=lambda s: (s.mean,))
+        return KalmanNetRun(means, updates, initialised, final)
 
     def describe(self) -> dict[str, Any]:
         net = self.network

@@ -1,10 +1,11 @@
-"""Registers ``kalmannet`` with the estimator registry (imported lazily by the registry)."""
+"""Registers ``kalmannet`` and ``recursive-kalmannet`` with the estimator registry (imported
+lazily by the registry)."""
 
 from __future__ import annotations
 
 from fkn_bench.estimators.registry import register_estimator
-from fkn_bench.kalmannet.checkpoint import TRAINABLE
-from fkn_bench.kalmannet.estimator import kalmannet_factory
+from fkn_bench.kalmannet.checkpoint import RECURSIVE_TRAINABLE, TRAINABLE
+from fkn_bench.kalmannet.estimator import kalmannet_factory, recursive_kalmannet_factory
 
 __all__: list[str] = []
 
@@ -13,4 +14,12 @@ register_estimator(
     kalmannet_factory,
     description="KalmanNet (architecture 2): a recurrent network computes the Kalman gain (needs checkpoint=PATH)",
     trainable=TRAINABLE,
+)
+
+register_estimator(
+    "recursive-kalmannet",
+    recursive_kalmannet_factory,
+    description="Recursive KalmanNet (Mortada et al. 2025): recurrent networks compute the gain and the error covariance "
+                "(needs checkpoint=PATH)",
+    trainable=RECURSIVE_TRAINABLE,
 )

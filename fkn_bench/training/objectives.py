@@ -8,6 +8,10 @@
   e.g. Abbeel et al., "Discriminative training of Kalman filters", RSS 2005; Sarkka, Bayesian
   Filtering and Smoothing, 2013, section 12.3): the mean over update steps after ``loss_cut`` of
   ``1/2 [m log 2 pi + log det S_k + nu_k^T S_k^-1 nu_k]``.
+* ``gaussian-nll``: the Gaussian negative log-likelihood of the true state under the estimate and
+  its reported error covariance (:func:`gaussian_nll`), for estimators that carry a covariance of
+  their own (Recursive KalmanNet; Mortada et al., EUSIPCO 2025). Only a
+  :class:`~fkn_bench.training.SequenceModel` that declares it in ``objectives`` trains with it.
 """
 
 from __future__ import annotations
@@ -18,9 +22,17 @@ from torch import Tensor
 
 from fkn_bench.filters.base import FilterResult
 
-__all__ = ["OBJECTIVES", "aligned_state_error", "state_mse", "innovation_nll"]
+__all__ = ["OBJECTIVES", "OBJECTIVE_LABELS", "aligned_state_error", "state_mse", "innovation_nll", "gaussian_nll"]
 
 OBJECTIVES: tuple[str, ...] = ("supervised", "nll")
+"""The objectives of :class:`~fkn_bench.training.TrainConfig` (its subclasses may allow others)."""
+
+OBJECTIVE_LABELS: dict[str, str] = {
+    "supervised": "13-state RMSE",
+    "nll": "innovation NLL per update",
+    "gaussian-nll": "Gaussian NLL of the state error per step",
+}
+"""What the validation loss of each objective is (history, figures, artefacts)."""
 
 
 def aligned_state_error(means: Tensor, truth: Tensor) -> Tensor:
@@ -53,3 +65,13 @@ def innovation_nll(result: FilterResult, loss_cut: int) -> Tensor:
     log_det = 2.0 * torch.log(torch.diagonal(L, dim1=-2, dim2=-1)).sum(-1)
     m = nu.shape[-1]
     return 0.5 * (m * math.log(2.0 * math.pi) + log_det + whitened.square().sum(-1)).mean()
+
+
+def gaussian_nll(errors: Tensor, covariances: Tensor) -> Tensor:
+    """Mean Gaussian negative log-likelihood ``1/2 [k log 2 pi + log det P + e^T P^-1 e]`` of
+    errors ``(..., k)`` under covariances ``(..., k, k)`` (symmetric positive definite; a scalar)."""
+    L = torch.linalg.cholesky(covariances)
+    whitened = torch.linalg.solve_triangular(L, errors.unsqueeze(-1), upper=False).squeeze(-1)
+    log_det = 2.0 * torch.log(torch.diagonal(L, dim1=-2, dim2=-1)).sum(-1)
+    k = errors.shape[-1]
+    return 0.5 * (k * math.log(2.0 * math.pi) + log_det + whitened.square().sum(-1)).mean()

@@ -45,7 +45,7 @@ from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.training.artifacts import deployed_estimator_config, run_provenance, write_artifact
 from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from fkn_bench.training.data import TrainingData, training_data
-from fkn_bench.training.objectives import aligned_state_error, state_mse
+from fkn_bench.training.objectives import OBJECTIVE_LABELS, aligned_state_error, state_mse
 from fkn_bench.training.trainer import NoiseModel, OnEpoch, SequenceModel, TrainConfig, Trainer
 
 __all__ = ["Trainable", "TrainingOutcome", "fit", "options_with_file", "read_toml", "split_metrics", "trainable"]
@@ -285,7 +285,7 @@ def fit(
     with atomic_path(directory / "history.csv") as tmp:
         history.to_csv(tmp, index=False)
     if plots and len(history):
-        loss = "innovation NLL" if settings.objective == "nll" else "13-state RMSE"
+        loss = OBJECTIVE_LABELS[settings.objective].removesuffix(" per update").removesuffix(" per step")
         plot_losses(history, directory / "loss.png", title=f"{estimator} on {label} ({loss})",
                     best_epoch=trainer.best_epoch)
         if not isinstance(model, SequenceModel):  # a network's own recursion has no standard deviations
@@ -301,7 +301,7 @@ def fit(
         "epochs_run": len(history),
         "best_epoch": outcome.best_epoch,
         "best_val_loss": outcome.best_loss,
-        "val_loss_is": "innovation NLL per update" if settings.objective == "nll" else "13-state RMSE",
+        "val_loss_is": OBJECTIVE_LABELS[settings.objective],
         **declared.notes,
         "seconds_total": outcome.seconds,
         "seconds_per_epoch": float(history["seconds"].mean()) if len(history) else None,

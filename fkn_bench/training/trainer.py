@@ -16,7 +16,7 @@ strong-Wolfe line search) on all training windows at once. Validation runs the v
 selection; the RMSE is logged as a diagnostic only).
 
 A :class:`SequenceModel` (KalmanNet) brings its own differentiable recursion instead: the loop
-calls its ``sequence_mse`` where it would run the variant, and everything else (optimiser,
+calls its ``sequence_loss`` where it would run the variant, and everything else (optimiser,
 scheduler, early stopping, seeds, resume) is the same. With ``max_grad_norm`` set, gradient norms
 are clipped, the steps whose norm was above it are counted, and a batch whose gradient norm is
 not finite is skipped (and counted) instead of stepping the weights to NaN
@@ -32,7 +32,7 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import torch
 from torch import Tensor, nn
@@ -62,13 +62,25 @@ class NoiseModel(nn.Module, ABC):
 class SequenceModel(nn.Module, ABC):
     """A trained module that brings its own differentiable recursion over a batch of sequences
     (e.g. KalmanNet, whose network computes the gain inside the filter loop) instead of giving
-    noise parameters to a filter variant. The :class:`Trainer` calls :meth:`sequence_mse` where it
-    would run ``variant.run`` for a :class:`NoiseModel`; the supervised objective only."""
+    noise parameters to a filter variant. The :class:`Trainer` calls :meth:`sequence_loss` where it
+    would run ``variant.run`` for a :class:`NoiseModel`: the supervised objective, unless the
+    model declares others in :attr:`objectives`."""
+
+    objectives: tuple[str, ...] = ("supervised",)
+    """The training objectives :meth:`sequence_loss` computes."""
 
     @abstractmethod
     def sequence_mse(self, sequences: Sequences, *, dt: float, loss_cut: int) -> Tensor:
         """Mean squared state error over steps ``loss_cut:`` of ``sequences`` (a scalar tensor,
         differentiable with respect to the module's parameters)."""
+
+    def sequence_loss(self, sequences: Sequences, *, dt: float, loss_cut: int, objective: str) -> tuple[Tensor, Tensor]:
+        """``(objective, 13-state MSE)`` over steps ``loss_cut:`` of ``sequences`` (the same
+        tensor for the supervised objective). The default: :meth:`sequence_mse`, supervised only."""
+        if objective not in self.objectives:
+            raise ValueError(f"{type(self).__name__} trains with the objectives {list(self.objectives)} (got {objective!r})")
+        mse = self.sequence_mse(sequences, dt=dt, loss_cut=loss_cut)
+        return mse, mse
 
     @abstractmethod
     def run_means(self, measurements: Tensor, mask: Tensor, *, dt: float) -> Tensor:
@@ -124,7 +136,8 @@ class TrainConfig:
             mean of the estimated ratios (``rigid-body-ratios``; None: isotropic).
         window, stride, train_measurement_every, episodes: the training windows (see
             :class:`~fkn_bench.training.TrainingData`).
-        objective: ``supervised`` (13-state MSE vs truth) or ``nll`` (innovation NLL).
+        objective: ``supervised`` (13-state MSE vs truth) or ``nll`` (innovation NLL); a
+            subclass may allow others (:attr:`objectives`).
         optimizer: ``adam`` (mini-batches) or ``lbfgs`` (full batch, one step per epoch).
         lbfgs_iterations, lbfgs_history: L-BFGS iterations per epoch and memory.
         epochs: maximum epochs (paper: 100).
@@ -165,6 +178,9 @@ class TrainConfig:
     max_grad_norm: float | None = None
     threads: int = 1
 
+    objectives: ClassVar[tuple[str, ...]] = OBJECTIVES
+    """The values ``objective`` may take (a subclass for a :class:`SequenceModel` with its own)."""
+
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"variant must be one of {list(VARIANTS)} (got {self.variant!r})")
@@ -176,8 +192,8 @@ class TrainConfig:
             self.build_filter()  # the variant takes the model, and the model its inertia (else ValueError)
         if self.window < 2 or self.loss_cut >= self.window:
             raise ValueError(f"need window >= 2 and loss_cut < window (got {self.window}, {self.loss_cut})")
-        if self.objective not in OBJECTIVES:
-            raise ValueError(f"objective must be one of {OBJECTIVES} (got {self.objective!r})")
+        if self.objective not in self.objectives:
+            raise ValueError(f"objective must be one of {self.objectives} (got {self.objective!r})")
         if self.optimizer not in ("adam", "lbfgs"):
             raise ValueError(f"optimizer must be one of ['adam', 'lbfgs'] (got {self.optimizer!r})")
         for name in ("epochs", "patience", "windows_per_batch", "threads", "lbfgs_iterations", "lbfgs_history"):
@@ -268,8 +284,8 @@ class Trainer:
         tensor for the supervised objective; a diagnostic for ``nll``). A :class:`SequenceModel`
         runs its own recursion (``raw`` is None)."""
         if isinstance(self.model, SequenceModel):
-            mse = self.model.sequence_mse(sequences, dt=self.data.scenario.dt, loss_cut=self.config.loss_cut)
-            return mse, mse
+            return self.model.sequence_loss(sequences, dt=self.data.scenario.dt, loss_cut=self.config.loss_cut,
+                                            objective=self.config.objective)
         noise = self.model.parameter_set.to_noise(raw)
         nll = self.config.objective == "nll"
         result = self.variant.run(noise, sequences.measurements, sequences.mask, dt=self.data.scenario.dt,
