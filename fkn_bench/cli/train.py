@@ -83,12 +83,9 @@ def run(args: argparse.Namespace) -> int:
                       progress=not args.no_progress, family=args.family)
     summary = outcome.summary()
     if args.write_artifact:
-        from fkn_bench.io import write_bytes_atomic
-        from fkn_bench.training.artifacts import artifact_path
+        from fkn_bench.training.artifacts import install_artifact
 
-        target = artifact_path(args.estimator, summary["family"])
-        write_bytes_atomic(target, Path(summary["artifact"]).read_bytes())
-        summary["installed_artifact"] = str(target)
+        summary["installed_artifact"] = str(install_artifact(summary["artifact"], args.estimator, summary["family"]))
     if args.json:
         print(json.dumps(summary, indent=2, default=str))
         return 0

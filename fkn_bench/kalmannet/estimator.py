@@ -35,7 +35,14 @@ from fkn_bench.kalmannet.recursive import RecursiveKalmanNet, RecursiveKalmanNet
 from fkn_bench.linalg import symmetrize
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
-from fkn_bench.training.artifacts import ArtifactError, read_artifact
+from fkn_bench.training.artifacts import (
+    ArtifactError,
+    artifact_family,
+    artifact_label,
+    artifact_path,
+    resolve_artifact_label,
+    weights_of_artifact,
+)
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["KalmanNetEstimator", "kalmannet_factory", "RecursiveKalmanNetEstimator", "recursive_kalmannet_factory"]
@@ -64,16 +71,26 @@ class KalmanNetEstimator(RecursiveEstimator):
     ) -> None:
         if (checkpoint is None) == (network is None):
             raise ValueError("give either checkpoint=PATH or network=KalmanNet(...)")
-        self.checkpoint = None if checkpoint is None else str(checkpoint)
-        self.net = network if network is not None else self._load(checkpoint)  # type: ignore[arg-type]
+        # a committed file is named by its label (fkn_bench.baselines/params/...), not by where this
+        # checkout is, so that configurations and their fingerprints do not depend on it
+        self.checkpoint = None if checkpoint is None else artifact_label(resolve_artifact_label(checkpoint))
+        self.metadata: dict[str, Any] = {}
+        if network is None:
+            self.net, _, _, document = self._load(resolve_artifact_label(checkpoint))  # type: ignore[arg-type]
+            recorded = document.get("scenario")  # a dict, or a list of them for a mixture
+            names = [s.get("name") for s in (recorded if isinstance(recorded, list) else [recorded]) if isinstance(s, dict)]
+            if names:  # what the harness reports as the training set ("trained on ...")
+                self.metadata["scenario"] = {"name": "+".join(str(n) for n in names)}
+        else:
+            self.net = network
         self.net.eval()
         if self.net.manifold.measurement_dim != 7 or self.net.manifold.state_dim != 13:
             raise ValueError("the estimator API needs the pose model (13 states, 7 measurements)")
         self.name, self.description = name, description
 
     @staticmethod
-    def _load(checkpoint: str | Path) -> Any:
-        return model_from_checkpoint(checkpoint)[0]
+    def _load(checkpoint: str | Path) -> tuple[Any, Any, Any, dict[str, Any]]:
+        return model_from_checkpoint(checkpoint)
 
     # ------------------------------------------------------------------ batch
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
@@ -116,19 +133,26 @@ class KalmanNetEstimator(RecursiveEstimator):
         return {"checkpoint": self.checkpoint, "name": self.name, "description": self.description}
 
 
-def _checkpoint_of_artifact(path: str | Path, estimator: str = "kalmannet") -> Path:
-    """The checkpoint a ``parameters.json`` of a KalmanNet (or ``estimator``) training names (as
-    written, or beside the artefact when it was moved with it)."""
-    document = read_artifact(path)
-    if document["estimator"] != estimator:
-        raise ArtifactError(f"{path} holds {document['estimator']!r} parameters, not {estimator}'s")
-    named = document["estimator_config"].get("checkpoint")
-    if named is not None and Path(named).is_file():
-        return Path(named)
-    beside = Path(path).parent / "checkpoint.pt"
-    if beside.is_file():
-        return beside
-    raise ArtifactError(f"{path}: the KalmanNet checkpoint it names ({named}) is not there, nor {beside}")
+def _trained_network(
+    estimator: str, label: str, scenario: Scenario | None, checkpoint: str | Path | None, parameters: str | Path | None
+) -> Path:
+    """The weights a factory of ``estimator`` loads: ``checkpoint=PATH``, the ``parameters=PATH``
+    of a training run, or the committed artefact of the scenario's model family
+    (:func:`~fkn_bench.training.artifacts.artifact_family`: a recording or a user scenario gets
+    the ``default`` family's when one is committed)."""
+    if checkpoint is not None and parameters is not None:
+        raise ValueError("give either checkpoint= or parameters=, not both")
+    if checkpoint is not None:
+        return Path(checkpoint)
+    if parameters is None:
+        family = artifact_family(estimator, scenario)
+        parameters = artifact_path(estimator, family)
+        if not parameters.is_file():
+            raise ArtifactError(
+                f"no trained {label} for model family '{family}' ({parameters}): train one with `fkn-bench train "
+                f"--estimator {estimator} --scenario {family} --write-artifact` (or pass checkpoint=PATH)"
+            )
+    return weights_of_artifact(parameters, estimator)
 
 
 def kalmannet_factory(
@@ -137,21 +161,11 @@ def kalmannet_factory(
     checkpoint: str | Path | None = None,
     parameters: str | Path | None = None,
 ) -> KalmanNetEstimator:
-    """Registry factory of ``kalmannet``: a trained network from ``checkpoint=PATH`` or from the
-    ``parameters=PATH`` (``parameters.json``) of a ``fkn-bench train --estimator kalmannet`` run.
-    No trained weights are committed yet, so without either it raises (the harness then lists
-    ``kalmannet`` as unavailable)."""
-    if checkpoint is not None and parameters is not None:
-        raise ValueError("give either checkpoint= or parameters=, not both")
-    if parameters is not None:
-        checkpoint = _checkpoint_of_artifact(parameters)
-    if checkpoint is None:
-        family = scenario.model_family if scenario is not None else "ds1"
-        raise ArtifactError(
-            f"no trained KalmanNet for model family '{family}': train one with `fkn-bench train --estimator kalmannet "
-            f"--scenario {family} --out runs/kalmannet-{family}` and pass checkpoint=runs/kalmannet-{family}/checkpoint.pt"
-        )
-    return KalmanNetEstimator(checkpoint=checkpoint)
+    """Registry factory of ``kalmannet``: a trained network from ``checkpoint=PATH``, from the
+    ``parameters=PATH`` (``parameters.json``) of a ``fkn-bench train --estimator kalmannet`` run,
+    or by default the committed weights of the scenario's model family
+    (``baselines/params/kalmannet-<family>.json`` and ``.weights.pt``)."""
+    return KalmanNetEstimator(checkpoint=_trained_network("kalmannet", "KalmanNet", scenario, checkpoint, parameters))
 
 
 class RecursiveKalmanNetEstimator(KalmanNetEstimator):
@@ -180,8 +194,8 @@ class RecursiveKalmanNetEstimator(KalmanNetEstimator):
         super().__init__(checkpoint=checkpoint, network=network, name=name, description=description)  # type: ignore[arg-type]
 
     @staticmethod
-    def _load(checkpoint: str | Path) -> Any:
-        return recursive_model_from_checkpoint(checkpoint)[0]
+    def _load(checkpoint: str | Path) -> tuple[Any, Any, Any, dict[str, Any]]:
+        return recursive_model_from_checkpoint(checkpoint)
 
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)
@@ -214,19 +228,7 @@ def recursive_kalmannet_factory(
     checkpoint: str | Path | None = None,
     parameters: str | Path | None = None,
 ) -> RecursiveKalmanNetEstimator:
-    """Registry factory of ``recursive-kalmannet``: a trained network from ``checkpoint=PATH``
-    or from the ``parameters=PATH`` (``parameters.json``) of a ``fkn-bench train --estimator
-    recursive-kalmannet`` run. No trained weights are committed yet, so without either it raises
-    (the harness then lists ``recursive-kalmannet`` as unavailable)."""
-    if checkpoint is not None and parameters is not None:
-        raise ValueError("give either checkpoint= or parameters=, not both")
-    if parameters is not None:
-        checkpoint = _checkpoint_of_artifact(parameters, "recursive-kalmannet")
-    if checkpoint is None:
-        family = scenario.model_family if scenario is not None else "ds1"
-        raise ArtifactError(
-            f"no trained Recursive KalmanNet for model family '{family}': train one with `fkn-bench train --estimator "
-            f"recursive-kalmannet --scenario {family} --out runs/rkn-{family}` and pass "
-            f"checkpoint=runs/rkn-{family}/checkpoint.pt"
-        )
-    return RecursiveKalmanNetEstimator(checkpoint=checkpoint)
+    """Registry factory of ``recursive-kalmannet``, as :func:`kalmannet_factory`."""
+    return RecursiveKalmanNetEstimator(
+        checkpoint=_trained_network("recursive-kalmannet", "Recursive KalmanNet", scenario, checkpoint, parameters)
+    )

@@ -12,14 +12,13 @@ __all__: list[str] = []
 register_estimator(
     "kalmannet",
     kalmannet_factory,
-    description="KalmanNet (architecture 2): a recurrent network computes the Kalman gain (needs checkpoint=PATH)",
+    description="KalmanNet (architecture 2): a recurrent network computes the Kalman gain",
     trainable=TRAINABLE,
 )
 
 register_estimator(
     "recursive-kalmannet",
     recursive_kalmannet_factory,
-    description="Recursive KalmanNet (Mortada et al. 2025): recurrent networks compute the gain and the error covariance "
-                "(needs checkpoint=PATH)",
+    description="Recursive KalmanNet (Mortada et al. 2025): recurrent networks compute the gain and the error covariance",
     trainable=RECURSIVE_TRAINABLE,
 )

@@ -38,6 +38,9 @@ __all__ = [
     "ArtifactError",
     "artifact_path",
     "artifact_label",
+    "install_artifact",
+    "resolve_artifact_label",
+    "weights_of_artifact",
     "write_artifact",
     "read_artifact",
     "run_provenance",
@@ -63,6 +66,14 @@ def _committed() -> Path:
 def artifact_path(estimator: str, family: str) -> Path:
     """Where the committed artefact of ``estimator`` for model family ``family`` lives."""
     return _committed() / f"{estimator}-{family}.json"
+
+
+def resolve_artifact_label(label: str | Path) -> Path:
+    """The file an :func:`artifact_label` names: ``fkn_bench.baselines/params/<file>`` in this
+    installation's committed parameters, anything else as a path."""
+    text = str(label)
+    prefix = "fkn_bench.baselines/params/"
+    return _committed() / text[len(prefix):] if text.startswith(prefix) else Path(text)
 
 
 def artifact_label(path: str | Path) -> str:
@@ -103,6 +114,73 @@ def write_artifact(
                   parameters=parameters, training=training)
     return write_json_atomic(path, {"format": ARTIFACT_FORMAT, "format_version": ARTIFACT_FORMAT_VERSION, **fields,
                                     "provenance": run_provenance()})
+
+
+WEIGHTS_SUFFIX = ".weights.pt"
+"""Committed network weights sit beside their artefact as ``<estimator>-<family>.weights.pt``."""
+
+_WEIGHTS_KEYS = ("estimator", "config", "scenario", "deployed", "state_dict", "best_epoch", "provenance")
+
+
+def install_artifact(artifact: str | Path, estimator: str, family: str) -> Path:
+    """Install the ``parameters.json`` of a training run as the committed artefact of
+    ``estimator`` for ``family`` (:func:`artifact_path`); returns its path.
+
+    An artefact of constant parameters is copied. One whose ``estimator_config`` names a training
+    ``checkpoint`` (a network: KalmanNet, Recursive KalmanNet) gets its weights file beside it,
+    ``<estimator>-<family>.weights.pt``: the checkpoint without the optimiser, scheduler, RNG and
+    data state (a checkpoint document, read with ``torch.load(weights_only=True)``), and the
+    artefact's ``estimator_config`` becomes ``{"weights": <file name>, "weights_sha256": <hex>}``,
+    so that a weights file that does not match its artefact is refused. Both are written atomically.
+    """
+    import hashlib
+
+    from fkn_bench.io import write_bytes_atomic
+    from fkn_bench.training.checkpoint import load_checkpoint, save_checkpoint
+
+    document = read_artifact(artifact)
+    target = artifact_path(estimator, family)
+    checkpoint = document["estimator_config"].get("checkpoint")
+    if checkpoint is None:
+        write_bytes_atomic(target, Path(artifact).read_bytes())
+        return target
+    source = Path(checkpoint) if Path(checkpoint).is_file() else Path(artifact).parent / "checkpoint.pt"
+    full = load_checkpoint(source)
+    weights = target.with_name(target.name.removesuffix(".json") + WEIGHTS_SUFFIX)
+    save_checkpoint(weights, {k: full[k] for k in _WEIGHTS_KEYS if k in full})
+    digest = hashlib.sha256(weights.read_bytes()).hexdigest()
+    document["estimator_config"] = {"weights": weights.name, "weights_sha256": digest}
+    fields = {k: document[k] for k in ("estimator", "family", "scenario", "estimator_config", "parameters", "training")}
+    write_json_atomic(target, {"format": ARTIFACT_FORMAT, "format_version": ARTIFACT_FORMAT_VERSION, **fields,
+                               "provenance": document.get("provenance") or run_provenance()})
+    return target
+
+
+def weights_of_artifact(path: str | Path, estimator: str) -> Path:
+    """The network weights a ``parameters.json`` of ``estimator`` deploys: the installed
+    ``weights`` file beside it (its SHA-256 checked), else the training ``checkpoint`` it names
+    (as written, or beside it when the run directory was moved). Raises :class:`ArtifactError`
+    naming the file and the problem."""
+    import hashlib
+
+    document = read_artifact(path)
+    if document["estimator"] != estimator:
+        raise ArtifactError(f"{path} holds {document['estimator']!r} parameters, not {estimator}'s")
+    config = document["estimator_config"]
+    if "weights" in config:
+        weights = Path(path).parent / str(config["weights"])
+        if not weights.is_file():
+            raise ArtifactError(f"{path}: its weights file {weights} is missing")
+        if hashlib.sha256(weights.read_bytes()).hexdigest() != config.get("weights_sha256"):
+            raise ArtifactError(f"{weights} does not match {path} (SHA-256 differs): corrupt or replaced")
+        return weights
+    named = config.get("checkpoint")
+    if named is not None and Path(named).is_file():
+        return Path(named)
+    beside = Path(path).parent / "checkpoint.pt"
+    if beside.is_file():
+        return beside
+    raise ArtifactError(f"{path}: the {estimator} checkpoint it names ({named}) is not there, nor {beside}")
 
 
 def read_artifact(path: str | Path) -> dict[str, Any]:

@@ -83,7 +83,10 @@ def test_truncated_backpropagation_changes_gradients_not_estimates(hostile) -> N
     assert not torch.allclose(grads[0], grads[1])
 
 
-def test_registered_trainable_and_unavailable_without_weights() -> None:
+def test_registered_trainable_and_unavailable_without_weights(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: ANN001
+    from fkn_bench.training import artifacts
+
+    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path)  # no committed weights
     spec = estimator_spec("kalmannet")
     assert spec.trainable is TRAINABLE
     with pytest.raises(ArtifactError, match="train one with `fkn-bench train --estimator kalmannet"):

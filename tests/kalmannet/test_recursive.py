@@ -149,7 +149,10 @@ def test_config_objectives_and_kalmannet_unchanged() -> None:
         kalmannet.sequence_loss(simulate(1, 0), dt=1.0, loss_cut=0, objective="gaussian-nll")
 
 
-def test_registered_trainable_and_unavailable_without_weights() -> None:
+def test_registered_trainable_and_unavailable_without_weights(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: ANN001
+    from fkn_bench.training import artifacts
+
+    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path)  # no committed weights
     spec = estimator_spec("recursive-kalmannet")
     assert spec.trainable is RECURSIVE_TRAINABLE
     with pytest.raises(ArtifactError, match="train one with `fkn-bench train --estimator recursive-kalmannet"):

@@ -15,7 +15,8 @@ from fkn_bench.estimators import make_estimator
 from fkn_bench.kalmannet import KalmanNetConfig, KalmanNetEstimator, model_from_checkpoint
 from fkn_bench.scenarios import get_scenario
 from fkn_bench.training import fit
-from fkn_bench.training.artifacts import read_artifact
+from fkn_bench.envs import generate_episodes
+from fkn_bench.training.artifacts import ArtifactError, read_artifact
 
 SHORT = get_scenario("ds1", n_steps=2000)
 OPTIONS = {"window": 200, "loss_cut": 50, "episodes": 1, "epochs": 2, "windows_per_batch": 4, "out_mult": 2,
@@ -71,3 +72,37 @@ def test_config_refuses_what_kalmannet_does_not_train_with() -> None:
     with pytest.raises(ValueError, match="detach_every"):
         KalmanNetConfig(detach_every=0)
     assert KalmanNetConfig.from_options({}).to_dict()["max_grad_norm"] == 1.0
+
+
+def test_installed_weights_deploy_and_a_corrupt_file_is_refused(runs: list, tmp_path: Path,
+                                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """``fkn-bench train --write-artifact`` (:func:`install_artifact`) of a network: the artefact
+    plus a weights file beside it (no optimiser state), checked by its SHA-256; the registry's
+    factory loads it for the scenario's family and names a missing or corrupt file."""
+    from fkn_bench.training import artifacts
+
+    outcome = runs[0]
+    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path)
+    with pytest.raises(ArtifactError, match="no trained KalmanNet for model family 'ds1'.*--write-artifact"):
+        make_estimator("kalmannet", scenario=get_scenario("ds1"))
+    installed = artifacts.install_artifact(outcome.artifact, "kalmannet", "ds1")
+    weights = tmp_path / "kalmannet-ds1.weights.pt"
+    assert installed == tmp_path / "kalmannet-ds1.json" and weights.is_file()
+    assert set(read_artifact(installed)["estimator_config"]) == {"weights", "weights_sha256"}
+    assert "trainer" not in torch.load(weights, weights_only=True)  # weights only, no optimiser state
+    assert weights.stat().st_size < outcome.checkpoint.stat().st_size
+    committed = make_estimator("kalmannet", scenario=get_scenario("ds1"))
+    trained = make_estimator("kalmannet", checkpoint=str(outcome.checkpoint))
+    episodes = generate_episodes(SHORT, [0], split="test")
+    np.testing.assert_array_equal(committed.estimate(episodes.measurements, episodes.valid, SHORT.dt).means,
+                                  trained.estimate(episodes.measurements, episodes.valid, SHORT.dt).means)
+    assert committed.to_config()["checkpoint"] == "fkn_bench.baselines/params/kalmannet-ds1.weights.pt"
+    assert KalmanNetEstimator(**committed.to_config()).to_config() == committed.to_config()
+    data = bytearray(weights.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    weights.write_bytes(bytes(data))
+    with pytest.raises(ArtifactError, match="does not match .*SHA-256 differs"):
+        make_estimator("kalmannet", scenario=get_scenario("ds1"))
+    weights.unlink()
+    with pytest.raises(ArtifactError, match="weights file .* is missing"):
+        make_estimator("kalmannet", scenario=get_scenario("ds1"))
