@@ -40,7 +40,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(subparsers, "sweep", "hyperparameter search (random then grid, or TPE) on optuna",
                          __doc__)
     parser.add_argument("--space", required=True, metavar="TOML",
-                        help="search-space file, or a packaged space name (paper, quick)")
+                        help="search-space file, or a packaged space name (paper, quick, kalmannet-seeds)")
     parser.add_argument("--estimator", help="trainable estimator (default: the space's, else flexkalmannet)")
     parser.add_argument("--scenario", help="training scenario (default: the space's, else ds1)")
     parser.add_argument("--trials", type=int, metavar="N",

@@ -122,6 +122,9 @@ def test_files_and_packaged_spaces(tmp_path: Path) -> None:
         space.check_fields(FIELDS, "FlexKalmanNetConfig")
         trial_config("flexkalmannet", space, {})
         assert space.defaults["sampler"] == "random-grid"
+    seeds = load_space(resolve_space("kalmannet-seeds"))  # KalmanNet's training robustness: ten seeds
+    assert seeds.defaults["estimator"] == "kalmannet" and seeds.pruner.kind == "none"
+    assert [trial_config("kalmannet", seeds, {"seed": s}).train_config().seed for s in (0, 9)] == [0, 9]
     paper = load_space(resolve_space("paper"))
     assert {"hidden", "layers", "lr", "window", "loss_cut", "dropout", "weight_decay", "activation", "variant",
             "objective"} <= set(paper.names)
