@@ -203,3 +203,19 @@ def test_configurations_do_not_depend_on_the_checkout_location() -> None:
                 continue
             text = json.dumps(config, default=str)
             assert package_root not in text and str(REPO) not in text, f"{name} on {scenario}: {text[:300]}"
+
+
+def test_a_run_diverged_then_and_now_is_compared_by_its_flags_only() -> None:
+    import pandas as pd
+
+    def rows(diverged: float, rmse: float) -> pd.DataFrame:
+        base = {"estimator": "x", "scenario": "s", "seed": 0, "unit": ""}
+        return pd.DataFrame([{**base, "group": "stability", "metric": "diverged", "value": diverged},
+                             {**base, "group": "state", "metric": "rmse", "value": rmse}])
+
+    same, _ = accuracy._compare(rows(1.0, 3e37), rows(1.0, 5e36), accuracy.TOLERANCES)
+    assert same == []  # both blew up: the chaotic values are not compared
+    (change,) = accuracy._compare(rows(0.0, 0.02), rows(0.0, 0.03), accuracy.TOLERANCES)[0]
+    assert change.name == "state/rmse"
+    flipped, _ = accuracy._compare(rows(1.0, 3e37), rows(0.0, 0.02), accuracy.TOLERANCES)
+    assert {d.name for d in flipped} == {"stability/diverged", "state/rmse"}

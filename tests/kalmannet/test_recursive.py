@@ -208,5 +208,5 @@ def test_the_trained_network_deploys_as_an_estimator(runs: dict[str, list], tmp_
     estimates = estimator.estimate(episodes.measurements, episodes.valid, SHORT.dt)
     with torch.no_grad():
         direct = outcome.model.run(torch.as_tensor(episodes.measurements), torch.as_tensor(episodes.valid), dt=SHORT.dt)
-    np.testing.assert_allclose(estimates.means[..., 4:], direct.means.numpy()[..., 4:], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(estimates.error_covariances, direct.covariances.numpy(), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(estimates.means[..., 4:], direct.means.numpy()[..., 4:], rtol=1e-5, atol=1e-9)  # deployed: float32 weights evaluated in float64
+    np.testing.assert_allclose(estimates.error_covariances, direct.covariances.numpy(), rtol=1e-5, atol=1e-9)

@@ -63,7 +63,7 @@ def test_the_trained_network_deploys_as_an_estimator(runs: list) -> None:
     estimates = from_artifact.estimate(episodes.measurements, episodes.valid, SHORT.dt)
     with torch.no_grad():
         direct = outcome.model.run_means(torch.as_tensor(episodes.measurements), torch.as_tensor(episodes.valid), dt=SHORT.dt)
-    np.testing.assert_allclose(estimates.means[..., 4:], direct.numpy()[..., 4:], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(estimates.means[..., 4:], direct.numpy()[..., 4:], rtol=1e-5, atol=1e-9)  # deployed: the float32 network evaluated in float64
 
 
 def test_config_refuses_what_kalmannet_does_not_train_with() -> None:
