@@ -5,22 +5,21 @@ Every metric of the harness is a deterministic function of the code, the scenari
 per-cell results in ``leaderboards/results`` are a regression baseline as they stand.
 :func:`run_accuracy_gate` reruns, with the harness, the first ``seeds`` seeds of the first
 committed cell of every (estimator, scenario) pair (seeds 0 and 1 by default; the cost is the
-per-step overhead of the batched filters, nearly the same for one seed or two) with the committed metric settings, and
-compares every deterministic metric with the committed value of the same seed, within the
-per-metric tolerance of :data:`TOLERANCES`: exact for the values that are integers stored as
-floats (the 0/1 flags ``stability/*`` and ``*/settled``, the count ``consistency/nis_count``),
-``|now - committed| <= 1e-12 + 1e-6 |committed|`` for every computed float metric (RMSEs, error
-percentiles, settling times, NEES/NIS means: float64 results differ only by rounding between
-machines and libraries); NaN equals NaN only.
+per-step overhead of the batched filters, nearly the same for one seed or two) with the committed
+metric settings, and compares every deterministic metric with the committed value of the same seed,
+within the per-metric tolerance of :data:`TOLERANCES`: exact for the values that are integers
+stored as floats (the 0/1 flags ``stability/*`` and ``*/settled``, the count
+``consistency/nis_count``), ``|now - committed| <= 1e-12 + 1e-6 |committed|`` for every computed
+float metric (RMSEs, error percentiles, settling times, NEES/NIS means: float64 results differ only
+by rounding between machines and libraries); NaN equals NaN only.
 
 A seed that diverged in the committed results and diverges now is compared by its stability flags
-only (diverged and the reasons): the error values of a run that has blown up grow chaotically,
-so rounding (a batch of 2 instead of 20, another CPU) moves them by percents; whether it diverges
-is the result. A change in either direction fails: an improvement also means the committed leaderboard no
-longer describes the code. The failure message is a table (estimator, scenario, seed, metric,
-committed, now, change) and the command that accepts intentional changes
-(:data:`ACCEPT_COMMAND`: recompute every cell, rebuild the leaderboards; then commit
-``leaderboards/``).
+only (diverged and the reasons): the error values of a run that has blown up grow chaotically, so
+rounding (a batch of 2 instead of 20, another CPU) moves them by percents; whether it diverges is
+the result. A change in either direction fails: an improvement also means the committed leaderboard
+no longer describes the code. The failure message is a table (estimator, scenario, seed, metric,
+committed, now, change) and the command that accepts intentional changes (:data:`ACCEPT_COMMAND`:
+recompute every cell, rebuild the leaderboards; then commit ``leaderboards/``).
 
 Coverage is automatic: every registered estimator that builds for a named scenario must have
 committed cells for it (an estimator whose factory fails there, e.g. learned parameters not

@@ -43,10 +43,17 @@ class RatioConvergence:
     times: ArrayF
     errors: ArrayF
 
+    def _at(self, time: float) -> ArrayF:
+        """``(S,)`` errors at ``time`` (s; the last sample when later)."""
+        return self.errors[:, min(int(np.searchsorted(self.times, time)), len(self.times) - 1)]
+
     def share_below(self, threshold: float, time: float) -> float:
         """Share of seeds whose error at ``time`` (s) is below ``threshold``."""
-        index = min(int(np.searchsorted(self.times, time)), len(self.times) - 1)
-        return float(np.mean(self.errors[:, index] < threshold))
+        return float(np.mean(self._at(time) < threshold))
+
+    def median_at(self, time: float) -> float:
+        """Median over seeds of the error at ``time`` (s)."""
+        return float(np.median(self._at(time)))
 
 
 def ratio_convergence(resolved: ResolvedEstimator, scenario: Scenario, seeds: int, duration: float) -> RatioConvergence:

@@ -38,14 +38,7 @@ from fkn_bench.kalmannet.recursive import RecursiveKalmanNet, RecursiveKalmanNet
 from fkn_bench.linalg import symmetrize
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
-from fkn_bench.training.artifacts import (
-    ArtifactError,
-    artifact_family,
-    artifact_label,
-    artifact_path,
-    resolve_artifact_label,
-    weights_of_artifact,
-)
+from fkn_bench.training.artifacts import artifact_label, committed_artifact, resolve_artifact_label, weights_of_artifact
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["KalmanNetEstimator", "kalmannet_factory", "RecursiveKalmanNetEstimator", "recursive_kalmannet_factory"]
@@ -151,15 +144,7 @@ def _trained_network(
         raise ValueError("give either checkpoint= or parameters=, not both")
     if checkpoint is not None:
         return Path(checkpoint)
-    if parameters is None:
-        family = artifact_family(estimator, scenario)
-        parameters = artifact_path(estimator, family)
-        if not parameters.is_file():
-            raise ArtifactError(
-                f"no trained {label} for model family '{family}' ({parameters}): train one with `fkn-bench train "
-                f"--estimator {estimator} --scenario {family} --write-artifact` (or pass checkpoint=PATH)"
-            )
-    return weights_of_artifact(parameters, estimator)
+    return weights_of_artifact(parameters or committed_artifact(estimator, scenario, label), estimator)
 
 
 def kalmannet_factory(

@@ -48,6 +48,7 @@ __all__ = [
     "TrainedKalmanEstimator",
     "artifact_factory",
     "artifact_family",
+    "committed_artifact",
     "DEFAULT_FAMILY",
 ]
 
@@ -126,8 +127,9 @@ def install_artifact(artifact: str | Path, estimator: str, family: str) -> Path:
     """Install the ``parameters.json`` of a training run as the committed artefact of
     ``estimator`` for ``family`` (:func:`artifact_path`); returns its path.
 
-    An artefact of constant parameters is copied. One whose ``estimator_config`` names a training
-    ``checkpoint`` (a network: KalmanNet, Recursive KalmanNet) gets its weights file beside it,
+    An artefact of constant parameters is copied. One that deploys a network (KalmanNet, Recursive
+    KalmanNet: its ``estimator_config`` names a training ``checkpoint``, or installed ``weights``)
+    gets its weights file beside it,
     ``<estimator>-<family>.weights.pt``: the checkpoint without the optimiser, scheduler, RNG and
     data state (a checkpoint document, read with ``torch.load(weights_only=True)``), and the
     artefact's ``estimator_config`` becomes ``{"weights": <file name>, "weights_sha256": <hex>}``,
@@ -140,12 +142,10 @@ def install_artifact(artifact: str | Path, estimator: str, family: str) -> Path:
 
     document = read_artifact(artifact)
     target = artifact_path(estimator, family)
-    checkpoint = document["estimator_config"].get("checkpoint")
-    if checkpoint is None:
+    if not {"checkpoint", "weights"} & set(document["estimator_config"]):
         write_bytes_atomic(target, Path(artifact).read_bytes())
         return target
-    source = Path(checkpoint) if Path(checkpoint).is_file() else Path(artifact).parent / "checkpoint.pt"
-    full = load_checkpoint(source)
+    full = load_checkpoint(weights_of_artifact(artifact, estimator))
     weights = target.with_name(target.name.removesuffix(".json") + WEIGHTS_SUFFIX)
     save_checkpoint(weights, {k: full[k] for k in _WEIGHTS_KEYS if k in full})
     digest = hashlib.sha256(weights.read_bytes()).hexdigest()
@@ -262,6 +262,21 @@ def artifact_family(name: str, scenario: Scenario | None) -> str:
     return scenario.model_family if scenario is not None else "ds1"
 
 
+def committed_artifact(name: str, scenario: Scenario | None, label: str | None = None) -> Path:
+    """The committed artefact of estimator ``name`` for ``scenario`` (:func:`artifact_family`);
+    raises :class:`ArtifactError` with the command that trains and installs it (``label``: how the
+    message names the estimator, default ``name``)."""
+    from fkn_bench.scenarios import scenario_names
+
+    family = artifact_family(name, scenario)
+    path = artifact_path(name, family)
+    if not path.is_file():
+        data = f"--scenario {family}" if family in scenario_names() else f"--scenario S1 --scenario S2 ... --family {family}"
+        raise ArtifactError(f"no trained {label or name} for model family '{family}' ({path}): train one with "
+                            f"`fkn-bench train --estimator {name} {data} --write-artifact`")
+    return path
+
+
 def artifact_factory(name: str, cls: type[TrainedKalmanEstimator] = TrainedKalmanEstimator) -> Callable[..., Any]:
     """Registry factory of the trained estimator ``name``: the committed artefact of the
     scenario's model family (see :func:`artifact_family`), or ``parameters=PATH`` (a
@@ -270,17 +285,7 @@ def artifact_factory(name: str, cls: type[TrainedKalmanEstimator] = TrainedKalma
     def factory(scenario: Scenario | None = None, *, parameters: str | Path | None = None) -> TrainedKalmanEstimator:
         if parameters is not None:
             return cls.from_artifact(parameters, name=name)
-        family = artifact_family(name, scenario)
-        path = artifact_path(name, family)
-        if not path.is_file():
-            from fkn_bench.scenarios import scenario_names
-
-            data = f"--scenario {family}" if family in scenario_names() else f"--scenario S1 --scenario S2 ... --family {family}"
-            raise ArtifactError(
-                f"no committed {name} parameters for model family '{family}' ({path}); train them with "
-                f"`fkn-bench train --estimator {name} {data} --write-artifact`"
-            )
-        return cls.from_artifact(path, name=name)
+        return cls.from_artifact(committed_artifact(name, scenario), name=name)
 
     factory.__name__ = f"{name.replace('-', '_')}_factory"
     return factory

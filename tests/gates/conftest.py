@@ -86,6 +86,12 @@ def check_estimator(report: accuracy.AccuracyReport, estimator: str) -> None:
 
 
 @pytest.fixture
+def free_tumbles() -> tuple[str, ...]:
+    """:data:`FREE_TUMBLES`, for the test files (which cannot import this module)."""
+    return FREE_TUMBLES
+
+
+@pytest.fixture
 def gate_check():
     """:func:`check_estimator`, for the test files (which cannot import this module)."""
     return check_estimator
