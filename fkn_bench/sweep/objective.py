@@ -99,8 +99,9 @@ def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
         for key, value in {"best_epoch": int(outcome.best_epoch), "epochs_run": epochs, "seconds": seconds,
                            "seconds_per_epoch": seconds / max(epochs, 1)}.items():
             trial.set_user_attr(key, value)
-        for key in ("gradient_steps_taken", "gradient_steps_clipped", "gradient_steps_skipped_nonfinite"):
-            if key in outcome.history:  # recurrent networks: how often clipping engaged, non-finite steps skipped
+        for key in ("gradient_steps_taken", "gradient_steps_clipped", "gradient_steps_skipped_nonfinite",
+                    "gradient_steps_rolled_back"):
+            if key in outcome.history:  # recurrent networks: clipping engaged, non-finite steps skipped or undone
                 trial.set_user_attr(key, int(outcome.history[key].iloc[-1]))  # cumulative counts
         if outcome.config.train_config().objective != "supervised":
             trial.set_user_attr("best_val_loss", float(outcome.best_loss))

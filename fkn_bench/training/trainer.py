@@ -18,10 +18,17 @@ selection; the RMSE is logged as a diagnostic only).
 A :class:`SequenceModel` (KalmanNet) brings its own differentiable recursion instead: the loop
 calls its ``sequence_loss`` where it would run the variant, and everything else (optimiser,
 scheduler, early stopping, seeds, resume) is the same. With ``max_grad_norm`` set, gradient norms
-are clipped, the steps whose norm was above it are counted, and a batch whose gradient norm is
-not finite is skipped (and counted) instead of stepping the weights to NaN
-(:attr:`Trainer.gradient_steps`; a SequenceModel's history records the counts per epoch, the
-artefact their totals).
+are clipped and the steps whose norm was above it are counted.
+
+Non-finite losses and gradients (Adam): the weights never step to NaN. A batch whose training loss
+or gradient norm is not finite takes no step. If the weights have moved since the last batch
+with a finite gradient, the step that moved them is undone (weights and Adam's moments return
+to just before it) and the learning rate is halved, since such a step left the recursion where it
+diverges (counted ``rolled_back``; a learned filter's usual failure, the recurrent gain pushing
+the filter off its measurements, cf. KalmanNet's issues #23 and #27). Otherwise (the starting
+weights, or a step just undone) the batch is skipped (``skipped_nonfinite``). The counts are in
+:attr:`Trainer.gradient_steps`; a SequenceModel's history records them per epoch, the artefact
+their totals. L-BFGS raises ``FloatingPointError`` on a non-finite loss instead.
 """
 
 from __future__ import annotations
@@ -274,9 +281,10 @@ class Trainer:
         self.best_state: dict[str, Tensor] = copy.deepcopy(model.state_dict())
         self.epochs_without_improvement = 0
         self.evaluations = 0  # loss evaluations of the L-BFGS steps
-        # Adam steps taken, of them with the gradient norm clipped, and batches skipped for a
-        # non-finite gradient norm (counted when max_grad_norm is set)
-        self.gradient_steps = {"taken": 0, "clipped": 0, "skipped_nonfinite": 0}
+        # Adam steps taken, of them with the gradient norm clipped (counted when max_grad_norm is
+        # set), batches skipped for a non-finite loss or gradient, and steps undone for one
+        self.gradient_steps = {"taken": 0, "clipped": 0, "skipped_nonfinite": 0, "rolled_back": 0}
+        self._before_step: tuple[dict[str, Any], dict[str, Any]] | None = None  # (model, optimiser) states
 
     # ------------------------------------------------------------------ losses
     def loss(self, sequences: Sequences, raw: Tensor | None) -> tuple[Tensor, Tensor]:
@@ -312,14 +320,40 @@ class Trainer:
     def _window_raw(self, batch: Sequences) -> Tensor | None:
         return None if isinstance(self.model, SequenceModel) else self.model.window_raw(batch)
 
-    def _backward(self, batch: Sequences) -> Tensor:
-        """The training loss on ``batch``, its gradients computed (FloatingPointError when not finite)."""
+    def _backward(self, batch: Sequences, *, raise_nonfinite: bool = True) -> Tensor:
+        """The training loss on ``batch``, its gradients computed when it is finite; a non-finite
+        loss raises FloatingPointError (or, with ``raise_nonfinite=False``, is returned as is)."""
         self.optimizer.zero_grad(set_to_none=True)
         loss = self.loss(batch, self._window_raw(batch))[0]
         if not torch.isfinite(loss):
-            raise FloatingPointError(f"non-finite training loss at epoch {len(self.history) + 1}: lower the learning rate")
+            if raise_nonfinite:
+                raise FloatingPointError(f"non-finite training loss at epoch {len(self.history) + 1}: lower the learning rate")
+            return loss
         loss.backward()
         return loss
+
+    def _gradient_norm(self) -> float:
+        """The gradients' total norm, clipped to ``max_grad_norm`` when set (counted)."""
+        limit = self.config.max_grad_norm
+        norm = float(nn.utils.clip_grad_norm_(self.model.parameters(), math.inf if limit is None else limit))
+        if limit is not None and math.isfinite(norm):
+            self.gradient_steps["clipped"] += norm > limit
+        return norm
+
+    def _undo_last_step(self) -> bool:
+        """Return the weights and the optimiser's state to before the last step and halve the
+        learning rate; False when there is no step to undo (see module docstring)."""
+        if self._before_step is None:
+            self.gradient_steps["skipped_nonfinite"] += 1
+            return False
+        model_state, optimizer_state = self._before_step
+        self.model.load_state_dict(model_state)
+        self.optimizer.load_state_dict(optimizer_state)
+        for group in self.optimizer.param_groups:
+            group["lr"] *= 0.5
+        self._before_step = None
+        self.gradient_steps["rolled_back"] += 1
+        return True
 
     def _lbfgs_epoch(self) -> float:
         batch = self.data.train
@@ -344,19 +378,18 @@ class Trainer:
         self.model.train()
         total, count = 0.0, 0
         for batch in self.data.batches(self.config.windows_per_batch, self.generator):
-            loss = self._backward(batch)
-            total += float(loss.detach()) * batch.batch_size
-            count += batch.batch_size
-            if self.config.max_grad_norm is not None:
-                norm = float(nn.utils.clip_grad_norm_(self.model.parameters(), self.config.max_grad_norm))
-                if not math.isfinite(norm):  # a non-finite gradient: no step (the weights stay finite)
-                    self.gradient_steps["skipped_nonfinite"] += 1
-                    continue
-                self.gradient_steps["clipped"] += norm > self.config.max_grad_norm
+            loss = self._backward(batch, raise_nonfinite=False)
+            if torch.isfinite(loss):
+                total += float(loss.detach()) * batch.batch_size
+                count += batch.batch_size
+            if not (torch.isfinite(loss) and math.isfinite(self._gradient_norm())):
+                self._undo_last_step()  # no step from here; undo the one that led here, if any
+                continue
+            self._before_step = (copy.deepcopy(self.model.state_dict()), copy.deepcopy(self.optimizer.state_dict()))
             self.optimizer.step()
             self.gradient_steps["taken"] += 1
         self.model.eval()
-        return self._reported(total / count)
+        return self._reported(total / count) if count else math.inf
 
     def deployed_parameters(self) -> dict[str, float]:
         """The deployed standard deviations by name (e.g. ``sigma_Q_qw``); for a

@@ -1,6 +1,7 @@
 """The Trainer trains a SequenceModel (a module with its own recursion, e.g. KalmanNet) through
-its ``sequence_mse``; with ``max_grad_norm`` it counts clipped steps and skips (and counts) a
-batch whose gradient is not finite, so the weights never become NaN."""
+its ``sequence_mse``; with ``max_grad_norm`` it counts clipped steps; a batch whose loss or
+gradient is not finite takes no step, and undoes the step that led there (halving the learning
+rate) or is skipped at the starting weights, so the weights never become NaN."""
 
 from __future__ import annotations
 
@@ -58,9 +59,9 @@ def test_a_sequence_model_trains_through_its_own_recursion(data: TrainingData) -
     trainer = _trainer(data, Offset())
     history = trainer.fit(progress=False)
     assert history[-1].val_loss < history[0].val_loss
-    assert trainer.gradient_steps == {"taken": 6, "clipped": 0, "skipped_nonfinite": 0}
+    assert trainer.gradient_steps == {"taken": 6, "clipped": 0, "skipped_nonfinite": 0, "rolled_back": 0}
     assert history[-1].parameters == {"gradient_steps_taken": 6.0, "gradient_steps_clipped": 0.0,
-                                      "gradient_steps_skipped_nonfinite": 0.0}
+                                      "gradient_steps_skipped_nonfinite": 0.0, "gradient_steps_rolled_back": 0.0}
 
 
 def test_clipping_is_counted_and_non_finite_gradients_skip_the_step(data: TrainingData) -> None:
@@ -70,3 +71,38 @@ def test_clipping_is_counted_and_non_finite_gradients_skip_the_step(data: Traini
     assert trainer.gradient_steps["skipped_nonfinite"] == 2
     assert trainer.gradient_steps["taken"] == 4 and trainer.gradient_steps["clipped"] == 4
     assert torch.isfinite(model.offset).all() and all(math.isfinite(r.train_loss) for r in trainer.history)
+
+
+class Cliff(Offset):
+    """``Offset`` whose training loss has an infinite gradient (or, with ``infinite_loss``, is
+    infinite) once the first offset falls below ``edge``, and whose validation loss is then
+    infinite: a step that crosses it must be undone (or, the last of an epoch, not be the best)."""
+
+    def __init__(self, edge: float, *, infinite_loss: bool = False) -> None:
+        super().__init__()
+        self.edge, self.infinite_loss = edge, infinite_loss
+
+    def sequence_mse(self, sequences: Sequences, *, dt: float, loss_cut: int) -> Tensor:
+        loss = super().sequence_mse(sequences, dt=dt, loss_cut=loss_cut)
+        if float(self.offset[0]) < self.edge:
+            if self.infinite_loss or not self.training:  # validation sees the divergence too
+                return loss * math.inf
+            return loss + torch.sqrt(self.offset[0] - self.offset[0].detach())  # value 0, gradient inf
+        return loss
+
+
+@pytest.mark.parametrize("infinite_loss", [False, True], ids=["infinite-gradient", "infinite-loss"])
+def test_a_step_into_a_non_finite_region_is_undone_and_the_learning_rate_halved(data: TrainingData,
+                                                                               infinite_loss: bool) -> None:
+    # Adam's first step moves the offset by about lr = 0.05, from 0.5 to 0.45: past the edge
+    model = Cliff(edge=0.46, infinite_loss=infinite_loss)
+    trainer = _trainer(data, model, max_grad_norm=10.0)
+    trainer.fit(progress=False)
+    steps = trainer.gradient_steps
+    assert steps["rolled_back"] >= 1 and steps["skipped_nonfinite"] == 0
+    assert float(model.offset[0]) >= model.edge  # every crossing undone
+    assert torch.isfinite(model.offset).all() and all(math.isfinite(r.train_loss) for r in trainer.history)
+    assert trainer.optimizer.param_groups[0]["lr"] == pytest.approx(0.05 * 0.5 ** steps["rolled_back"])
+    # Adam's moments were restored with the weights: it counts only the steps that stand
+    assert int(trainer.optimizer.state[model.offset]["step"]) == steps["taken"] - steps["rolled_back"]
+    assert trainer.history[-1].parameters["gradient_steps_rolled_back"] == steps["rolled_back"]
