@@ -26,7 +26,8 @@ with a finite gradient, the step that moved them is undone (weights and Adam's m
 to just before it) and the learning rate is halved, since such a step left the recursion where it
 diverges (counted ``rolled_back``; a learned filter's usual failure, the recurrent gain pushing
 the filter off its measurements, cf. KalmanNet's issues #23 and #27). Otherwise (the starting
-weights, or a step just undone) the batch is skipped (``skipped_nonfinite``). The counts are in
+weights, or a step just undone) the batch is skipped (``skipped_nonfinite``); an epoch with no
+finite loss and no step to undo raises ``FloatingPointError``. The counts are in
 :attr:`Trainer.gradient_steps`; a SequenceModel's history records them per epoch, the artefact
 their totals. L-BFGS raises ``FloatingPointError`` on a non-finite loss instead.
 """
@@ -376,7 +377,7 @@ class Trainer:
         if self.config.optimizer == "lbfgs":
             return self._lbfgs_epoch()
         self.model.train()
-        total, count = 0.0, 0
+        total, count, undone = 0.0, 0, self.gradient_steps["rolled_back"]
         for batch in self.data.batches(self.config.windows_per_batch, self.generator):
             loss = self._backward(batch, raise_nonfinite=False)
             if torch.isfinite(loss):
@@ -389,6 +390,9 @@ class Trainer:
             self.optimizer.step()
             self.gradient_steps["taken"] += 1
         self.model.eval()
+        if not count and self.gradient_steps["rolled_back"] == undone:  # nothing to learn from, nothing undone
+            raise FloatingPointError(f"no finite training loss in epoch {len(self.history) + 1}: the filter "
+                                     "diverges at the starting weights on every batch")
         return self._reported(total / count) if count else math.inf
 
     def deployed_parameters(self) -> dict[str, float]:

@@ -106,3 +106,10 @@ def test_a_step_into_a_non_finite_region_is_undone_and_the_learning_rate_halved(
     # Adam's moments were restored with the weights: it counts only the steps that stand
     assert int(trainer.optimizer.state[model.offset]["step"]) == steps["taken"] - steps["rolled_back"]
     assert trainer.history[-1].parameters["gradient_steps_rolled_back"] == steps["rolled_back"]
+
+
+def test_an_epoch_without_a_finite_loss_at_the_starting_weights_is_an_error(data: TrainingData) -> None:
+    model = Cliff(edge=1.0, infinite_loss=True)  # diverges from the start: nothing to undo
+    with pytest.raises(FloatingPointError, match="no finite training loss in epoch 1"):
+        _trainer(data, model).fit(progress=False)
+    assert float(model.offset[0]) == 0.5
