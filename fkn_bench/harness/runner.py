@@ -3,6 +3,8 @@
 :func:`run_grid` is what ``fkn-bench run`` calls. With a :class:`~fkn_bench.harness.store.ResultStore`
 every cell is written atomically the moment it completes, so an interrupted grid resumes where it
 stopped (finished cells are read back, not recomputed); without one, results stay in memory.
+The store must be fkn-bench's (:meth:`~fkn_bench.harness.store.ResultStore.prepare`, checked
+before anything runs).
 """
 
 from __future__ import annotations
@@ -61,8 +63,11 @@ def run_grid(
     rerun: bool = False,
 ) -> GridRun:
     """Run ``cells`` (module docstring). ``rerun`` recomputes finished cells too; ``progress``
-    shows a tqdm bar on stderr."""
+    shows a tqdm bar on stderr. Raises :class:`~fkn_bench.harness.store.StoreError` before
+    running anything when ``store`` is not fkn-bench's or cannot be written."""
     backend = backend or LocalBackend()
+    if store is not None:
+        store.prepare()
     records: list[CellRecord] = []
     todo: list[CellSpec] = []
     for cell in cells:

@@ -8,11 +8,19 @@ Layout under the store's root::
     results.csv                                              rows of the last grid run, sorted
     results.json                                             provenance of the last grid run
 
+    .fkn-bench-results                                       marker: fkn-bench writes here
+
 Each file is written atomically (:mod:`fkn_bench.io`) and the cell's JSON last, so a cell is
 finished exactly when its JSON exists. Resume: a cell whose JSON records the same key (estimator
 and its configuration fingerprint, source and its configuration hash, seeds, metric settings,
 format version) is not computed again; failed cells count as finished (their failure is the
 result; use ``rerun`` to try again).
+
+Ownership: :meth:`ResultStore.prepare` runs before anything is written and makes sure that the
+root is fkn-bench's: a new or empty directory gets the marker file; a directory with the marker,
+or with the ``results.json`` of an earlier run (``format: fkn-bench-results``; written before the
+marker existed), is ours; any other directory is refused (:class:`ForeignDirectoryError`) unless
+``force`` is given, so that nobody's ``results.csv`` is overwritten by surprise.
 """
 
 from __future__ import annotations
@@ -29,15 +37,30 @@ from fkn_bench.harness.records import CellRecord, Results
 from fkn_bench.io import atomic_path, read_json, write_json_atomic, write_text_atomic
 from fkn_bench.metrics import StatisticSums
 
-__all__ = ["CELL_FORMAT", "ResultStore", "StoreError", "read_rows_csv", "rows_to_csv"]
+__all__ = [
+    "CELL_FORMAT",
+    "MARKER",
+    "ForeignDirectoryError",
+    "ResultStore",
+    "StoreError",
+    "read_rows_csv",
+    "rows_to_csv",
+]
 
 CELL_FORMAT = "fkn-bench-cell"
+RESULTS_FORMAT = "fkn-bench-results"
+MARKER = ".fkn-bench-results"
+"""The file that marks a directory as fkn-bench's results directory (module docstring)."""
 
 _DTYPES = {"estimator": str, "scenario": str, "seed": np.int64, "group": str, "metric": str, "value": np.float64, "unit": str}
 
 
 class StoreError(ValueError):
-    """A results directory that cannot be read (missing, corrupt or of another format)."""
+    """A results directory that cannot be read (missing, corrupt or of another format) or written."""
+
+
+class ForeignDirectoryError(StoreError):
+    """A results directory that fkn-bench did not write (no marker, no earlier results)."""
 
 
 def rows_to_csv(rows: pd.DataFrame, *, float_format: str | None = None) -> str:
@@ -61,6 +84,45 @@ class ResultStore:
 
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)
+
+    # ------------------------------------------------------------------ ownership
+    def prepare(self, *, force: bool = False) -> None:
+        """Make the root a results directory of fkn-bench's before anything is written there.
+
+        A missing or empty directory is created and marked (:data:`MARKER`); one with the marker
+        or with an earlier run's ``results.json`` is ours (and marked); any other directory is
+        refused with :class:`ForeignDirectoryError` naming some of its entries, unless ``force``
+        (it is marked and written into; files other than ``cells/``, ``results.csv`` and
+        ``results.json`` are never touched). A root that is a file, or that cannot be created
+        or written, raises :class:`StoreError`.
+        """
+        root = self.root
+        if root.exists() and not root.is_dir():
+            raise StoreError(f"{root} is a file, not a directory")
+        if root.is_dir() and not force and not self._is_ours():
+            try:
+                entries = sorted(p.name + ("/" if p.is_dir() else "") for p in root.iterdir())
+            except OSError as exc:
+                raise StoreError(f"cannot read directory {root}: {exc.strerror or exc}") from None
+            if entries:
+                shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
+                raise ForeignDirectoryError(
+                    f"{root} is not an fkn-bench results directory: it holds {shown} and no {MARKER} marker"
+                )
+        try:
+            write_json_atomic(root / MARKER, {"format": RESULTS_FORMAT, "note": "fkn-bench run --out writes here"})
+        except OSError as exc:
+            raise StoreError(f"cannot write to {root}: {exc.strerror or exc}") from None
+
+    def _is_ours(self) -> bool:
+        """The root holds the marker, or an earlier run's ``results.json``."""
+        if (self.root / MARKER).is_file():
+            return True
+        try:
+            document = read_json(self.root / "results.json")
+        except (OSError, ValueError):
+            return False
+        return isinstance(document, dict) and document.get("format") == RESULTS_FORMAT
 
     # ------------------------------------------------------------------ paths
     def _paths(self, cell: CellSpec | CellRecord) -> tuple[Path, Path, Path]:

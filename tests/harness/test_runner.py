@@ -1,4 +1,5 @@
-"""Grid runs: resume without recomputing, interrupted grids, failures kept as results."""
+"""Grid runs: resume without recomputing, interrupted grids, failures kept as results, and only
+into a results directory of fkn-bench's."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 from fkn_bench.harness import (
     CellRecord,
     CellSpec,
+    ForeignDirectoryError,
     LocalBackend,
     ResultStore,
     build_grid,
@@ -81,3 +83,11 @@ def test_failures_are_results(tmp_path: Path, short_ds1: SimulatedSource, test_e
 def test_without_store_results_stay_in_memory(short_ds1: SimulatedSource) -> None:
     outcome = run_grid(build_grid(["manual-ekf"], [short_ds1], range(2)), progress=False)
     assert len(outcome.results) == 1 and outcome.results.seeds("manual-ekf", "ds1") == [0, 1]
+
+
+def test_a_foreign_directory_is_refused_before_anything_runs(tmp_path: Path, short_ds1: SimulatedSource) -> None:
+    (tmp_path / "results.csv").write_text("mine\n")
+    backend = CountingBackend()
+    with pytest.raises(ForeignDirectoryError, match="not an fkn-bench results directory"):
+        run_grid(build_grid(["manual-ekf"], [short_ds1], range(2)), store=ResultStore(tmp_path), backend=backend, progress=False)
+    assert backend.ran == [] and (tmp_path / "results.csv").read_text() == "mine\n"
