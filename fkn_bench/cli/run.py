@@ -3,7 +3,8 @@
 Runs the grid estimator x scenario x seed (cells of 10 consecutive seeds), prints a table (or,
 with ``--json``, one JSON document) with one line per estimator and scenario, and with ``--out``
 writes every cell's results there as it completes, so an interrupted run resumes where it
-stopped. ``--out`` writes only into a directory fkn-bench created (its ``.fkn-bench-results``
+stopped (a stored cell whose data does not match its recorded SHA-256 is recomputed, with a line
+on stderr). ``--out`` writes only into a directory fkn-bench created (its ``.fkn-bench-results``
 marker or an earlier run's ``results.json``), a new one or an empty one; any other directory is
 refused unless ``--force``. Results are identical for the same seeds whatever the backend or
 worker count.
@@ -209,6 +210,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(summary_text(summaries))
     if args.out:
-        print(f"fkn-bench run: {len(cells)} cells ({outcome.computed} computed, {outcome.reused} reused, "
+        mismatched = f", {len(outcome.mismatched)} after a checksum mismatch" if outcome.mismatched else ""
+        print(f"fkn-bench run: {len(cells)} cells ({outcome.computed} computed{mismatched}, {outcome.reused} reused, "
               f"{outcome.failed} failed) in {args.out}", file=sys.stderr)
     return 1 if cells and outcome.failed == len(cells) else 0

@@ -1,10 +1,11 @@
-"""Result files: exact round trips, resume keys, loading, nothing torn or left behind, and a root
-that must be fkn-bench's."""
+"""Result files: exact round trips, resume keys, loading, nothing torn or left behind, checksums
+of each cell's data, and a root that must be fkn-bench's."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import hashlib
 import json
 
 import numpy as np
@@ -14,6 +15,7 @@ import pytest
 from dataclasses import replace
 
 from fkn_bench.harness import (
+    CellChecksumError,
     CellSpec,
     ForeignDirectoryError,
     ResultStore,
@@ -83,6 +85,49 @@ def test_csv_keeps_odd_names_and_nan(tmp_path: Path) -> None:
     back = read_rows_csv(path)
     assert back.estimator[0] == "NA" and back.scenario[0] == "nan" and np.isnan(back.value[0])
     assert back.unit[0] == ""
+
+
+# ---------------------------------------------------------------------------- checksums
+def test_cell_record_holds_the_sha256_of_its_data(tmp_path: Path, short_ds1: SimulatedSource) -> None:
+    json_path = ResultStore(tmp_path).write_cell(run_cell(_spec(short_ds1)))
+    document = json.loads(json_path.read_text())
+    for kind, suffix in (("rows", ".csv"), ("sums", ".npz")):
+        assert document["sha256"][kind] == hashlib.sha256(json_path.with_suffix(suffix).read_bytes()).hexdigest()
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".npz"])
+def test_an_edited_cell_fails_its_checksum(tmp_path: Path, short_ds1: SimulatedSource, suffix: str) -> None:
+    store = ResultStore(tmp_path)
+    spec = _spec(short_ds1)
+    json_path = store.write_cell(run_cell(spec))
+    data = json_path.with_suffix(suffix)
+    if suffix == ".csv":  # a hand edit that still parses: an RMSE of 16.67
+        text = data.read_text()
+        start = text.index(",state,rmse,") + len(",state,rmse,")
+        data.write_text(text[:start] + "16.67" + text[text.index(",", start):])
+        assert 16.67 in read_rows_csv(data)["value"].tolist()
+    else:
+        blob = bytearray(data.read_bytes())
+        blob[-30] ^= 0xFF
+        data.write_bytes(bytes(blob))
+    message = rf"cell .*seeds-3-4\.json: seeds-3-4\{suffix} does not match the SHA-256 its record holds"
+    with pytest.raises(CellChecksumError, match=message):
+        store.finished(spec)
+    with pytest.raises(CellChecksumError, match=message):
+        store.load()
+
+
+def test_a_cell_written_before_the_checksums_is_read_unchecked(tmp_path: Path, short_ds1: SimulatedSource) -> None:
+    store = ResultStore(tmp_path)
+    spec = _spec(short_ds1)
+    record = run_cell(spec)
+    json_path = store.write_cell(record)
+    document = json.loads(json_path.read_text())
+    del document["sha256"]  # the layout of the committed leaderboards/results
+    json_path.write_text(json.dumps(document))
+    legacy = store.finished(spec)
+    assert legacy is not None
+    pd.testing.assert_frame_equal(legacy.rows, record.rows, check_exact=True)
 
 
 # ---------------------------------------------------------------------------- prepare (ownership)
