@@ -3,7 +3,11 @@
 Runs the grid estimator x scenario x seed (cells of 10 consecutive seeds), prints a table (or,
 with ``--json``, one JSON document) with one line per estimator and scenario, and with ``--out``
 writes every cell's results there as it completes, so an interrupted run resumes where it
-stopped. Results are identical for the same seeds whatever the backend or worker count.
+stopped (a stored cell whose data does not match its recorded SHA-256 is recomputed, with a line
+on stderr). ``--out`` writes only into a directory fkn-bench created (its ``.fkn-bench-results``
+marker or an earlier run's ``results.json``), a new one or an empty one; any other directory is
+refused unless ``--force``. Results are identical for the same seeds whatever the backend or
+worker count.
 
 Examples::
 
@@ -59,6 +63,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--json", action="store_true", help="print exactly one JSON document on stdout")
     parser.add_argument("--out", metavar="DIR", help="write per-cell results here (and resume from them)")
     parser.add_argument("--rerun", action="store_true", help="recompute cells already finished in --out")
+    parser.add_argument("--force", action="store_true",
+                        help="write into an --out directory that fkn-bench did not create (its cells/, results.csv "
+                             "and results.json are overwritten)")
     parser.add_argument("--backend", default="local", choices=BACKENDS, help="where cells run (default: local)")
     parser.add_argument("--workers", type=int, default=1, metavar="N",
                         help="worker processes (local: a process pool when > 1; dask: LocalCluster size)")
@@ -83,6 +90,25 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise UsageError("--scheduler needs --backend dask")
     if args.rerun and not args.out:
         raise UsageError("--rerun needs --out (without it nothing is reused)")
+    if args.force and not args.out:
+        raise UsageError("--force needs --out (without it nothing is written)")
+
+
+def _store(args: argparse.Namespace) -> Any:
+    """The result store of ``--out``, checked to be fkn-bench's and writable before anything runs
+    (:meth:`~fkn_bench.harness.ResultStore.prepare`); a directory fkn-bench did not write is
+    refused unless ``--force``. Every refusal is a one-line usage error naming ``--out``."""
+    from fkn_bench.harness import ForeignDirectoryError, ResultStore, StoreError
+
+    store = ResultStore(args.out)
+    try:
+        store.prepare(force=args.force)
+    except ForeignDirectoryError as exc:
+        raise UsageError(f"--out: {exc}; choose another directory, or pass --force to write cells/, results.csv "
+                         f"and results.json there anyway") from None
+    except StoreError as exc:
+        raise UsageError(f"--out: {exc}") from None
+    return store
 
 
 def _estimators(args: argparse.Namespace, scenarios: list[Any]) -> list[Any]:
@@ -139,7 +165,6 @@ def _recording_source(args: argparse.Namespace) -> Any:
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.harness import (
         MetricSettings,
-        ResultStore,
         SimulatedSource,
         build_grid,
         make_backend,
@@ -164,7 +189,7 @@ def run(args: argparse.Namespace) -> int:
         sources = [SimulatedSource(scenario, args.split) for scenario in scenarios]
     resolved = _estimators(args, scenarios)
     cells = build_grid(resolved, sources, range(args.seeds), settings=MetricSettings(cut=args.cut))
-    store = ResultStore(args.out) if args.out else None
+    store = _store(args) if args.out else None
     backend = make_backend(args.backend, workers=args.workers, scheduler=args.scheduler)
     outcome = run_grid(cells, store=store, backend=backend, progress=not args.no_progress, rerun=args.rerun)
     order = [(r.name, r.scenario) for r in resolved]
@@ -185,6 +210,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(summary_text(summaries))
     if args.out:
-        print(f"fkn-bench run: {len(cells)} cells ({outcome.computed} computed, {outcome.reused} reused, "
+        mismatched = f", {len(outcome.mismatched)} after a checksum mismatch" if outcome.mismatched else ""
+        print(f"fkn-bench run: {len(cells)} cells ({outcome.computed} computed{mismatched}, {outcome.reused} reused, "
               f"{outcome.failed} failed) in {args.out}", file=sys.stderr)
     return 1 if cells and outcome.failed == len(cells) else 0

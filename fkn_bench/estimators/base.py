@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -49,6 +50,9 @@ __all__ = [
     "ESTIMATOR_FORMAT_VERSION",
     "EstimatorFileError",
     "check_batch_inputs",
+    "MAX_INTERVAL",
+    "observation_time",
+    "observation_valid",
     "parse_observation",
     "read_estimator_document",
 ]
@@ -168,7 +172,11 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
     """Measurement ``(7,)`` (None when missing) and time (None when absent) of an observation.
 
     Accepts a Gymnasium observation dict (``pose``, ``valid``, ``time``) or a ``(7,)`` array
-    (all NaN when missing). Raises ``ValueError`` for anything else, a non-finite time included.
+    (all NaN when missing). The dict's fields are checked where they enter (``ValueError`` naming
+    the field): ``time``, when present, must be a finite real number of seconds (a number, not a
+    string; see :func:`observation_time`) and ``valid``, when present, a bool or 0/1 (see
+    :func:`observation_valid`; ``"False"`` or NaN are refused, not counted valid). Anything else
+    is refused with a ``ValueError`` too.
     """
     if type(observation) is np.ndarray:  # the common online case first: a (7,) array
         pose, valid, time = observation, True, None
@@ -176,23 +184,58 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
         try:
             pose = observation["pose"]
         except KeyError:
-            raise ValueError(f"observation dict needs a 'pose' entry (has {sorted(observation)})") from None
-        valid = observation.get("valid", True)
+            raise ValueError(f"observation dict needs a 'pose' entry (has {sorted(observation, key=str)})") from None
+        valid = observation_valid(observation["valid"]) if "valid" in observation else True
         time = observation.get("time")
-        time = None if time is None else float(time)
-        if time is not None and not math.isfinite(time):
-            raise ValueError(f"observation time must be a finite number of seconds (got {time})")
+        time = None if time is None else observation_time(time)
     elif isinstance(observation, Mapping):
         return parse_observation(dict(observation))
     else:
         pose, valid, time = observation, True, None
     if type(pose) is not np.ndarray or pose.dtype != np.float64:
-        pose = np.asarray(pose, dtype=np.float64)
+        try:
+            pose = np.asarray(pose, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"observation 'pose' must be 7 numbers (got {pose!r})") from None
     if pose.shape != (7,):
         raise ValueError(f"a pose observation must have shape (7,) (got {pose.shape})")
     if not valid or (math.isnan(pose[0]) and np.isnan(pose).all()):
         return None, time
     return pose, time
+
+
+def observation_time(value: Any) -> float:
+    """An observation's ``time`` as a float: a finite real number of seconds (``int``, ``float``,
+    a numpy integer or float, or a 0-d array of one). A string (``"nan"``, ``"0.5"``), a bool, an
+    array of another shape, NaN and +-inf are refused with a ``ValueError`` naming the field."""
+    if type(value) is not float:
+        if isinstance(value, np.ndarray) and value.shape == ():
+            value = value[()]
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+            raise ValueError(f"observation 'time' must be a real number of seconds (got {value!r})")
+        try:
+            value = float(value)
+        except (OverflowError, TypeError, ValueError):
+            raise ValueError(f"observation 'time' must be a finite number of seconds (got {value!r})") from None
+    if not math.isfinite(value):
+        raise ValueError(f"observation 'time' must be a finite number of seconds (got {value})")
+    return value
+
+
+def observation_valid(value: Any) -> bool:
+    """An observation's ``valid`` flag as a bool: ``True``/``False``, a numpy bool, or a number
+    equal to 0 or 1 (``np.int64(1)`` from the Gymnasium environments; also in a 0-d array).
+    Anything else (``"False"``, ``None``, NaN, 2, a list) is refused with a ``ValueError``
+    naming the field rather than counted valid."""
+    if type(value) is bool:
+        return value
+    if isinstance(value, np.ndarray) and value.shape == ():
+        value = value[()]
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, numbers.Real) and (value == 0 or value == 1):
+        return bool(value == 1)
+    raise ValueError(f"observation 'valid' must be True/False or 0/1 (got {value!r})")
 
 
 class Estimator(ABC):
@@ -264,6 +307,11 @@ class Estimator(ABC):
 TIME_TOLERANCE = 1e-6
 """Online observation intervals within this many seconds of ``dt`` are taken as ``dt``."""
 
+MAX_INTERVAL = 1e6
+"""The longest online observation interval, s (11.6 days): a longer one is refused as a unit or
+clock mistake (e.g. a Unix timestamp after times counted from 0); no filter's prediction over it
+means anything, and one over ~1e308 s overflows."""
+
 
 class OnlineState(NamedTuple):
     """An online estimator's state after a step (an immutable value): the time (s), the filter's
@@ -280,12 +328,15 @@ class RecursiveEstimator(Estimator):
     online recursion of the project (every built-in estimator uses it).
 
     Rules of :meth:`step`: steps are taken ``dt`` apart; when an observation carries a ``time``,
-    it must increase (``ValueError`` otherwise), and an interval that differs from ``dt`` by more
-    than :data:`TIME_TOLERANCE` is predicted over its actual length. The measurement is cleaned
-    by :meth:`_online_sanitize` (the model's rule; unusable measurements skip the update). The
-    first step starts from :meth:`_online_prior` without a prediction; later steps predict first.
-    The sequence initialises at its first usable measurement (:meth:`_online_initial`; that
-    measurement is not used again in an update); later usable measurements update.
+    it must be a finite number (:func:`parse_observation`) that increases by at most
+    :data:`MAX_INTERVAL` (``ValueError`` naming the time otherwise), and an interval that differs
+    from ``dt`` by more than :data:`TIME_TOLERANCE` is predicted over its actual length. A refused
+    step (a bad ``time``, ``valid`` or ``pose``) leaves the estimator as it was, so the next
+    valid step continues the sequence. The measurement is cleaned by :meth:`_online_sanitize`
+    (the model's rule; unusable measurements skip the update). The first step starts from
+    :meth:`_online_prior` without a prediction; later steps predict first. The sequence
+    initialises at its first usable measurement (:meth:`_online_initial`; that measurement is not
+    used again in an update); later usable measurements update.
 
     The ``_online_*`` hooks step a filter variant on numpy arrays by default; subclasses with
     another filter state override them. Measurements reach them sanitised, as ``(1, 7)`` arrays.
@@ -295,7 +346,12 @@ class RecursiveEstimator(Estimator):
     _online: OnlineState | None = None
 
     def reset(self, *, dt: float) -> None:
-        self._dt = check_dt(dt)
+        """Start a new online sequence with time step ``dt`` (s): a finite number in
+        ``(0, MAX_INTERVAL]`` (``ValueError`` naming ``dt`` otherwise)."""
+        step = check_dt(dt)
+        if step > MAX_INTERVAL:
+            raise ValueError(f"dt must be at most MAX_INTERVAL = {MAX_INTERVAL:g} s (got {dt!r})")
+        self._dt = step
         self._online = None
 
     def step(self, observation: Any) -> Estimate:
@@ -309,8 +365,13 @@ class RecursiveEstimator(Estimator):
         else:
             now = previous.time + self._dt if time is None else time
             interval = now - previous.time
-            if interval <= 0:
+            if not interval > 0:
                 raise ValueError(f"observation time {now} does not increase (previous {previous.time})")
+            if interval > MAX_INTERVAL:
+                raise ValueError(
+                    f"observation time {now} is {interval:.6g} s after the previous one ({previous.time}); "
+                    f"intervals over MAX_INTERVAL = {MAX_INTERVAL:g} s are refused (reset() starts a new sequence)"
+                )
             if abs(interval - self._dt) <= TIME_TOLERANCE:
                 interval = self._dt
         self._online_observe(z)  # after the checks: a refused step leaves the estimator as it was

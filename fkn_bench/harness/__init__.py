@@ -18,17 +18,19 @@ from fkn_bench.harness.report import summary_text
 from fkn_bench.harness.rows import COLUMNS, deterministic_rows
 from fkn_bench.harness.runner import GridRun, run_grid
 from fkn_bench.harness.sources import EpisodeSource, RecordingSource, SimulatedSource
-from fkn_bench.harness.store import ResultStore, StoreError
+from fkn_bench.harness.store import CellChecksumError, ForeignDirectoryError, ResultStore, StoreError
 from fkn_bench.harness.summary import PRIMARY_SCORE, summarize_pair, summarize_results
 from fkn_bench.metrics import MetricSettings
 
 __all__ = [
     "BACKENDS",
     "COLUMNS",
+    "CellChecksumError",
     "CellRecord",
     "CellSpec",
     "DaskBackend",
     "EpisodeSource",
+    "ForeignDirectoryError",
     "GridRun",
     "LocalBackend",
     "MetricSettings",

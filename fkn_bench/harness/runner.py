@@ -2,7 +2,10 @@
 
 :func:`run_grid` is what ``fkn-bench run`` calls. With a :class:`~fkn_bench.harness.store.ResultStore`
 every cell is written atomically the moment it completes, so an interrupted grid resumes where it
-stopped (finished cells are read back, not recomputed); without one, results stay in memory.
+stopped (finished cells are read back, not recomputed; a finished cell whose data no longer
+matches its recorded checksums is recomputed, with a line on stderr); without one, results stay
+in memory. The store must be fkn-bench's (:meth:`~fkn_bench.harness.store.ResultStore.prepare`,
+checked before anything runs).
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from fkn_bench.harness.backends import Backend, LocalBackend
 from fkn_bench.harness.grid import CellSpec
 from fkn_bench.provenance import environment
 from fkn_bench.harness.records import CellRecord, Results
-from fkn_bench.harness.store import ResultStore
+from fkn_bench.harness.store import CellChecksumError, ResultStore
 
 __all__ = ["GridRun", "run_grid", "grid_provenance"]
 
@@ -26,12 +29,14 @@ __all__ = ["GridRun", "run_grid", "grid_provenance"]
 @dataclass(frozen=True, eq=False)
 class GridRun:
     """Outcome of :func:`run_grid`: the results of every requested cell, and how many cells were
-    ``computed`` now, ``reused`` from the store, and ``failed`` (among both)."""
+    ``computed`` now, ``reused`` from the store, and ``failed`` (among both); ``mismatched``
+    names the stored cells recomputed because their data did not match their checksums."""
 
     results: Results
     computed: int
     reused: int
     failed: int
+    mismatched: tuple[str, ...] = ()
 
 
 def grid_provenance(cells: Sequence[CellSpec], backend: Backend) -> dict[str, Any]:
@@ -61,12 +66,21 @@ def run_grid(
     rerun: bool = False,
 ) -> GridRun:
     """Run ``cells`` (module docstring). ``rerun`` recomputes finished cells too; ``progress``
-    shows a tqdm bar on stderr."""
+    shows a tqdm bar on stderr. Raises :class:`~fkn_bench.harness.store.StoreError` before
+    running anything when ``store`` is not fkn-bench's or cannot be written."""
     backend = backend or LocalBackend()
+    if store is not None:
+        store.prepare()
     records: list[CellRecord] = []
     todo: list[CellSpec] = []
+    mismatched: list[str] = []
     for cell in cells:
-        done = None if (store is None or rerun) else store.finished(cell)
+        try:
+            done = None if (store is None or rerun) else store.finished(cell)
+        except CellChecksumError as exc:
+            print(f"fkn-bench run: {exc}; recomputing it", file=sys.stderr)
+            mismatched.append(cell.name)
+            done = None
         if done is None:
             todo.append(cell)
         else:
@@ -84,4 +98,4 @@ def run_grid(
     if store is not None:
         store.write_summary(results, grid_provenance(cells, backend))
     failed = sum(r.status != "ok" for r in records)
-    return GridRun(results=results, computed=len(records) - reused, reused=reused, failed=failed)
+    return GridRun(results=results, computed=len(records) - reused, reused=reused, failed=failed, mismatched=tuple(mismatched))

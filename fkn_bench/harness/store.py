@@ -8,36 +8,74 @@ Layout under the store's root::
     results.csv                                              rows of the last grid run, sorted
     results.json                                             provenance of the last grid run
 
+    .fkn-bench-results                                       marker: fkn-bench writes here
+
 Each file is written atomically (:mod:`fkn_bench.io`) and the cell's JSON last, so a cell is
 finished exactly when its JSON exists. Resume: a cell whose JSON records the same key (estimator
 and its configuration fingerprint, source and its configuration hash, seeds, metric settings,
 format version) is not computed again; failed cells count as finished (their failure is the
 result; use ``rerun`` to try again).
+
+Integrity: a cell's JSON records the SHA-256 of its CSV and NPZ files (``sha256``), and reading
+the cell checks them: a cell whose data was edited or corrupted raises :class:`CellChecksumError`
+(resume recomputes it and says so). Cells written before the checksums (no ``sha256``) are read
+unchecked, so older result directories still resume.
+
+Ownership: :meth:`ResultStore.prepare` runs before anything is written and makes sure that the
+root is fkn-bench's: a new or empty directory gets the marker file; a directory with the marker,
+or with the ``results.json`` of an earlier run (``format: fkn-bench-results``; written before the
+marker existed), is ours; any other directory is refused (:class:`ForeignDirectoryError`) unless
+``force`` is given, so that nobody's ``results.csv`` is overwritten by surprise.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import pandas as pd
 
 from fkn_bench.harness.grid import CellSpec, safe_name
 from fkn_bench.harness.records import CellRecord, Results
-from fkn_bench.io import atomic_path, read_json, write_json_atomic, write_text_atomic
+from fkn_bench.io import read_json, write_bytes_atomic, write_json_atomic, write_text_atomic
 from fkn_bench.metrics import StatisticSums
 
-__all__ = ["CELL_FORMAT", "ResultStore", "StoreError", "read_rows_csv", "rows_to_csv"]
+__all__ = [
+    "CELL_FORMAT",
+    "MARKER",
+    "CellChecksumError",
+    "ForeignDirectoryError",
+    "ResultStore",
+    "StoreError",
+    "read_rows_csv",
+    "rows_to_csv",
+]
 
 CELL_FORMAT = "fkn-bench-cell"
+RESULTS_FORMAT = "fkn-bench-results"
+MARKER = ".fkn-bench-results"
+"""The file that marks a directory as fkn-bench's results directory (module docstring)."""
 
 _DTYPES = {"estimator": str, "scenario": str, "seed": np.int64, "group": str, "metric": str, "value": np.float64, "unit": str}
 
 
 class StoreError(ValueError):
-    """A results directory that cannot be read (missing, corrupt or of another format)."""
+    """A results directory that cannot be read (missing, corrupt or of another format) or written."""
+
+
+class ForeignDirectoryError(StoreError):
+    """A results directory that fkn-bench did not write (no marker, no earlier results)."""
+
+
+class CellChecksumError(StoreError):
+    """A cell whose CSV or NPZ file does not match the SHA-256 recorded in its JSON."""
+
+
+def _sha256(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()
 
 
 def rows_to_csv(rows: pd.DataFrame, *, float_format: str | None = None) -> str:
@@ -48,7 +86,7 @@ def rows_to_csv(rows: pd.DataFrame, *, float_format: str | None = None) -> str:
     return buffer.getvalue()
 
 
-def read_rows_csv(path: str | Path) -> pd.DataFrame:
+def read_rows_csv(path: str | Path | IO[bytes]) -> pd.DataFrame:
     """Read tidy rows written by :func:`rows_to_csv` (exact floats; names are never NaN)."""
     options: dict[str, Any] = {}
     if int(pd.__version__.split(".")[0]) < 3:  # pandas 3 parses round-trip exactly by default
@@ -62,6 +100,45 @@ class ResultStore:
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)
 
+    # ------------------------------------------------------------------ ownership
+    def prepare(self, *, force: bool = False) -> None:
+        """Make the root a results directory of fkn-bench's before anything is written there.
+
+        A missing or empty directory is created and marked (:data:`MARKER`); one with the marker
+        or with an earlier run's ``results.json`` is ours (and marked); any other directory is
+        refused with :class:`ForeignDirectoryError` naming some of its entries, unless ``force``
+        (it is marked and written into; files other than ``cells/``, ``results.csv`` and
+        ``results.json`` are never touched). A root that is a file, or that cannot be created
+        or written, raises :class:`StoreError`.
+        """
+        root = self.root
+        if root.exists() and not root.is_dir():
+            raise StoreError(f"{root} is a file, not a directory")
+        if root.is_dir() and not force and not self._is_ours():
+            try:
+                entries = sorted(p.name + ("/" if p.is_dir() else "") for p in root.iterdir())
+            except OSError as exc:
+                raise StoreError(f"cannot read directory {root}: {exc.strerror or exc}") from None
+            if entries:
+                shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
+                raise ForeignDirectoryError(
+                    f"{root} is not an fkn-bench results directory: it holds {shown} and no {MARKER} marker"
+                )
+        try:
+            write_json_atomic(root / MARKER, {"format": RESULTS_FORMAT, "note": "fkn-bench run --out writes here"})
+        except OSError as exc:
+            raise StoreError(f"cannot write to {root}: {exc.strerror or exc}") from None
+
+    def _is_ours(self) -> bool:
+        """The root holds the marker, or an earlier run's ``results.json``."""
+        if (self.root / MARKER).is_file():
+            return True
+        try:
+            document = read_json(self.root / "results.json")
+        except (OSError, ValueError):
+            return False
+        return isinstance(document, dict) and document.get("format") == RESULTS_FORMAT
+
     # ------------------------------------------------------------------ paths
     def _paths(self, cell: CellSpec | CellRecord) -> tuple[Path, Path, Path]:
         """The cell's CSV, NPZ and JSON files."""
@@ -71,9 +148,14 @@ class ResultStore:
 
     # ------------------------------------------------------------------ resume
     def finished(self, spec: CellSpec) -> CellRecord | None:
-        """The stored record of ``spec`` when it is finished with the same key, else None."""
+        """The stored record of ``spec`` when it is finished with the same key, else None.
+
+        Raises :class:`CellChecksumError` when the cell's data does not match its checksums (the
+        caller recomputes it and says so); a missing or torn cell is simply not finished."""
         try:
             record = self.read_cell(self._paths(spec)[2])
+        except CellChecksumError:
+            raise
         except StoreError:  # missing (read_json's FileNotFoundError) or broken
             return None
         return record if record.key == spec.key() else None
@@ -82,13 +164,15 @@ class ResultStore:
     def write_cell(self, record: CellRecord) -> Path:
         """Write the record's rows, sums and JSON (last) atomically; returns the JSON path."""
         csv_path, npz_path, json_path = self._paths(record)
-        write_text_atomic(csv_path, rows_to_csv(record.rows))
+        rows = rows_to_csv(record.rows).encode("utf-8")
+        write_bytes_atomic(csv_path, rows)
         arrays: dict[str, np.ndarray] = {}
         for name, sums in (("nees", record.nees), ("nis", record.nis)):
             if sums is not None:
                 arrays.update({f"{name}_sum": sums.sum, f"{name}_count": sums.count})
-        with atomic_path(npz_path) as tmp, open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **arrays)
+        write_bytes_atomic(npz_path, sums_data := buffer.getvalue())
         document = {
             "format": CELL_FORMAT,
             "cell": record.name,
@@ -100,6 +184,7 @@ class ResultStore:
             "key": record.key,
             "source": record.source,
             "files": {"rows": csv_path.name, "sums": npz_path.name},
+            "sha256": {"rows": _sha256(rows), "sums": _sha256(sums_data)},
             "notes": record.notes,
             "provenance": record.provenance,
         }
@@ -107,7 +192,8 @@ class ResultStore:
 
     # ------------------------------------------------------------------ read
     def read_cell(self, json_path: str | Path) -> CellRecord:
-        """Read one finished cell (raises :class:`StoreError`)."""
+        """Read one finished cell (raises :class:`StoreError`; :class:`CellChecksumError` when
+        its data does not match the checksums its JSON records)."""
         json_path = Path(json_path)
         try:
             document = read_json(json_path)
@@ -116,8 +202,21 @@ class ResultStore:
         if not isinstance(document, dict) or document.get("format") != CELL_FORMAT:
             raise StoreError(f"{json_path} is not an fkn-bench cell file")
         try:
-            rows = read_rows_csv(json_path.with_name(document["files"]["rows"]))
-            with np.load(json_path.with_name(document["files"]["sums"]), allow_pickle=False) as npz:
+            data = {kind: json_path.with_name(document["files"][kind]).read_bytes() for kind in ("rows", "sums")}
+        except (OSError, KeyError, TypeError) as exc:
+            raise StoreError(f"cell {json_path} is incomplete: {exc}") from None
+        checksums = document.get("sha256")  # absent in cells written before the checksums: unchecked
+        if checksums is not None:
+            for kind, content in data.items():
+                recorded = checksums.get(kind) if isinstance(checksums, dict) else None
+                if recorded != _sha256(content):
+                    raise CellChecksumError(
+                        f"cell {json_path}: {document['files'][kind]} does not match the SHA-256 its record holds "
+                        f"(edited or corrupted)"
+                    )
+        try:
+            rows = read_rows_csv(io.BytesIO(data["rows"]))
+            with np.load(io.BytesIO(data["sums"]), allow_pickle=False) as npz:
                 sums = {name: np.array(npz[name]) for name in npz.files}
         except (OSError, KeyError, ValueError) as exc:
             raise StoreError(f"cell {json_path} is incomplete: {exc}") from None

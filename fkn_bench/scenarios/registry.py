@@ -10,6 +10,10 @@ TOML format (``fkn-bench ... --scenario-file my.toml``)::
     base = "ds2"            # optional: start from a registered scenario
     noise_scale = 2.0
     measurement_every = 5
+
+A file cannot silently redefine a built-in scenario (:data:`BUILTIN_SCENARIOS`): a table named
+like one is refused unless it says ``override = true``, so that results printed as "ds1" are the
+paper's ds1.
 """
 
 from __future__ import annotations
@@ -28,6 +32,7 @@ __all__ = [
     "list_scenarios",
     "scenario_names",
     "load_scenarios",
+    "BUILTIN_SCENARIOS",
 ]
 
 
@@ -79,7 +84,15 @@ def get_scenario(scenario: str | Scenario, **overrides: Any) -> Scenario:
 def _from_table(name: str, table: Mapping[str, Any], earlier: Mapping[str, Scenario]) -> Scenario:
     data = dict(table)
     base_name = data.pop("base", None)
+    override = data.pop("override", False)
+    if not isinstance(override, bool):
+        raise ConfigError(f"'override' must be true or false (got {override!r})")
     data.setdefault("name", name)
+    if data["name"] in BUILTIN_SCENARIOS and not override:
+        raise ConfigError(
+            f"would redefine the built-in scenario '{data['name']}'; give it another name, or set "
+            f"override = true to replace the built-in one"
+        )
     if base_name is None:
         return Scenario.from_dict(data)
     base = earlier.get(str(base_name)) or get_scenario(str(base_name))
@@ -89,8 +102,10 @@ def _from_table(name: str, table: Mapping[str, Any], earlier: Mapping[str, Scena
 def load_scenarios(path: str | Path, *, register: bool = True) -> list[Scenario]:
     """Read scenarios from a TOML file (``[scenario.NAME]`` tables, see module docstring).
 
-    A ``base`` may name a registered scenario or one defined earlier in the same file. Returns
-    them and, unless ``register=False``, registers them (replacing same-named ones).
+    A ``base`` may name a registered scenario or one defined earlier in the same file. A table
+    that names a built-in scenario (:data:`BUILTIN_SCENARIOS`) raises :class:`ConfigError` unless
+    it sets ``override = true``. Returns them and, unless ``register=False``, registers them
+    (replacing same-named ones).
     """
     path = Path(path)
     try:
@@ -212,3 +227,6 @@ for _scenario in (
     ),
 ):
     register_scenario(_scenario)
+
+BUILTIN_SCENARIOS: frozenset[str] = frozenset(_REGISTRY)
+"""Names of the built-in scenarios, which a scenario file redefines only with ``override = true``."""

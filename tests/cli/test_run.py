@@ -155,6 +155,7 @@ def test_unknown_scenario_exits_2_with_the_list(capsys: pytest.CaptureFixture) -
         (["--workers", "0"], "--workers"),
         (["--scheduler", "tcp://127.0.0.1:1"], "--backend dask"),
         (["--rerun"], "--out"),
+        (["--force"], "--force needs --out"),
         (["--cut", "5000"], "nothing to score"),
     ],
 )
@@ -186,3 +187,32 @@ def test_help_lists_run(capsys: pytest.CaptureFixture) -> None:
     for option in ("--estimator", "--scenario", "--seeds", "--split", "--json", "--out", "--backend", "--workers",
                    "--scheduler"):
         assert option in out
+
+
+def _one_line_error(capsys: pytest.CaptureFixture, *args: str) -> str:
+    """Run ``fkn-bench run`` expecting a usage error: exit 2 and one line on stderr, no traceback."""
+    assert main(["run", *args, "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    return err
+
+
+def test_out_never_overwrites_a_directory_it_did_not_write(capsys: pytest.CaptureFixture, tiny: str, tmp_path: Path) -> None:
+    args = ("--estimator", "manual-ekf", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "2", "--out", str(tmp_path))
+    (tmp_path / "results.csv").write_text("mine\n")
+    err = _one_line_error(capsys, *args)
+    assert f"fkn-bench run: error: --out: {tmp_path} is not an fkn-bench results directory: it holds results.csv" in err
+    assert "pass --force" in err and (tmp_path / "results.csv").read_text() == "mine\n"
+    assert _run_json(capsys, *args, "--force")["cells"]["computed"] == 1
+    assert (tmp_path / "results.csv").read_text() != "mine\n"
+    assert _run_json(capsys, *args)["cells"]["reused"] == 1  # ours now: no --force needed
+
+
+def test_out_naming_a_file_or_an_unwritable_path_is_a_one_line_error(capsys: pytest.CaptureFixture, tiny: str,
+                                                                    tmp_path: Path) -> None:
+    file = tmp_path / "results.txt"
+    file.write_text("mine\n")
+    args = ("--estimator", "manual-ekf", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "2")
+    assert f"--out: {file} is a file, not a directory" in _one_line_error(capsys, *args, "--out", str(file), "--force")
+    assert f"--out: cannot write to {file}/sub: Not a directory" in _one_line_error(capsys, *args, "--out", str(file / "sub"))
+    assert file.read_text() == "mine\n"

@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
 
 from fkn_bench.estimators import (
     Estimate,
@@ -17,10 +19,12 @@ from fkn_bench.estimators import (
     Estimator,
     EstimatorFileError,
     check_batch_inputs,
+    estimator_names,
     load_estimator,
+    make_estimator,
     parse_observation,
 )
-from fkn_bench.estimators.base import ESTIMATOR_FORMAT, ESTIMATOR_FORMAT_VERSION, read_estimator_document
+from fkn_bench.estimators.base import ESTIMATOR_FORMAT, ESTIMATOR_FORMAT_VERSION, MAX_INTERVAL, read_estimator_document
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 
 
@@ -236,3 +240,154 @@ def test_a_refused_step_leaves_the_estimator_as_it_was(name: str, bad_time: floa
     expected, got = clean.step({"pose": pose, "time": 0.3}), refused.step({"pose": pose, "time": 0.3})
     np.testing.assert_array_equal(got.mean, expected.mean)  # the same operations on the same inputs
     np.testing.assert_array_equal(got.native_covariance, expected.native_covariance)
+
+
+# ---------------------------------------------------------------------------- observation fields
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("time", float("nan"), r"observation 'time' must be a finite number of seconds \(got nan\)"),
+        ("time", float("-inf"), r"observation 'time' must be a finite number"),
+        ("time", "nan", r"observation 'time' must be a real number of seconds \(got 'nan'\)"),
+        ("time", "0.5", r"observation 'time' must be a real number"),
+        ("time", True, r"observation 'time' must be a real number"),
+        ("time", np.array([0.5]), r"observation 'time' must be a real number"),
+        ("time", 10**400, r"observation 'time' must be a finite number"),
+        ("valid", "False", r"observation 'valid' must be True/False or 0/1 \(got 'False'\)"),
+        ("valid", float("nan"), r"observation 'valid' must be True/False or 0/1 \(got nan\)"),
+        ("valid", 2, r"observation 'valid'"),
+        ("valid", None, r"observation 'valid'"),
+        ("valid", [1], r"observation 'valid'"),
+        ("pose", "abcdefg", r"observation 'pose' must be 7 numbers"),
+    ],
+)
+def test_parse_observation_refuses_a_bad_field_by_name(field: str, value: Any, message: str) -> None:
+    observation = {"pose": np.array([1.0, 0, 0, 0, 0, 0, 0]), "valid": 1, "time": 0.5, field: value}
+    with pytest.raises(ValueError, match=message):
+        parse_observation(observation)
+
+
+def test_parse_observation_accepts_the_numeric_forms_of_time_and_valid() -> None:
+    pose = np.array([1.0, 0, 0, 0, 0, 0, 0])
+    for time in (2, 2.0, np.float32(2.0), np.int64(2), np.array(2.0)):
+        assert parse_observation({"pose": pose, "time": time})[1] == 2.0
+    for valid, usable in ((True, True), (np.bool_(False), False), (1, True), (0.0, False), (np.int64(1), True), (np.array(0), False)):
+        assert (parse_observation({"pose": pose, "valid": valid})[0] is not None) is usable
+
+
+def test_reset_and_step_refuse_intervals_over_max_interval() -> None:
+    estimator = make_estimator("manual-ekf")
+    with pytest.raises(ValueError, match=r"dt must be at most MAX_INTERVAL = 1e\+06 s \(got 2000000.0\)"):
+        estimator.reset(dt=2 * MAX_INTERVAL)
+    estimator.reset(dt=0.1)
+    pose = np.array([1.0, 0, 0, 0, 0, 0, 0])
+    estimator.step({"pose": pose, "time": 1.0})
+    with pytest.raises(ValueError, match=r"observation time 1e\+300 is 1e\+300 s after the previous one \(1.0\)"):
+        estimator.step({"pose": pose, "time": 1e300})
+    assert estimator.step({"pose": pose, "time": 1.0 + MAX_INTERVAL}).time == 1.0 + MAX_INTERVAL  # the limit itself is allowed
+
+
+# ---------------------------------------------------------------------------- property: step()
+# Arbitrary observations for every registered estimator (hypothesis). Each example resets a
+# pair of estimators: `subject` gets every observation, `twin` only the ones `subject` accepted,
+# so a refused step that changed anything shows up as a difference at the next accepted one.
+_GOOD_VALID = (True, False, 0, 1, 1.0, np.int64(0), np.int64(1), np.bool_(True), np.array(1))
+_BAD_VALID = ("False", "1", None, float("nan"), 2, -1, 0.5, [1])
+_BAD_TIME = (float("nan"), float("inf"), float("-inf"), "nan", "0.5", True, [0.3], np.array([0.3]), 10**400)
+_POSE_VALUES = (float("nan"), float("inf"), float("-inf"), 0.0, -1.0, 1.0)
+_PHASES = (Phase.explicit, Phase.generate, Phase.shrink)  # no explain phase: minutes on a failure
+
+
+_POSES = st.lists(st.one_of(st.floats(-10.0, 10.0), st.sampled_from(_POSE_VALUES)), min_size=7, max_size=7).map(
+    lambda values: np.array(values, dtype=np.float64)
+)
+"""(7,) poses with components within +-10, some NaN, +-inf, 0 or +-1 (so zero, unnormalised and
+non-finite quaternions; large position outliers are issue 19 item 2, not input validation)."""
+
+
+@pytest.fixture(scope="module")
+def estimator_pairs() -> dict[str, tuple[Estimator, Estimator]]:
+    from fkn_bench.scenarios import get_scenario
+
+    scenario = get_scenario("ds1")
+    return {name: (make_estimator(name, scenario=scenario), make_estimator(name, scenario=scenario)) for name in estimator_names()}
+
+
+def _check_estimate(estimate: Estimate, time: float) -> None:
+    assert estimate.time == time
+    assert np.isfinite(estimate.mean).all(), f"non-finite mean {estimate.mean}"
+    covariance = estimate.native_covariance
+    if covariance is not None:
+        assert np.isfinite(covariance).all(), "non-finite covariance"
+        np.testing.assert_allclose(covariance, covariance.T, rtol=1e-9, atol=1e-12)
+        eigenvalues = np.linalg.eigvalsh(covariance)  # positive, but for rounding in near-singular ones
+        assert eigenvalues.min() > -1e-12 * eigenvalues.max(), f"covariance not positive semi-definite (eigenvalues {eigenvalues})"
+
+
+def _same_estimate(got: Estimate, expected: Estimate) -> None:
+    assert (got.time, got.initialised, got.updated) == (expected.time, expected.initialised, expected.updated)
+    np.testing.assert_array_equal(got.mean, expected.mean)
+    if expected.native_covariance is not None:
+        np.testing.assert_array_equal(got.native_covariance, expected.native_covariance)
+
+
+def test_every_registered_estimator_is_paired(estimator_pairs: dict[str, tuple[Estimator, Estimator]]) -> None:
+    assert sorted(estimator_pairs) == sorted(estimator_names())
+
+
+@pytest.mark.parametrize("name", estimator_names())
+def test_step_refuses_bad_fields_by_name_or_gives_finite_estimates(name: str, estimator_pairs: dict[str, tuple[Estimator, Estimator]]) -> None:
+    """Arbitrary observations (times that are good, absent, not numbers, not finite, going back
+    or jumping by more than MAX_INTERVAL; validity flags good, absent or not a bool/0/1; poses with
+    NaN, inf and zero quaternions): each step either raises a ``ValueError`` naming a bad field
+    and leaves the estimator as it was, or gives a finite estimate at the expected time with a
+    symmetric positive semi-definite (to rounding) covariance."""
+    subject, twin = estimator_pairs[name]
+
+    @settings(max_examples=10, deadline=None, derandomize=True, database=None, phases=_PHASES, suppress_health_check=[HealthCheck.too_slow])
+    @given(dt=st.sampled_from((0.1, 0.05, 1.0)), data=st.data())
+    def run(dt: float, data: st.DataObject) -> None:
+        subject.reset(dt=dt)
+        twin.reset(dt=dt)
+        last: float | None = None  # time of the last accepted step
+        for _ in range(data.draw(st.integers(4, 10), label="steps")):
+            observation: dict[str, Any] = {"pose": data.draw(_POSES, label="pose")}
+            bad: set[str] = set()
+            kind = data.draw(st.sampled_from(("next", "next", "gap", "far", "absent", "bad", "back")), label="time kind")
+            if kind == "absent":
+                expected = 0.0 if last is None else last + dt
+                if last is not None and not expected > last:  # dt lost in rounding (after a time of 1e300)
+                    bad.add("time")
+            else:
+                if kind == "next":
+                    time: Any = (0.0 if last is None else last) + data.draw(st.sampled_from((dt, 0.5 * dt, 3 * dt)))
+                elif kind == "gap":  # short: predictions over long horizons are not input validation
+                    time = (0.0 if last is None else last) + data.draw(st.floats(1e-6, 10.0))
+                elif kind == "far":
+                    time = (0.0 if last is None else last) + data.draw(st.sampled_from((1.5 * MAX_INTERVAL, 1.7e9, 1e300)))
+                elif kind == "back":
+                    time = (0.0 if last is None else last) - data.draw(st.floats(0.0, 10.0))
+                else:
+                    time = data.draw(st.sampled_from(_BAD_TIME))
+                observation["time"] = time
+                expected = float(time) if isinstance(time, float) else math.nan
+                if not isinstance(time, float) or not math.isfinite(time) or (last is not None and not 0 < time - last <= MAX_INTERVAL):
+                    bad.add("time")
+            valid_kind = data.draw(st.sampled_from(("good", "good", "absent", "bad")), label="valid kind")
+            if valid_kind == "good":
+                observation["valid"] = data.draw(st.sampled_from(_GOOD_VALID))
+            elif valid_kind == "bad":
+                observation["valid"] = data.draw(st.sampled_from(_BAD_VALID))
+                bad.add("valid")
+            try:
+                got = subject.step(observation)
+            except ValueError as exc:
+                assert bad, f"{observation} refused although every field is good: {exc}"
+                assert any(field in str(exc) for field in bad), f"{exc!r} does not name the bad field {bad}"
+                continue
+            assert not bad, f"{observation} accepted although its {bad} is bad"
+            _check_estimate(got, expected)
+            _same_estimate(got, twin.step(observation))  # the refused steps changed nothing
+            last = got.time
+
+    run()

@@ -1,4 +1,5 @@
-"""Grid runs: resume without recomputing, interrupted grids, failures kept as results."""
+"""Grid runs: resume without recomputing, interrupted grids, failures kept as results, edited
+cells recomputed, and only into a results directory of fkn-bench's."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 from fkn_bench.harness import (
     CellRecord,
     CellSpec,
+    ForeignDirectoryError,
     LocalBackend,
     ResultStore,
     build_grid,
@@ -18,6 +20,7 @@ from fkn_bench.harness import (
     run_grid,
 )
 from fkn_bench.harness.sources import SimulatedSource
+from fkn_bench.harness.store import read_rows_csv
 
 
 class CountingBackend(LocalBackend):
@@ -81,3 +84,33 @@ def test_failures_are_results(tmp_path: Path, short_ds1: SimulatedSource, test_e
 def test_without_store_results_stay_in_memory(short_ds1: SimulatedSource) -> None:
     outcome = run_grid(build_grid(["manual-ekf"], [short_ds1], range(2)), progress=False)
     assert len(outcome.results) == 1 and outcome.results.seeds("manual-ekf", "ds1") == [0, 1]
+
+
+def test_resume_recomputes_an_edited_cell_and_says_so(tmp_path: Path, short_ds1: SimulatedSource,
+                                                      capsys: pytest.CaptureFixture) -> None:
+    cells = build_grid(["manual-ekf"], [short_ds1], range(15))  # 2 cells
+    store = ResultStore(tmp_path)
+    first = run_grid(cells, store=store, progress=False)
+    csv_path = tmp_path / "cells" / "manual-ekf" / "ds1" / "seeds-10-14.csv"
+    text, original = csv_path.read_text(), read_rows_csv(csv_path)
+    start = text.index(",state,rmse,") + len(",state,rmse,")
+    csv_path.write_text(text[:start] + "16.67" + text[text.index(",", start):])
+    capsys.readouterr()
+    backend = CountingBackend()
+    again = run_grid(cells, store=store, backend=backend, progress=False)
+    assert backend.ran == ["manual-ekf/ds1/seeds-10-14"] and (again.computed, again.reused) == (1, 1)
+    assert again.mismatched == ("manual-ekf/ds1/seeds-10-14",)
+    err = capsys.readouterr().err
+    assert "seeds-10-14.csv does not match the SHA-256 its record holds (edited or corrupted); recomputing it" in err
+    pd.testing.assert_frame_equal(deterministic_rows(again.results.rows), deterministic_rows(first.results.rows),
+                                  check_exact=True)
+    recomputed = deterministic_rows(read_rows_csv(csv_path)).reset_index(drop=True)  # replaced the edited file
+    pd.testing.assert_frame_equal(recomputed, deterministic_rows(original).reset_index(drop=True), check_exact=True)
+
+
+def test_a_foreign_directory_is_refused_before_anything_runs(tmp_path: Path, short_ds1: SimulatedSource) -> None:
+    (tmp_path / "results.csv").write_text("mine\n")
+    backend = CountingBackend()
+    with pytest.raises(ForeignDirectoryError, match="not an fkn-bench results directory"):
+        run_grid(build_grid(["manual-ekf"], [short_ds1], range(2)), store=ResultStore(tmp_path), backend=backend, progress=False)
+    assert backend.ran == [] and (tmp_path / "results.csv").read_text() == "mine\n"

@@ -215,6 +215,10 @@ def test_bad_toml(tmp_path: Path) -> None:
         ('[scenario.bad]\nbase = "ds1"\nnoise = 2.0\n', "\\[scenario.bad\\]: unknown scenario field\\(s\\) noise"),
         ('[scenario.bad]\nbase = "ds9"\n', "\\[scenario.bad\\]: unknown scenario 'ds9'; valid scenarios: ds1, ds2"),
         ('[scenario.bad]\nmeasurement_every = 0\n', "'measurement_every' must be an integer >= 1"),
+        ("[scenario.ds1]\nnoise_scale = 5.0\n",
+         "\\[scenario.ds1\\]: would redefine the built-in scenario 'ds1'; give it another name, or set override = true"),
+        ('[scenario.mine]\nname = "tumble-fast"\n', "\\[scenario.mine\\]: would redefine the built-in scenario 'tumble-fast'"),
+        ('[scenario.ds2]\noverride = "yes"\n', "\\[scenario.ds2\\]: 'override' must be true or false \\(got 'yes'\\)"),
     ],
 )
 def test_toml_errors_name_the_problem(tmp_path: Path, text: str, pattern: str, isolated_registry: None) -> None:
@@ -230,3 +234,12 @@ def test_failed_file_registers_nothing(tmp_path: Path, isolated_registry: None) 
     with pytest.raises(ConfigError, match="'dt'"):
         load_scenarios(path)
     assert "good" not in scenario_names()
+
+
+def test_override_true_replaces_a_built_in_scenario(tmp_path: Path, isolated_registry: None) -> None:
+    from fkn_bench.scenarios import BUILTIN_SCENARIOS
+
+    assert {"ds1", "ds2", "tumble-fast"} <= BUILTIN_SCENARIOS
+    path = _write(tmp_path, "[scenario.ds1]\noverride = true\nbase = \"ds1\"\nnoise_scale = 5.0\n")
+    (s,) = load_scenarios(path)
+    assert s.name == "ds1" and get_scenario("ds1").noise_scale == 5.0
