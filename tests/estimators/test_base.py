@@ -344,7 +344,7 @@ def test_step_refuses_bad_fields_by_name_or_gives_finite_estimates(name: str, es
     symmetric positive semi-definite (to rounding) covariance."""
     subject, twin = estimator_pairs[name]
 
-    @settings(max_examples=10, deadline=None, derandomize=True, database=None, phases=_PHASES, suppress_health_check=[HealthCheck.too_slow])
+    @settings(max_examples=6, deadline=None, derandomize=True, database=None, phases=_PHASES, suppress_health_check=[HealthCheck.too_slow])
     @given(dt=st.sampled_from((0.1, 0.05, 1.0)), data=st.data())
     def run(dt: float, data: st.DataObject) -> None:
         subject.reset(dt=dt)
