@@ -10,12 +10,13 @@ import json
 import math
 import os
 import tempfile
+import tomllib
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_json_atomic", "read_json", "to_jsonable"]
+__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_json_atomic", "read_json", "read_toml", "to_jsonable"]
 
 
 @contextmanager
@@ -102,3 +103,22 @@ def read_json(path: str | Path) -> Any:
         return json.loads(text)
     except json.JSONDecodeError as exc:
         raise ValueError(f"{path} is not valid JSON: {exc}") from None
+
+
+def read_toml(path: str | Path, what: str = "config file", error: type[ValueError] = ValueError) -> dict[str, Any]:
+    """The TOML document in ``path``. A missing file, a directory, an unreadable file, text that is
+    not UTF-8 (TOML's encoding) or invalid TOML raises ``error`` naming ``what`` and the path."""
+    path = Path(path)
+    try:
+        with path.open("rb") as fh:
+            return tomllib.load(fh)
+    except FileNotFoundError:
+        raise error(f"{what} not found: {path}") from None
+    except IsADirectoryError:
+        raise error(f"{what} {path} is a directory, not a TOML file") from None
+    except PermissionError:
+        raise error(f"{what} {path} cannot be read (permission denied)") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{what} {path} is not UTF-8 text ({exc.reason} at byte {exc.start}); TOML files are UTF-8") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise error(f"{what} {path} is not valid TOML: {exc}") from None

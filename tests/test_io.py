@@ -140,3 +140,30 @@ def test_written_files_get_the_usual_permissions(tmp_path: Path) -> None:
         assert io.write_json_atomic(tmp_path / "private.json", {}).stat().st_mode & 0o777 == 0o600
     finally:
         os.umask(previous)
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (None, r"scenario file not found: .*missing\.toml"),
+        ("directory", r"scenario file .*x\.toml is a directory, not a TOML file"),
+        (b"[scenario.a]\nbase = \"ds1\"\n# caf\xe9\n", r"scenario file .*x\.toml is not UTF-8 text \(invalid continuation byte at byte 32\); TOML files are UTF-8"),
+        (b"[scenario.a\n", r"scenario file .*x\.toml is not valid TOML"),
+    ],
+    ids=["missing", "directory", "not-utf8", "invalid"],
+)
+def test_read_toml_names_the_file_and_the_problem(tmp_path: Path, content: bytes | str | None, message: str) -> None:
+    path = tmp_path / ("missing.toml" if content is None else "x.toml")
+    if content == "directory":
+        path.mkdir()
+    elif isinstance(content, bytes):
+        path.write_bytes(content)
+    with pytest.raises(KeyError, match=message):
+        io.read_toml(path, "scenario file", KeyError)  # type: ignore[arg-type]
+    assert io.read_toml(_toml(tmp_path), "x") == {"a": 1}
+
+
+def _toml(tmp_path: Path) -> Path:
+    path = tmp_path / "good.toml"
+    path.write_text("a = 1\n", encoding="utf-8")
+    return path

@@ -18,11 +18,11 @@ paper's ds1.
 
 from __future__ import annotations
 
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from fkn_bench.io import read_toml
 from fkn_bench.scenarios.scenario import ConfigError, Scenario
 
 __all__ = [
@@ -108,13 +108,7 @@ def load_scenarios(path: str | Path, *, register: bool = True) -> list[Scenario]
     (replacing same-named ones).
     """
     path = Path(path)
-    try:
-        with path.open("rb") as fh:
-            document = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ConfigError(f"scenario file not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"scenario file {path} is not valid TOML: {exc}") from None
+    document = read_toml(path, "scenario file", ConfigError)
     tables = document.get("scenario")
     if not isinstance(tables, dict) or not tables:
         raise ConfigError(f"scenario file {path} has no [scenario.NAME] tables")

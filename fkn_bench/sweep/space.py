@@ -369,7 +369,7 @@ def parse_space(document: Mapping[str, Any], source: str = "<space>") -> SearchS
 
 def load_space(path: str | Path) -> SearchSpace:
     """Read a search-space TOML file."""
-    from fkn_bench.training.pipeline import read_toml
+    from fkn_bench.io import read_toml
 
     return parse_space(read_toml(path, "search-space file", SpaceError), str(path))
 

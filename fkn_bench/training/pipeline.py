@@ -29,7 +29,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-import tomllib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,7 +38,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from fkn_bench.io import atomic_path
+from fkn_bench.io import atomic_path, read_toml
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.training.artifacts import deployed_estimator_config, run_provenance, write_artifact
@@ -48,7 +47,7 @@ from fkn_bench.training.data import TrainingData, training_data
 from fkn_bench.training.objectives import OBJECTIVE_LABELS, aligned_state_error, state_mse
 from fkn_bench.training.trainer import NoiseModel, OnEpoch, SequenceModel, TrainConfig, Trainer
 
-__all__ = ["Trainable", "TrainingOutcome", "fit", "options_with_file", "read_toml", "split_metrics", "trainable"]
+__all__ = ["Trainable", "TrainingOutcome", "fit", "options_with_file", "split_metrics", "trainable"]
 
 
 @dataclass(frozen=True)
@@ -83,17 +82,6 @@ def trainable(estimator: str) -> Trainable:
         names = ", ".join(s.name for s in estimator_specs() if s.trainable)
         raise ValueError(f"estimator {estimator!r} is not trainable; trainable estimators: {names}")
     return declared
-
-
-def read_toml(path: str | Path, what: str = "config file", error: type[ValueError] = ValueError) -> dict[str, Any]:
-    """The TOML document in ``path``; ``error`` naming ``what`` and the path when it is missing or invalid."""
-    try:
-        with Path(path).open("rb") as fh:
-            return tomllib.load(fh)
-    except FileNotFoundError:
-        raise error(f"{what} not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise error(f"{what} {path} is not valid TOML: {exc}") from None
 
 
 def options_with_file(options: Mapping[str, Any], *tables: str) -> dict[str, Any]:

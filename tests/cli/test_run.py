@@ -216,3 +216,11 @@ def test_out_naming_a_file_or_an_unwritable_path_is_a_one_line_error(capsys: pyt
     assert f"--out: {file} is a file, not a directory" in _one_line_error(capsys, *args, "--out", str(file), "--force")
     assert f"--out: cannot write to {file}/sub: Not a directory" in _one_line_error(capsys, *args, "--out", str(file / "sub"))
     assert file.read_text() == "mine\n"
+
+
+def test_a_scenario_file_that_is_not_utf8_is_one_line_not_a_traceback(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    path = tmp_path / "latin1.toml"
+    path.write_bytes(b"[scenario.caf\xe9]\nbase = \"ds1\"\n")
+    assert main(["run", "--scenario-file", str(path), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "latin1.toml is not UTF-8 text" in err[0] and "Traceback" not in err[0]
