@@ -147,7 +147,7 @@ def test_written_files_get_the_usual_permissions(tmp_path: Path) -> None:
     [
         (None, r"scenario file not found: .*missing\.toml"),
         ("directory", r"scenario file .*x\.toml is a directory, not a TOML file"),
-        (b"[scenario.a]\nbase = \"ds1\"\n# caf\xe9\n", r"scenario file .*x\.toml is not UTF-8 text \(invalid continuation byte at byte 32\); TOML files are UTF-8"),
+        (b"[scenario.a]\nbase = \"ds1\"\n# caf\xe9\n", r"scenario file .*x\.toml is not UTF-8 text \(invalid continuation byte at byte 31\); TOML files are UTF-8"),
         (b"[scenario.a\n", r"scenario file .*x\.toml is not valid TOML"),
     ],
     ids=["missing", "directory", "not-utf8", "invalid"],
