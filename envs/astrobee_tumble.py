@@ -55,6 +55,8 @@ class _EpisodeWalk:
         if int(chunk_size) < 1:
             raise ValueError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
         self.render_mode = render_mode
+        if not isinstance(expose_truth, (bool, np.bool_)):  # bool("no") is True: no truthiness here
+            raise ValueError(f"expose_truth must be True or False (got {expose_truth!r})")
         self.expose_truth = bool(expose_truth)
         self.reward_weights = _check_weights(reward_weights)
         self._chunk_size = int(chunk_size)

@@ -298,3 +298,9 @@ def test_negative_seed() -> None:
     env = AstrobeeTumbleEnv(n_steps=20)
     with pytest.raises((ValueError, gym.error.Error), match="greater or equal to zero|non-negative"):
         env.reset(seed=-1)
+
+
+@pytest.mark.parametrize("value", ["no", "False", 0, None])
+def test_expose_truth_must_be_a_bool(value: object) -> None:
+    with pytest.raises(ValueError, match=r"expose_truth must be True or False \(got"):
+        gym.make("AstrobeeTumble-v0", expose_truth=value)
