@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
 from pathlib import Path
 from typing import IO, Any
 
@@ -124,6 +125,10 @@ class ResultStore:
                 raise ForeignDirectoryError(
                     f"{root} is not an fkn-bench results directory: it holds {shown} and no {MARKER} marker"
                 )
+        if (root / MARKER).is_file():  # marked already: only check that it can be written (a rerun leaves no change)
+            if not os.access(root, os.W_OK):
+                raise StoreError(f"cannot write to {root}: permission denied")
+            return
         try:
             write_json_atomic(root / MARKER, {"format": RESULTS_FORMAT, "note": "fkn-bench run --out writes here"})
         except OSError as exc:

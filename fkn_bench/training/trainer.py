@@ -336,17 +336,18 @@ class Trainer:
     def _gradient_norm(self) -> float:
         """The gradients' total norm, clipped to ``max_grad_norm`` when set (counted)."""
         limit = self.config.max_grad_norm
-        norm = float(nn.utils.clip_grad_norm_(self.model.parameters(), math.inf if limit is None else limit))
-        if limit is not None and math.isfinite(norm):
-            self.gradient_steps["clipped"] += norm > limit
+        if limit is None:
+            return float(nn.utils.get_total_norm([p.grad for p in self.model.parameters() if p.grad is not None]))
+        norm = float(nn.utils.clip_grad_norm_(self.model.parameters(), limit))
+        self.gradient_steps["clipped"] += math.isfinite(norm) and norm > limit
         return norm
 
-    def _undo_last_step(self) -> bool:
+    def _undo_last_step(self) -> None:
         """Return the weights and the optimiser's state to before the last step and halve the
-        learning rate; False when there is no step to undo (see module docstring)."""
+        learning rate; without a step to undo, count the batch as skipped (module docstring)."""
         if self._before_step is None:
             self.gradient_steps["skipped_nonfinite"] += 1
-            return False
+            return
         model_state, optimizer_state = self._before_step
         self.model.load_state_dict(model_state)
         self.optimizer.load_state_dict(optimizer_state)
@@ -354,7 +355,6 @@ class Trainer:
             group["lr"] *= 0.5
         self._before_step = None
         self.gradient_steps["rolled_back"] += 1
-        return True
 
     def _lbfgs_epoch(self) -> float:
         batch = self.data.train
