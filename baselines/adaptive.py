@@ -43,7 +43,7 @@ from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 
-from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
+from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
@@ -342,10 +342,14 @@ class AdaptiveKalmanFilter:
             z_rows = model.align(z[rows], x_rows)
             nu_rows = z_rows - model.measure(x_rows)
             ctx = UpdateContext(model, x_rows, P_rows, z_rows, nu_rows, np.maximum(since[rows], 1.0))
-            result, noise_rows = rule.update(ctx, {key: value if every else value[rows] for key, value in noise.items()})
+            result, noise_rows, ok = self._guarded_update(ctx, {key: value if every else value[rows] for key, value in noise.items()})
+            if not ok.all():  # skipped rows: no innovation, and they count as not updated
+                nu_rows = np.where(ok[:, None], nu_rows, 0.0)
+                update_rows = update_rows.copy()
+                update_rows[np.flatnonzero(update_rows)[~ok]] = False
             if every:
                 x, P, noise, nu, S = result.x, result.P, noise_rows, nu_rows, result.S
-                since = np.zeros(batch)
+                since = np.where(update_rows, 0.0, since)
             else:
                 nu, S = np.zeros((batch, m)), batched(np.eye(m), batch)
                 x, P = x.copy(), P.copy()
@@ -359,6 +363,43 @@ class AdaptiveKalmanFilter:
             since = np.where(init_rows, 0.0, since)
         new = AdaptiveState(x, P, state.initialised | usable, since, noise)
         return new, StepOutput(prior, nu, S, update_rows)
+
+    def _guarded_update(self, ctx: UpdateContext, noise: Noise) -> tuple[KalmanUpdate, Noise, ArrayB]:
+        """The rule's update of ``ctx``'s rows, and ``ok (b,)``: rows whose update failed (the
+        innovation covariance not positive definite, an eigen-decomposition that did not
+        converge, a non-finite result: the aftermath of gross outliers) are skipped, as an
+        unusable measurement is: they keep the prediction and their noise estimates, with a
+        zero innovation and an identity innovation covariance. A batch that fails is updated
+        row by row, so one row's failure does not stop the others."""
+        rule = self.rule
+        try:
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                result, new = rule.update(ctx, noise)
+            ok = _finite_update(result, new)
+        except np.linalg.LinAlgError:
+            ok = None
+        if ok is not None and ok.all():
+            return result, new, ok
+        b = ctx.x_pred.shape[0]
+        m = ctx.nu.shape[1]
+        x, P = ctx.x_pred.copy(), ctx.P_pred.copy()
+        S, K = batched(np.eye(m), b), np.zeros((b, x.shape[1], m))
+        out = {key: value.copy() for key, value in noise.items()}
+        ok = np.zeros(b, dtype=bool)
+        for row in range(b):
+            one = slice(row, row + 1)
+            ctx_row = UpdateContext(ctx.model, ctx.x_pred[one], ctx.P_pred[one], ctx.z[one], ctx.nu[one], ctx.steps[one])
+            try:
+                with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                    result_row, new_row = rule.update(ctx_row, {key: value[one] for key, value in noise.items()})
+            except np.linalg.LinAlgError:
+                continue
+            if _finite_update(result_row, new_row)[0]:
+                ok[row] = True
+                x[one], P[one], S[one], K[one] = result_row
+                for key, value in out.items():
+                    value[one] = new_row[key]
+        return KalmanUpdate(x, P, S, K), out, ok
 
     def run(self, measurements: ArrayF, mask: ArrayB, *, dt: float) -> AdaptiveResult:
         """Filter a batch of sequences ``measurements (B, T, m)`` with validity ``mask (B, T)``."""
@@ -397,6 +438,14 @@ class AdaptiveKalmanFilter:
         buffers = (means, covariances, innovations, innovation_covs, prior_means, updated, initialised,
                    r_diag, q_diag)
         return AdaptiveResult(*(None if a is None else np.swapaxes(a, 0, 1) for a in buffers), final=state)
+
+
+def _finite_update(result: KalmanUpdate, noise: Noise) -> ArrayB:
+    """``(b,)`` True where an update's mean, covariance, innovation covariance and noise are finite."""
+    ok = np.isfinite(result.x).all(1) & np.isfinite(result.P).all((1, 2)) & np.isfinite(result.S).all((1, 2))
+    for value in noise.values():
+        ok &= np.isfinite(value.reshape(value.shape[0], -1)).all(1)
+    return ok
 
 
 # ---------------------------------------------------------------------------------------------
@@ -448,11 +497,13 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
 
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)
-        result = self.filter.run(z, m, dt=step)
-        extras = {"r_diag": result.r_diag}
-        if result.q_diag is not None:
-            extras["q_diag"] = result.q_diag
-        return filter_result_to_estimates(result, self.filter, extras=extras)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # overflow: the restart rule
+            result = self.filter.run(z, m, dt=step)
+            extras = {"r_diag": result.r_diag}
+            if result.q_diag is not None:
+                extras["q_diag"] = result.q_diag
+            estimates = filter_result_to_estimates(result, self.filter, extras=extras)
+        return restart_diverged(estimates, lambda zs, ms: self.estimate(zs, ms, step), z, m)
 
     def _online_prior(self) -> AdaptiveState:
         return self.filter.initial_state(1)

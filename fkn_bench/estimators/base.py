@@ -15,6 +15,15 @@ filter variants. Each sequence initialises at its first usable measurement (atti
 from it, rates zero, the estimator's documented ``P0``); before it, the estimate is the prior
 (identity attitude, zeros) with ``initialised = False``.
 
+Divergence: no estimator emits a non-finite number. Where a filter's state stops being finite
+(an overflow after gross outliers has moved it far from anything physical) the sequence restarts,
+as a navigation filter is re-initialised when it diverges: from the step where it overflowed it
+reports the prior (``initialised = False``) until its next usable measurement, where it
+initialises as at the start (:func:`restart_diverged` in ``estimate``; the same rule in the online
+``step``). ``Estimates.extras["restarted"]`` (``(B, T)`` bool, present only when a sequence
+restarted) marks the steps where a restart happened, and
+:attr:`RecursiveEstimator.restarts` counts the online ones.
+
 Persistence: :meth:`Estimator.save` writes a JSON document (atomically) with ``format``,
 ``format_version``, the estimator ``name`` and its ``config``; :func:`load_estimator` reads it back
 through the registry and refuses unknown formats or versions with a message that says so.
@@ -26,7 +35,7 @@ import functools
 import math
 import numbers
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -55,6 +64,7 @@ __all__ = [
     "observation_valid",
     "parse_observation",
     "read_estimator_document",
+    "restart_diverged",
 ]
 
 ESTIMATOR_FORMAT = "fkn-bench-estimator"
@@ -139,6 +149,59 @@ class Estimates:
     @property
     def n_steps(self) -> int:
         return self.means.shape[1]
+
+
+def _finite_rows(estimates: Estimates) -> ArrayB:
+    """``(B, T)`` True where the mean, the covariances and the innovations an estimate carries
+    are all finite."""
+    ok = np.isfinite(estimates.means).all(-1)
+    for array in (estimates.covariances, estimates.error_covariances, estimates.innovations, estimates.innovation_covariances):
+        if array is not None:
+            ok &= np.isfinite(array).reshape(ok.shape + (-1,)).all(-1)
+    return ok
+
+
+def restart_diverged(
+    estimates: Estimates, rerun: Callable[[ArrayF, ArrayB], Estimates], measurements: ArrayF, mask: ArrayB
+) -> Estimates:
+    """``estimates`` with every sequence that stopped being finite restarted (module docstring).
+
+    ``rerun(measurements, mask)`` filters a sub-batch from scratch (the estimator's own
+    ``estimate`` with the same ``dt``, which applies this rule itself). A sequence whose outputs
+    are first non-finite at step ``t0`` is filtered again from ``t0`` on, as a new sequence that
+    initialises at its first usable measurement from ``t0``; its outputs replace those from ``t0``
+    on. Each restart starts later than the previous one (a fresh sequence is finite at its first
+    step: the prior or a measurement), so this ends. Costs one finiteness check when nothing
+    diverged.
+    """
+    ok = _finite_rows(estimates)
+    if ok.all():
+        return estimates
+    per_step = {
+        name: getattr(estimates, name)
+        for name in ("means", "covariances", "error_covariances", "innovations", "innovation_covariances",
+                     "innovation_mask", "initialised")
+    }
+    per_step = {name: array.copy() for name, array in per_step.items() if array is not None}
+    batch, steps = ok.shape
+    extras = {
+        name: np.array(value, copy=True) for name, value in estimates.extras.items()
+    }
+    restarted = extras.get("restarted")
+    restarted = np.zeros((batch, steps), dtype=bool) if restarted is None else restarted.astype(bool)
+    for row in np.flatnonzero(~ok.all(1)):
+        t0 = int(np.argmin(ok[row]))
+        fresh = rerun(measurements[row : row + 1, t0:], mask[row : row + 1, t0:])
+        for name, array in per_step.items():
+            array[row, t0:] = getattr(fresh, name)[0]
+        for name, array in extras.items():
+            if name != "restarted" and array.shape[:2] == (batch, steps) and name in fresh.extras:
+                array[row, t0:] = fresh.extras[name][0]
+        restarted[row, t0] = True
+        if "restarted" in fresh.extras:
+            restarted[row, t0:] |= fresh.extras["restarted"][0]
+    extras["restarted"] = restarted
+    return Estimates(**per_step, extras=extras)
 
 
 def check_batch_inputs(measurements: Any, mask: Any, dt: Any) -> tuple[ArrayF, ArrayB, float]:
@@ -344,6 +407,8 @@ class RecursiveEstimator(Estimator):
 
     _dt: float | None = None
     _online: OnlineState | None = None
+    restarts: int = 0
+    """Online restarts since :meth:`reset` (module docstring: a state that stopped being finite)."""
 
     def reset(self, *, dt: float) -> None:
         """Start a new online sequence with time step ``dt`` (s): a finite number in
@@ -353,6 +418,7 @@ class RecursiveEstimator(Estimator):
             raise ValueError(f"dt must be at most MAX_INTERVAL = {MAX_INTERVAL:g} s (got {dt!r})")
         self._dt = step
         self._online = None
+        self.restarts = 0
 
     def step(self, observation: Any) -> Estimate:
         if self._dt is None:
@@ -385,8 +451,16 @@ class RecursiveEstimator(Estimator):
                 state, updated = self._online_update(state, z), True
             else:
                 state, initialised = self._online_initial(state, z), True
-        self._online = OnlineState(now, state, initialised)
         mean, covariance = self._online_report(state)
+        if not _reportable(mean, covariance):
+            # diverged (module docstring): restart from the prior, initialising from this
+            # step's measurement when it is usable
+            state, initialised, updated = self._online_prior(), False, False
+            if z is not None:
+                state, initialised = self._online_initial(state, z), True
+            self.restarts += 1
+            mean, covariance = self._online_report(state)
+        self._online = OnlineState(now, state, initialised)
         mean = mean.copy()
         w, x, y, z = mean[0:4].tolist()
         mean[0:4] /= math.sqrt(w * w + x * x + y * y + z * z)
@@ -426,6 +500,14 @@ class RecursiveEstimator(Estimator):
 
 
 _ONE = np.ones(1, dtype=bool)
+
+
+def _reportable(mean: ArrayF, covariance: ArrayF | None) -> bool:
+    """True when an online state is finite and its quaternion's norm neither zero nor overflowing."""
+    if not (np.isfinite(mean).all() and (covariance is None or np.isfinite(covariance).all())):
+        return False
+    w, x, y, z = mean[0:4].tolist()
+    return 0.0 < w * w + x * x + y * y + z * z < math.inf
 
 
 def read_estimator_document(path: str | Path) -> dict[str, Any]:

@@ -15,6 +15,13 @@ breaks. Use it in your own tests::
 
     def test_my_filter_follows_the_input_rules():
         check_input_rules(MyEstimator())
+
+:func:`garbage_measurements` is a fuzz: a fraction of a batch's measurements (30% by default)
+replaced by garbage of every kind at once (values up to 1e300, position jumps of 1 m to 1e15 m,
+1e4 m outliers, random quaternions of any scale, NaN and inf, zero and tiny quaternions, sign
+flips), half of it inside the mask where there was no measurement. :func:`check_survives_garbage`
+runs an estimator on it and asserts that it raises nothing and emits nothing non-finite (the
+estimators' restart rule, :func:`~fkn_bench.estimators.base.restart_diverged`, is allowed).
 """
 
 from __future__ import annotations
@@ -25,7 +32,7 @@ import numpy as np
 
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["HostileInput", "hostile_measurements", "check_input_rules"]
+__all__ = ["HostileInput", "hostile_measurements", "check_input_rules", "garbage_measurements", "check_survives_garbage"]
 
 
 @dataclass(frozen=True)
@@ -108,3 +115,58 @@ def check_input_rules(estimator: object, hostile: HostileInput | None = None, *,
         assert not row[:first].any() and row[first:].all(), (
             "input rule broken: a sequence reports the prior until its first usable measurement"
         )
+
+
+GARBAGE_KINDS = (
+    "values up to 1e300 in every component",
+    "a position jump of 1 m to 1e15 m",
+    "a random quaternion scaled by 1e-200 to 1e200",
+    "one component NaN, inf or -inf",
+    "a zero quaternion",
+    "the quaternion's sign flipped",
+    "the quaternion scaled by 1e-12",
+    "a 1e4 m position outlier",
+)
+"""What :func:`garbage_measurements` puts in place of a measurement, drawn uniformly."""
+
+
+def garbage_measurements(
+    measurements: ArrayF, mask: ArrayB, rng: np.random.Generator, fraction: float = 0.3
+) -> tuple[ArrayF, ArrayB]:
+    """``(measurements, mask)`` ``(B, T, 7)``, ``(B, T)`` with a ``fraction`` of the steps
+    (measured or not) replaced by garbage of a kind of :data:`GARBAGE_KINDS` drawn uniformly;
+    half of the garbage at steps without a measurement is put inside the mask. Copies; the
+    inputs are not modified."""
+    z, valid = np.array(measurements, dtype=np.float64), np.array(mask, dtype=bool)
+    batch, steps, _ = z.shape
+    hit = rng.random((batch, steps)) < fraction
+    kind = rng.integers(0, len(GARBAGE_KINDS), size=(batch, steps))
+    sign = rng.choice([-1.0, 1.0], size=(batch, steps, 7))
+    g = z.copy()
+    huge = sign * 10.0 ** rng.uniform(-3.0, 300.0, size=(batch, steps, 7))
+    g = np.where((kind == 0)[..., None], huge, g)
+    jump = sign[..., 4:] * 10.0 ** rng.uniform(0.0, 15.0, size=(batch, steps, 3))
+    g[..., 4:] = np.where((kind == 1)[..., None], z[..., 4:] + jump, g[..., 4:])
+    scaled = rng.normal(size=(batch, steps, 4)) * 10.0 ** rng.uniform(-200.0, 200.0, size=(batch, steps, 1))
+    g[..., :4] = np.where((kind == 2)[..., None], scaled, g[..., :4])
+    rows, cols = np.nonzero(kind == 3)
+    g[rows, cols, rng.integers(0, 7, size=rows.size)] = rng.choice([np.nan, np.inf, -np.inf], size=rows.size)
+    g[..., :4] = np.where((kind == 4)[..., None], 0.0, g[..., :4])
+    g[..., :4] = np.where((kind == 5)[..., None], -z[..., :4], g[..., :4])
+    g[..., :4] = np.where((kind == 6)[..., None], 1e-12 * z[..., :4], g[..., :4])
+    g[..., 4:] = np.where((kind == 7)[..., None], z[..., 4:] + 1e4 * sign[..., 4:], g[..., 4:])
+    z = np.where(hit[..., None], g, z)
+    valid |= hit & (rng.random((batch, steps)) < 0.5)
+    return z, valid
+
+
+def check_survives_garbage(estimator: object, measurements: ArrayF, mask: ArrayB, dt: float) -> object:
+    """Run ``estimator.estimate`` on (garbage) inputs and assert that every output array is
+    finite; returns the estimates. Exceptions propagate (the fuzz allows none)."""
+    result = estimator.estimate(measurements, mask, dt)  # type: ignore[attr-defined]
+    for name in ("means", "covariances", "error_covariances", "innovations", "innovation_covariances"):
+        array = getattr(result, name, None)
+        if array is not None:
+            bad = ~np.isfinite(array)
+            assert not bad.any(), f"{name} has {int(bad.sum())} non-finite entries"
+    return result

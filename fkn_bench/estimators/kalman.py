@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
+from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.filters import MODELS, VARIANTS, NoiseParameters, make_filter, make_model
 from fkn_bench.filters.pose import (
     error_covariance_from_state,
@@ -27,7 +27,7 @@ from fkn_bench.linalg import symmetrize
 from fkn_bench.runtime import torch_threads
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["KalmanEstimator", "filter_result_to_estimates"]
+__all__ = ["KalmanEstimator", "MAX_STD", "MIN_STD", "filter_result_to_estimates"]
 
 def filter_result_to_estimates(result: Any, variant: Any, *, extras: Mapping[str, ArrayF] | None = None) -> Estimates:
     """Convert the result of a pose filter's ``run`` (a torch :class:`FilterResult`, or the numpy
@@ -63,6 +63,15 @@ def filter_result_to_estimates(result: Any, variant: Any, *, extras: Mapping[str
         initialised=numpy(result.initialised),
         extras=extras,
     )
+
+
+MIN_STD = 1e-12
+"""The smallest noise standard deviation an estimator accepts (in the component's SI unit)."""
+
+MAX_STD = 1e6
+"""The largest noise standard deviation an estimator accepts: a million metres, radians or
+metres per second is no noise model of this problem, and a larger one's square (``1e160``
+squares to ``inf``) would put infinities, then NaN, into the filter."""
 
 
 class KalmanEstimator(RecursiveEstimator):
@@ -142,23 +151,38 @@ class KalmanEstimator(RecursiveEstimator):
 
     @staticmethod
     def _check_std(name: str, values: Sequence[float] | None, default: Sequence[float]) -> ArrayF:
-        array = np.array(default if values is None else values, dtype=float)
+        try:
+            array = np.array(default if values is None else values, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be {len(default)} numbers (got {values!r})") from None
         if array.shape != (len(default),):
             raise ValueError(f"{name} needs {len(default)} values (got shape {array.shape})")
-        if not np.all(np.isfinite(array)) or np.any(array <= 0):
-            raise ValueError(f"{name} values must be finite and > 0 (got {array.tolist()})")
+        outside = ~((array >= MIN_STD) & (array <= MAX_STD))  # also NaN
+        if outside.any():
+            index = int(np.flatnonzero(outside)[0])
+            raise ValueError(
+                f"{name}[{index}] = {float(array[index])!r} is outside [{MIN_STD:g}, {MAX_STD:g}] "
+                "(standard deviations in the component's SI unit; see fkn_bench.estimators.kalman.MAX_STD)"
+            )
         return array
 
     @staticmethod
     def _check_cov(name: str, values: Sequence[Sequence[float]], dim: int) -> ArrayF:
-        array = np.array(values, dtype=float)
+        try:
+            array = np.array(values, dtype=float)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name} must be a {dim}x{dim} matrix of numbers") from None
         if array.shape != (dim, dim):
             raise ValueError(f"{name} must be a {dim}x{dim} matrix (got shape {array.shape})")
         if not np.all(np.isfinite(array)) or not np.allclose(array, array.T, rtol=1e-10, atol=1e-14):
             raise ValueError(f"{name} must be finite and symmetric")
         symmetric = symmetrize(array)
-        if np.linalg.eigvalsh(symmetric).min() <= 0:
+        eigenvalues = np.linalg.eigvalsh(symmetric)
+        if eigenvalues.min() <= 0:
             raise ValueError(f"{name} must be positive definite")
+        if eigenvalues.min() < MIN_STD**2 or eigenvalues.max() > MAX_STD**2:
+            raise ValueError(f"{name}'s eigenvalues must lie in [{MIN_STD**2:g}, {MAX_STD**2:g}] "
+                             f"(got {eigenvalues.min():g} to {eigenvalues.max():g})")
         return symmetric
 
     # ------------------------------------------------------------------ batch
@@ -168,9 +192,11 @@ class KalmanEstimator(RecursiveEstimator):
 
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)
-        with torch.no_grad(), torch_threads():
+        # overflow in a diverging sequence is handled by the restart rule (no warning)
+        with torch.no_grad(), torch_threads(), np.errstate(over="ignore", invalid="ignore", divide="ignore"):
             result = self.filter.run(self.noise_parameters(), torch.from_numpy(z), torch.from_numpy(m), dt=step)
-        return filter_result_to_estimates(result, self.filter)
+            estimates = filter_result_to_estimates(result, self.filter)
+        return restart_diverged(estimates, lambda zs, ms: self.estimate(zs, ms, step), z, m)
 
     def _online_report(self, state: Any) -> tuple[ArrayF, ArrayF]:
         mean, covariance = state.mean[0], state.covariance[0]

@@ -162,7 +162,10 @@ class PoseTwistModel(StateSpaceModel):
 
     Hooks: measured quaternions are renormalised, and dropped when their norm is below
     ``min_quaternion_norm`` or not finite (documented rule: a zero quaternion carries no
-    attitude); the measured quaternion's sign is aligned with the prediction before the
+    attitude); a measurement with a position component of magnitude above ``max_abs_position``
+    (m, default 1e9: beyond any Earth orbit, so no pose sensor of this problem reports one) is
+    dropped too, which keeps the squares and products of innovations far from float64 overflow
+    (a 1e200 m position would otherwise move the state to 1e200 m and overflow later); the measured quaternion's sign is aligned with the prediction before the
     innovation is formed (``q`` and ``-q`` are the same attitude); after an update the state
     quaternion is renormalised and the covariance projected with the normalisation's Jacobian
     ``N = (I - q q^T) / |q|``.
@@ -174,8 +177,13 @@ class PoseTwistModel(StateSpaceModel):
     layout = PAPER_MANUAL_LAYOUT
     H = np.concatenate((np.eye(7), np.zeros((7, 6))), axis=1)
 
-    def __init__(self, *, min_quaternion_norm: float = 1e-6) -> None:
+    def __init__(self, *, min_quaternion_norm: float = 1e-6, max_abs_position: float = 1e9) -> None:
         self.min_quaternion_norm = float(min_quaternion_norm)
+        self.max_abs_position = float(max_abs_position)
+        if not (self.min_quaternion_norm > 0.0 and math.isfinite(self.min_quaternion_norm)):
+            raise ValueError(f"min_quaternion_norm must be a positive finite number (got {min_quaternion_norm!r})")
+        if not (self.max_abs_position > 0.0 and math.isfinite(self.max_abs_position)):
+            raise ValueError(f"max_abs_position must be a positive finite number of metres (got {max_abs_position!r})")
 
     def predict(self, x: Array, dt: float) -> Array:
         return self.transition(x, dt, jacobian=False)[0]
@@ -219,7 +227,8 @@ class PoseTwistModel(StateSpaceModel):
         if isinstance(measurements, np.ndarray) and measurements.shape == (1, 7):  # one online measurement:
             w, x, y, z, *r = measurements[0].tolist()  # the same rule on Python floats
             norm = math.sqrt(w * w + x * x + y * y + z * z)  # NaN or inf where q is not finite or overflows
-            if mask[0] and self.min_quaternion_norm <= norm < math.inf and all(map(math.isfinite, r)):
+            limit = self.max_abs_position
+            if mask[0] and self.min_quaternion_norm <= norm < math.inf and all(-limit <= c <= limit for c in r):
                 out = measurements.copy()
                 out[0, :4] /= norm
                 return out, _USABLE
@@ -227,9 +236,11 @@ class PoseTwistModel(StateSpaceModel):
         xp = namespace(measurements)
         finite = all_last(xp.isfinite(measurements))
         z = xp.where(finite[..., None], measurements, 0.0)
-        norm = xp.sqrt(sum_last(z[..., :4] * z[..., :4]))
+        with np.errstate(over="ignore"):  # (numpy) an overflow is expected here, and handled:
+            norm = xp.sqrt(sum_last(z[..., :4] * z[..., :4]))
         # a norm that overflows (components ~1e155 and up) leaves no usable direction either
         usable = mask & finite & (norm[..., 0] >= self.min_quaternion_norm) & (norm[..., 0] < float("inf"))
+        usable = usable & all_last(xp.abs(z[..., 4:]) <= self.max_abs_position)
         q = z[..., :4] / xp.where(norm < self.min_quaternion_norm, self.min_quaternion_norm, norm)
         return xp.where(usable[..., None], xp.concat((q, z[..., 4:]), axis=-1), 0.0), usable
 

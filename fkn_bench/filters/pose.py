@@ -58,7 +58,11 @@ def with_unit_quaternion(states: ArrayF) -> ArrayF:
     The additive EKF renormalises its quaternion after each update only; over prediction-only
     steps it drifts from unit norm by ``O((w dt)^2)`` per step (2.6e-5 over 9 steps on ds1).
     Estimators report unit quaternions; the filter's internal state is left as the model has it.
+    A quaternion whose norm is zero or overflows (a diverged state) comes back NaN, so that the
+    estimators' restart rule (:func:`fkn_bench.estimators.base.restart_diverged`) sees it.
     """
     out = np.array(states, dtype=float)
-    out[..., 0:4] /= np.linalg.norm(out[..., 0:4], axis=-1, keepdims=True)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        norm = np.linalg.norm(out[..., 0:4], axis=-1, keepdims=True)
+        out[..., 0:4] /= np.where((norm > 0) & (norm < np.inf), norm, np.nan)
     return out

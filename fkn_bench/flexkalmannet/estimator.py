@@ -17,7 +17,7 @@ from typing import Any
 
 import torch
 
-from fkn_bench.estimators.base import Estimates, Estimator, RecursiveEstimator, check_batch_inputs
+from fkn_bench.estimators.base import Estimates, Estimator, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.estimators.kalman import filter_result_to_estimates
 from fkn_bench.flexkalmannet.checkpoint import model_from_checkpoint
 from fkn_bench.runtime import torch_threads
@@ -71,7 +71,7 @@ class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
             raw = self.model.time_varying_raw(torch.where(usable[..., None], zt, torch.zeros_like(zt)), usable)
             noise = self.model.parameter_set.to_noise(raw)
             result = self.filter.run(noise, zt, mt, dt=step)
-        return filter_result_to_estimates(result, self.filter)
+        return restart_diverged(filter_result_to_estimates(result, self.filter), lambda zs, ms: self.estimate(zs, ms, step), z, m)
 
     def reset(self, *, dt: float) -> None:
         super().reset(dt=dt)
@@ -109,6 +109,8 @@ def flexkalmannet_factory(
         mode: ``constant`` (paper) or ``time_varying`` (needs ``checkpoint``).
         history: time-varying mode: measurements averaged per step.
     """
+    if checkpoint is not None and parameters is not None:
+        raise ValueError("give either checkpoint=PATH or parameters=PATH, not both")
     if mode == "time_varying":
         if checkpoint is None:
             raise ValueError("flexkalmannet mode 'time_varying' needs checkpoint=PATH (the network weights)")

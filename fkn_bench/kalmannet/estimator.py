@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs
+from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error, with_unit_quaternion
 from fkn_bench.kalmannet.checkpoint import model_from_checkpoint, recursive_model_from_checkpoint
 from fkn_bench.kalmannet.recursion import KalmanNet, KalmanNetState
@@ -97,11 +97,12 @@ class KalmanNetEstimator(RecursiveEstimator):
         z, m, step = check_batch_inputs(measurements, mask, dt)
         with torch.no_grad(), torch_threads():
             run = self.net.run(torch.from_numpy(z), torch.from_numpy(m), dt=step)
-        return Estimates(
+        estimates = Estimates(
             means=with_unit_quaternion(run.means.numpy()),
             innovation_mask=run.updated.numpy(),
             initialised=run.initialised.numpy(),
         )
+        return restart_diverged(estimates, lambda zs, ms: self.estimate(zs, ms, step), z, m)
 
     # ------------------------------------------------------------------ online (batch of one)
     def _online_sanitize(self, z: ArrayF) -> ArrayF | None:
@@ -199,13 +200,14 @@ class RecursiveKalmanNetEstimator(KalmanNetEstimator):
             error_covariances, covariances = native, state_covariance_from_error(means[..., :4], native)
         else:  # a 13x13 state covariance (the Euclidean manifold forced on the pose model)
             covariances, error_covariances = native, error_covariance_from_state(means[..., :4], native)
-        return Estimates(
+        estimates = Estimates(
             means=means,
             covariances=covariances,
             error_covariances=error_covariances,
             innovation_mask=run.updated.numpy(),
             initialised=run.initialised.numpy(),
         )
+        return restart_diverged(estimates, lambda zs, ms: self.estimate(zs, ms, step), z, m)
 
     def _online_prior(self) -> RecursiveKalmanNetState:
         return self.net.prior(1, torch.float64)

@@ -185,11 +185,17 @@ def weights_of_artifact(path: str | Path, estimator: str) -> Path:
 
 def read_artifact(path: str | Path) -> dict[str, Any]:
     """Read and check an artefact; raises :class:`ArtifactError` naming the file and problem."""
+    if not str(path).strip():
+        raise ArtifactError("the learned-parameter file name is empty (parameters=PATH names a parameters.json)")
     path = Path(path)
     try:
         document = read_json(path)
     except FileNotFoundError:
         raise ArtifactError(f"learned-parameter file not found: {path}") from None
+    except IsADirectoryError:
+        raise ArtifactError(f"{path} is a directory, not a learned-parameter file (parameters.json)") from None
+    except OSError as exc:
+        raise ArtifactError(f"cannot read learned-parameter file {path}: {exc.strerror or exc}") from None
     except ValueError as exc:
         raise ArtifactError(str(exc)) from None
     return checked_document(document, path, ARTIFACT_FORMAT, ARTIFACT_FORMAT_VERSION, "a learned-parameter file",
@@ -231,10 +237,30 @@ class TrainedKalmanEstimator(KalmanEstimator):
 
     @classmethod
     def from_artifact(cls, path: str | Path, *, name: str | None = None) -> TrainedKalmanEstimator:
+        """The estimator of an artefact (``name``: the estimator it must hold, e.g. the registry
+        name being built). Complete or rejected: an artefact of another estimator, one whose
+        ``estimator_config`` lacks the variant or any of ``Q``, ``R``, ``P0`` (as ``*_std`` or
+        ``*_cov``), or one whose values do not build a filter (e.g. a standard deviation out of
+        range) raises :class:`ArtifactError` naming the file and the key."""
         document = read_artifact(path)
+        if name is not None and document["estimator"] != name:
+            raise ArtifactError(f"{path} holds {document['estimator']!r} parameters, not {name}'s")
+        config = document["estimator_config"]
+        if not isinstance(config, dict):
+            raise ArtifactError(f"{path}: 'estimator_config' must be an object (got {type(config).__name__})")
+        missing = [entry for entry in ("q", "r", "p0") if f"{entry}_std" not in config and f"{entry}_cov" not in config]
+        if "variant" not in config:
+            missing.insert(0, "variant")
+        if missing:
+            keys = ", ".join(k if k == "variant" else f"{k}_std (or {k}_cov)" for k in missing)
+            raise ArtifactError(f"{path}: 'estimator_config' lacks {keys}: an incomplete parameter file is not "
+                                "completed with defaults")
         metadata = {k: document.get(k) for k in ("family", "scenario", "training", "provenance")}
         metadata["artifact"] = artifact_label(path)
-        return cls(metadata=metadata, **{**document["estimator_config"], "name": name or document["estimator"]})
+        try:
+            return cls(metadata=metadata, **{**config, "name": name or document["estimator"]})
+        except (TypeError, ValueError) as exc:
+            raise ArtifactError(f"{path}: 'estimator_config' does not build a filter: {exc}") from None
 
     def to_config(self) -> dict[str, Any]:
         return {**super().to_config(), "metadata": self.metadata}

@@ -55,8 +55,15 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         raise CheckpointError(f"checkpoint not found: {path}")
     try:
         document = torch.load(path, map_location="cpu", weights_only=True)
-    except (RuntimeError, EOFError, OSError, pickle.UnpicklingError, zipfile.BadZipFile, ValueError) as exc:
-        raise CheckpointError(f"{path} is not a readable checkpoint (truncated or corrupt?): {exc}") from None
+    except pickle.UnpicklingError:
+        # (torch's own message suggests weights_only=False: unpickling arbitrary code; not relayed)
+        raise CheckpointError(f"{path} is not a readable checkpoint: corrupt, or it holds Python objects other than "
+                              "tensors and plain data, which fkn-bench does not load") from None
+    except (RuntimeError, EOFError, OSError, zipfile.BadZipFile, ValueError) as exc:
+        reason = str(exc).strip().splitlines()[0].split(". ")[0] if str(exc).strip() else type(exc).__name__
+        if "weights_only" in str(exc):
+            reason = "its data cannot be read without unpickling Python objects"
+        raise CheckpointError(f"{path} is not a readable checkpoint (truncated or corrupt?): {reason[:200]}") from None
     if isinstance(document, dict) and document.get("format") in LEGACY_FORMATS and "estimator" not in document:
         document = {**document, "format": CHECKPOINT_FORMAT, "estimator": LEGACY_FORMATS[document["format"]]}
     return checked_document(document, path, CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION, "an fkn-bench checkpoint",

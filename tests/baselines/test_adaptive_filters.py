@@ -150,7 +150,7 @@ def test_registry_descriptions_and_knobs(tmp_path: Path) -> None:
         ("vbakf", {"iterations": 0}, "iterations must be an integer"),
         ("vbakf", {"rho": 1.01}, "rho must be in"),
         ("vbakf", {"r_std": [0.1] * 6}, "r_std needs 7 values"),
-        ("akhlaghi", {"q_std": [-1.0] * 13}, "q_std values must be finite and > 0"),
+        ("akhlaghi", {"q_std": [-1.0] * 13}, r"q_std\[0\] = -1.0 is outside"),
         ("akhlaghi", {"gamma": 1.0}, "unknown AkhlaghiEstimator options"),
     ],
 )
@@ -173,3 +173,31 @@ def test_online_api_errors() -> None:
     # an irregular interval is predicted over its actual length and stays finite
     estimate = estimator.step({"pose": np.r_[1.0, 0, 0, 0, 0.1, 0, 0], "valid": 1, "time": 2.35})
     assert estimate.updated and np.isfinite(estimate.native_covariance).all()
+
+
+class _FailsOnLargeInnovations(AkhlaghiRule):
+    """Akhlaghi's rule, but its update raises LinAlgError when any innovation exceeds 100 m."""
+
+    def update(self, ctx, noise):  # noqa: ANN001, ANN201
+        if np.abs(ctx.nu).max() > 100.0:
+            raise np.linalg.LinAlgError("innovation covariance is not positive definite")
+        return super().update(ctx, noise)
+
+
+def test_a_failed_update_is_skipped_for_its_row_only(hostile) -> None:
+    """An update that fails (LinAlgError or a non-finite result) is skipped for the rows it fails
+    in, as an unusable measurement is; the other rows of the batch are updated as if alone."""
+    z, mask, _ = hostile
+    z, mask = z[:2].copy(), mask[:2].copy()
+    step = int(np.flatnonzero(mask[1])[5])
+    z[1, step, 4] += 1e4
+    adaptive = AdaptiveKalmanFilter(_FailsOnLargeInnovations())
+    both = adaptive.run(z, mask, dt=DT)
+    alone = AdaptiveKalmanFilter(_FailsOnLargeInnovations()).run(z[:1], mask[:1], dt=DT)
+    np.testing.assert_allclose(both.means[0], alone.means[0], rtol=0, atol=1e-12)
+    assert not both.updated[1, step] and both.updated[1, np.flatnonzero(mask[1])[6]]
+    np.testing.assert_array_equal(both.means[1, step], both.prior_means[1, step])  # kept the prediction
+    np.testing.assert_array_equal(both.innovations[1, step], 0.0)
+    masked = mask.copy()
+    masked[1, step] = False  # the same as that measurement missing
+    np.testing.assert_allclose(both.means[1], AdaptiveKalmanFilter(_FailsOnLargeInnovations()).run(z, masked, dt=DT).means[1], rtol=0, atol=1e-12)

@@ -391,3 +391,50 @@ def test_step_refuses_bad_fields_by_name_or_gives_finite_estimates(name: str, es
             last = got.time
 
     run()
+
+
+# ---------------------------------------------------------------------------- divergence: restart
+def test_restart_diverged_refilters_a_sequence_from_where_it_stopped_being_finite() -> None:
+    from fkn_bench.estimators.base import restart_diverged
+
+    z, mask = np.zeros((2, 6, 7)), np.ones((2, 6), dtype=bool)
+    means = np.ones((2, 6, 13))
+    means[1, 3:, 5] = np.inf
+    calls = []
+
+    def rerun(zs: np.ndarray, ms: np.ndarray) -> Estimates:
+        calls.append(zs.shape)
+        return Estimates(means=np.full(zs.shape[:2] + (13,), 2.0), initialised=np.zeros(zs.shape[:2], dtype=bool),
+                         extras={"r_diag": np.full(zs.shape[:2] + (7,), 5.0)})
+
+    original = Estimates(means=means, initialised=np.ones((2, 6), dtype=bool), extras={"r_diag": np.zeros((2, 6, 7))})
+    fixed = restart_diverged(original, rerun, z, mask)
+    assert calls == [(1, 3, 7)]  # row 1 from step 3 on
+    np.testing.assert_array_equal(fixed.means[0], 1.0)
+    np.testing.assert_array_equal(fixed.means[1, :3], 1.0)
+    np.testing.assert_array_equal(fixed.means[1, 3:], 2.0)
+    assert fixed.initialised[1].tolist() == [True] * 3 + [False] * 3
+    np.testing.assert_array_equal(fixed.extras["r_diag"][1, 3:], 5.0)
+    assert fixed.extras["restarted"].tolist() == [[False] * 6, [False] * 3 + [True] + [False] * 2]
+    assert np.isinf(original.means[1, 3, 5])  # the input is not modified
+    assert restart_diverged(fixed, rerun, z, mask) is fixed  # nothing diverged: returned as is
+
+
+def test_online_step_restarts_a_state_that_stopped_being_finite(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The online rule: from the prior, initialised from this step's measurement when usable."""
+    estimator = make_estimator("manual-ekf")
+    estimator.reset(dt=0.1)
+    pose = np.array([1.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0])
+    estimator.step(pose)
+    real_predict = type(estimator)._online_predict
+    monkeypatch.setattr(type(estimator), "_online_predict", lambda self, state, dt: type(state)(np.full_like(state.mean, np.nan), state.covariance))
+    restarted = estimator.step(pose)
+    assert estimator.restarts == 1 and restarted.initialised and not restarted.updated
+    np.testing.assert_array_equal(restarted.mean[:7], pose)
+    assert np.isfinite(restarted.covariance).all()
+    missing = estimator.step(np.full(7, np.nan))  # no usable measurement: back to the prior
+    assert estimator.restarts == 2 and not missing.initialised
+    monkeypatch.setattr(type(estimator), "_online_predict", real_predict)
+    assert estimator.step(pose).initialised and estimator.restarts == 2
+    estimator.reset(dt=0.1)
+    assert estimator.restarts == 0

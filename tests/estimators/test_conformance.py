@@ -4,11 +4,14 @@ estimator that does not."""
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
 from fkn_bench.estimators import estimator_names, make_estimator
-from fkn_bench.estimators.conformance import check_input_rules, hostile_measurements
+from fkn_bench.envs import generate_episodes
+from fkn_bench.estimators.conformance import check_input_rules, check_survives_garbage, garbage_measurements, hostile_measurements
 from fkn_bench.scenarios import get_scenario
 
 
@@ -40,3 +43,42 @@ class _ZeroFilled:
 def test_the_checker_names_the_broken_rule(hostile) -> None:
     with pytest.raises(AssertionError, match="unusable measurement at"):
         check_input_rules(_ZeroFilled(make_estimator("manual-ekf")), hostile)
+
+
+# ---------------------------------------------------------------------------------------------
+# the 30%-garbage fuzz (issue 19): 1e5 filter steps (250 sequences of 400) per estimator
+@pytest.fixture(scope="module")
+def garbage():  # noqa: ANN201
+    scenario = get_scenario("ds1", n_steps=400)
+    episodes = generate_episodes(scenario, list(range(250)))
+    z, mask = garbage_measurements(episodes.measurements, episodes.valid, np.random.default_rng(19))
+    return scenario, z, mask
+
+
+def test_the_fuzz_holds_every_kind_of_garbage(garbage) -> None:
+    _, z, mask = garbage
+    assert z.shape == (250, 400, 7)
+    used = z[mask]
+    assert np.isnan(used).any() and np.isinf(used).any()
+    assert (np.abs(used[:, 4:]) > 1e12).any() and (np.abs(used) > 1e250).any()
+    assert (used[:, :4] == 0).all(-1).any() and (mask & ~generate_episodes(get_scenario("ds1", n_steps=400), list(range(250))).valid).any()
+
+
+@pytest.mark.parametrize("name", estimator_names())
+def test_registered_estimator_survives_30_percent_garbage(name: str, garbage) -> None:
+    """No exception, no warning, nothing non-finite, in ``estimate`` over 1e5 steps and in
+    ``step`` over 300; a sequence may restart (the documented divergence rule)."""
+    scenario, z, mask = garbage
+    try:
+        estimator = make_estimator(name, scenario=scenario)
+    except Exception as exc:  # noqa: BLE001 - e.g. a third-party estimator without ds1 parameters
+        pytest.skip(f"{name} does not build for ds1: {exc}")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        check_survives_garbage(estimator, z, mask, scenario.dt)
+        estimator.reset(dt=scenario.dt)
+        for t in range(300):
+            estimate = estimator.step({"pose": z[0, t], "valid": bool(mask[0, t])})
+            assert np.isfinite(estimate.mean).all(), t
+            if estimate.native_covariance is not None:
+                assert np.isfinite(estimate.native_covariance).all(), t

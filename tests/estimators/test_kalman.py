@@ -237,9 +237,9 @@ def test_configuration_is_checked() -> None:
         KalmanEstimator(variant="pf")
     with pytest.raises(ValueError, match=r"q_std needs 13 values \(got shape \(12,\)\)"):
         KalmanEstimator(q_std=[0.1] * 12)
-    with pytest.raises(ValueError, match="r_std values must be finite and > 0"):
+    with pytest.raises(ValueError, match=r"r_std\[6\] = 0.0 is outside"):
         KalmanEstimator(r_std=[0.1] * 6 + [0.0])
-    with pytest.raises(ValueError, match="p0_std values must be finite and > 0"):
+    with pytest.raises(ValueError, match=r"p0_std\[11\] = nan is outside"):
         KalmanEstimator(variant="mekf", p0_std=[0.1] * 11 + [np.nan])
     with pytest.raises(ValueError, match=r"r_std needs 6 values"):
         KalmanEstimator(variant="mekf", r_std=[0.1] * 7)
@@ -312,3 +312,18 @@ def test_full_covariance_configuration(tmp_path: Path, hostile) -> None:
         KalmanEstimator(r_cov=(-correlated).tolist())
     with pytest.raises(ValueError, match=r"q_cov must be a 13x13 matrix"):
         KalmanEstimator(q_cov=np.eye(12).tolist())
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [
+        ({"r_std": [0.1] * 6 + [1e160]}, r"r_std\[6\] = 1e\+160 is outside \[1e-12, 1e\+06\]"),
+        ({"q_std": [0.0] + [0.005] * 12}, r"q_std\[0\] = 0\.0 is outside"),
+        ({"p0_std": [float("nan")] * 13}, r"p0_std\[0\] = nan is outside"),
+        ({"r_std": ["a"] * 7}, r"r_std must be 7 numbers"),
+        ({"r_cov": (1e13 * np.eye(7)).tolist()}, r"r_cov's eigenvalues must lie in"),
+    ],
+)
+def test_noise_that_would_overflow_the_filter_is_refused_by_name(options: dict, message: str) -> None:
+    with pytest.raises(ValueError, match=message):
+        KalmanEstimator(**options)

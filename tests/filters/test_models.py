@@ -163,3 +163,19 @@ def test_linear_model() -> None:
         LinearGaussianModel(torch.ones(2, 3), H)
     with pytest.raises(ValueError, match=r"A must be \(n, n\) and H \(m, n\)"):
         LinearGaussianModel(A, torch.ones(1, 3))
+
+
+def test_sanitize_drops_positions_beyond_the_plausible_limit() -> None:
+    """A position component over ``max_abs_position`` (1e9 m by default) is not a measurement of
+    anything: dropped, batched and online alike (its square would overflow the filters later)."""
+    model = PoseTwistModel()
+    z = np.array([[[1.0, 0, 0, 0, 1e9, 0, 0], [1.0, 0, 0, 0, 0, -1.01e9, 0], [1.0, 0, 0, 0, 0, 0, 1e300]]])
+    _, usable = model.sanitize(z, np.ones((1, 3), dtype=bool))
+    assert usable.tolist() == [[True, False, False]]
+    _, usable_torch = model.sanitize(torch.from_numpy(z), torch.ones(1, 3, dtype=torch.bool))
+    assert usable_torch.tolist() == [[True, False, False]]
+    for row, expected in zip(z[0], (True, False, False)):
+        assert bool(model.sanitize(row[None], np.ones(1, dtype=bool))[1][0]) is expected
+    assert PoseTwistModel(max_abs_position=10.0).sanitize(z[0, :1], np.ones(1, dtype=bool))[1].tolist() == [False]
+    with pytest.raises(ValueError, match="max_abs_position"):
+        PoseTwistModel(max_abs_position=float("nan"))

@@ -170,3 +170,33 @@ def test_the_multiplicative_ekf_runs_any_pose_twist_model() -> None:
     layout = ratios.layout
     result = ratios.run(NoiseParameters.from_std(layout.q_default, layout.r_default, layout.p0_default), z, m, dt=0.1)
     assert result.means.shape == (2, 400, 15) and bool(torch.isfinite(result.covariances).all())
+
+
+def test_non_physical_ratios_are_evaluated_at_the_physical_boundary() -> None:
+    """A physical body has |p_i| <= 1 (triangle inequality of its moments); log ratios outside
+    that region give p clipped to [-1, 1], with zero derivative where clipped."""
+    from fkn_bench.filters.rigid_body import _coefficients_and_derivative
+
+    physical = np.array([inertia_ratios(ASTROBEE_INERTIA), inertia_ratios((1.0, 1.0, 1.9))])
+    p, dp = _coefficients_and_derivative(physical)
+    np.testing.assert_allclose(p, [euler_coefficients(ASTROBEE_INERTIA), euler_coefficients((1.0, 1.0, 1.9))], atol=1e-15)
+    assert np.abs(dp).max() > 0
+    p, dp = _coefficients_and_derivative(np.array([[3.0, 3.0], [-4.0, 0.5]]))
+    assert np.abs(p).max() == 1.0
+    assert (dp[np.abs(p) == 1.0] == 0).all()
+
+
+def test_fast_rows_are_integrated_finely_and_on_their_own() -> None:
+    """30 rad/s over 0.1 s is outside one RK4 step's stability region (h |w| = 3): the row gets more
+    steps and follows the exact rotation; a slow row in the same batch is integrated as alone."""
+    model = RigidBodyModel(inertia=(2.0, 2.0, 2.0))
+    x = np.zeros((2, 13))
+    x[:, 0] = 1.0
+    x[0, 7:10], x[1, 7:10] = (0.0, 0.0, 0.5), (0.0, 0.0, 30.0)
+    out = model.predict(x, 0.1)
+    np.testing.assert_allclose(out[1, :4], (np.cos(1.5), 0.0, 0.0, np.sin(1.5)), atol=1e-4)
+    np.testing.assert_allclose(out[0], model.predict(x[:1], 0.1)[0], rtol=0, atol=1e-15)
+    one_step = RigidBodyModel(inertia=(2.0, 2.0, 2.0))._rk4(x[1:, [0, 1, 2, 3, 7, 8, 9]], None, np.zeros((1, 3)), None, 0.1, 1)[0]
+    assert np.abs(one_step[0, :4] - (np.cos(1.5), 0.0, 0.0, np.sin(1.5))).max() > 0.05  # what one step gives
+    mean, F = model.transition(torch.from_numpy(x).requires_grad_(), 0.1)  # torch (differentiable) too
+    torch.testing.assert_close(mean.detach(), torch.from_numpy(out), rtol=0, atol=1e-12)

@@ -28,3 +28,36 @@ def test_artifact_family_default_for_anything_but_a_built_in_scenario() -> None:
     assert artifact_family("flexkalmannet", None) == DEFAULT_FAMILY
     # without a default artefact, the scenario's own family (ds1 without a scenario)
     assert artifact_family("nll-tuned-ekf", changed) == "ds2" and artifact_family("nll-tuned-ekf", None) == "ds1"
+
+
+def test_parameter_files_are_complete_or_rejected_naming_file_and_key(tmp_path) -> None:  # noqa: ANN001
+    """Issue 19: a file without r_std is not completed with the manual tuning, a file of another
+    estimator is not accepted, a sigma that overflows is refused, and both sources are refused."""
+    import json
+
+    from fkn_bench.training.artifacts import ArtifactError, artifact_path
+
+    committed = json.loads(artifact_path("flexkalmannet", "ds1").read_text())
+
+    def written(name: str, change) -> str:  # noqa: ANN001
+        document = json.loads(json.dumps(committed))
+        change(document)
+        path = tmp_path / name
+        path.write_text(json.dumps(document))
+        return str(path)
+
+    cases = {
+        "no-r.json": (lambda d: d["estimator_config"].pop("r_std"), r"no-r\.json: 'estimator_config' lacks r_std \(or r_cov\)"),
+        "other.json": (lambda d: d.update(estimator="nll-tuned-ekf"), r"other\.json holds 'nll-tuned-ekf' parameters, not flexkalmannet's"),
+        "huge.json": (lambda d: d["estimator_config"]["r_std"].__setitem__(2, 1e160), r"huge\.json: .*r_std\[2\] = 1e\+160 is outside"),
+    }
+    for name, (change, message) in cases.items():
+        with pytest.raises(ArtifactError, match=message):
+            make_estimator("flexkalmannet", parameters=written(name, change))
+    assert make_estimator("flexkalmannet", parameters=written("same.json", lambda d: None)).r_std.tolist() == committed["estimator_config"]["r_std"]
+    with pytest.raises(ArtifactError, match="file name is empty"):
+        make_estimator("flexkalmannet", parameters="")
+    with pytest.raises(ArtifactError, match="is a directory"):
+        make_estimator("flexkalmannet", parameters=str(tmp_path))
+    with pytest.raises(ValueError, match="either checkpoint=PATH or parameters=PATH, not both"):
+        make_estimator("flexkalmannet", parameters=written("same.json", lambda d: None), checkpoint="x.pt")
