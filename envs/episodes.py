@@ -15,6 +15,7 @@ import numpy as np
 from fkn_bench.envs.dynamics import ForcedRotation, FreeTumble
 from fkn_bench.envs.measurements import MeasurementGenerator, stream
 from fkn_bench.geometry import quaternion as quat
+from fkn_bench.limits import check_memory
 from fkn_bench.scenarios import SPLITS, Scenario, get_scenario
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -100,6 +101,11 @@ def true_inertia(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
     return np.array([nominal * (1.0 + stream(seed, "inertia").uniform(-error, error, 3)) for seed in seeds])
 
 
+GENERATION_BYTES_PER_STEP = 400
+"""Memory that generating one step of one episode takes at its peak (truth, measurements and the
+generators' temporaries: 320-340 bytes measured with tracemalloc), for :func:`fkn_bench.limits.check_memory`."""
+
+
 class EpisodeStream:
     """Generates a batch of episodes of ``scenario``, one per non-negative integer seed, chunk by
     chunk (``advance(n)``), for the environments."""
@@ -147,6 +153,9 @@ class EpisodeStream:
             state arrays are views of component-major buffers (not C-contiguous).
         """
         n = max(0, min(int(n), self.scenario.n_steps - self.index))
+        check_memory(len(self.seeds) * n * GENERATION_BYTES_PER_STEP,
+                     f"generating {len(self.seeds)} episode(s) of {n} steps of scenario {self.scenario.name}",
+                     "fewer seeds or a scenario with fewer steps (n_steps)")
         times = np.arange(self.index, self.index + n) * self.scenario.dt
         q, omega = self._rotation.advance(n)
         # component-major buffer (B, 13, n): long inner loops; returned as a (B, n, 13) view

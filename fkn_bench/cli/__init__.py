@@ -2,7 +2,8 @@
 exposes ``add_parser(subparsers)``, which registers the subcommand and sets ``handler``.
 
 Exit codes: 0 success, 1 failure while running, 2 invalid usage (unknown estimator or scenario,
-bad option values, unreadable input files).
+bad option values, unreadable input files, work over the memory limit), 130 interrupted (Ctrl-C,
+start-up included: one line, no traceback).
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -51,13 +53,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``fkn-bench`` console script; returns the exit code."""
-    from fkn_bench.scenarios import ConfigError
+    import fkn_bench
 
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    if signal.getsignal(signal.SIGINT) is fkn_bench._startup_interrupt:  # Ctrl-C is ours from here on
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        from fkn_bench.limits import SizeLimitError
+        from fkn_bench.scenarios import ConfigError
+
+        parser = build_parser()
+        args = parser.parse_args(argv)
+    except KeyboardInterrupt:  # Ctrl-C while starting up: no traceback either
+        print("fkn-bench: interrupted", file=sys.stderr)
+        return 130
     try:
         return int(args.handler(args) or 0)
-    except (UsageError, ConfigError) as exc:
+    except (UsageError, ConfigError, SizeLimitError) as exc:
         print(f"fkn-bench {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -66,3 +66,22 @@ def parse_key_values(items: list[str], option: str) -> dict[str, Any]:
             raise UsageError(f"{option} expects KEY=VALUE (got {item!r})")
         out[key.strip()] = parse_value(value)
     return out
+
+
+def output_directory(path: Any, option: str = "--out") -> Any:
+    """``path`` as a directory that exists and can be written (created with its parents), or
+    :class:`UsageError` in one line: a file in the way, a path that cannot be created, no write
+    permission."""
+    import os
+    from pathlib import Path
+
+    directory = Path(path)
+    if directory.exists() and not directory.is_dir():
+        raise UsageError(f"{option}: {directory} is a file, not a directory")
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"{option}: cannot create the directory {directory}: {exc.strerror or exc}") from None
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise UsageError(f"{option}: the directory {directory} is not writable")
+    return directory

@@ -59,8 +59,8 @@ def run(args: argparse.Namespace) -> int:
                          compression=args.compression)
     except (UnknownEstimatorError, EstimatorFileError) as exc:
         raise UsageError(str(exc)) from None
-    except PermissionError as exc:
-        raise UsageError(f"cannot write {args.out}: {exc.strerror}") from None
+    except OSError as exc:  # an unwritable place, a missing parent directory, a full disk
+        raise UsageError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     if args.json:
         print(json.dumps({
             "path": str(summary.path),

@@ -21,7 +21,7 @@ import argparse
 from pathlib import Path
 
 from fkn_bench.cli import usage_errors
-from fkn_bench.cli.options import add_command, check_minimum
+from fkn_bench.cli.options import add_command, check_minimum, output_directory
 
 __all__ = ["add_parser", "run"]
 
@@ -54,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
                                      config_source=str(args.config) if args.config is not None else None,
                                      figures=not args.no_figures)
         settings.training_config()
-    out = args.out if args.out is not None else Path("runs") / ("reproduce-quick" if args.quick else "reproduce")
+    out = output_directory(args.out if args.out is not None else Path("runs") / ("reproduce-quick" if args.quick else "reproduce"))
     reproduction = run_reproduction(out, settings, progress=not args.no_progress,
                                     log=None if args.no_progress else stderr_log)
     print(reproduction.out / "index.md")

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from fkn_bench.cli import usage_errors
-from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files
+from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files, output_directory
 
 __all__ = ["add_parser", "run"]
 
@@ -91,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         settings = SweepSettings(
             space=space,
             scenario=scenario,
-            out=args.out if args.out is not None else Path("runs") / f"sweep-{study_name}",
+            out=output_directory(args.out if args.out is not None else Path("runs") / f"sweep-{study_name}"),
             estimator=estimator,
             sampler=sampler,
             trials=option("trials", 20),

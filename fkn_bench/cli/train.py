@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from fkn_bench.cli import usage_errors
-from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files, parse_key_values
+from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files, output_directory, parse_key_values
 
 __all__ = ["add_parser", "parse_options"]
 
@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
     load_scenario_files(args)
     scenarios = [get_scenario(name) for name in (args.scenario or ["ds1"])]
     label = "+".join(s.name for s in scenarios)
-    out = args.out if args.out is not None else Path("runs") / f"{args.estimator}-{label}"
+    out = output_directory(args.out if args.out is not None else Path("runs") / f"{args.estimator}-{label}")
     with usage_errors(UnknownEstimatorError, ValueError, TypeError):
         outcome = fit(args.estimator, scenarios, parse_options(args), out=out, resume=args.resume,
                       progress=not args.no_progress, family=args.family)

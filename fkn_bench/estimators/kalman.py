@@ -65,8 +65,10 @@ def filter_result_to_estimates(result: Any, variant: Any, *, extras: Mapping[str
     )
 
 
-MIN_STD = 1e-12
-"""The smallest noise standard deviation an estimator accepts (in the component's SI unit)."""
+MIN_STD = 1e-100
+"""The smallest noise standard deviation an estimator accepts (in the component's SI unit): its
+square, 1e-200, is still a normal float64 (a tuned filter may drive a component's process noise
+to ~1e-21: the committed nll-tuned-ekf does); smaller ones would underflow to zero."""
 
 MAX_STD = 1e6
 """The largest noise standard deviation an estimator accepts: a million metres, radians or

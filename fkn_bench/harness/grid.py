@@ -15,6 +15,7 @@ from typing import Any
 
 from fkn_bench.harness.estimators import ResolvedEstimator, resolve_estimator
 from fkn_bench.harness.sources import EpisodeSource
+from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
 from fkn_bench.metrics import MetricSettings
 
 __all__ = ["SEED_CHUNK", "ONLINE_STEPS", "CellSpec", "chunk_seeds", "build_grid", "safe_name"]
@@ -87,6 +88,16 @@ class CellSpec:
         }
 
 
+def _episode_steps(source: EpisodeSource) -> int:
+    """Steps of one episode of ``source``: its split of a simulated scenario, else the scenario's."""
+    scenario = source.scenario
+    split = getattr(source, "split", None)
+    if split is not None and split != "full":
+        start, stop = scenario.split_bounds()[split]
+        return int(stop - start)
+    return int(scenario.n_steps)
+
+
 def build_grid(
     estimators: Sequence[ResolvedEstimator | str],
     sources: Sequence[EpisodeSource],
@@ -101,7 +112,12 @@ def build_grid(
     scenario, :attr:`~EpisodeSource.label`) or names, resolved here once per source."""
     settings = settings or MetricSettings()
     cells = []
+    largest_chunk = max((len(chunk) for chunk in chunk_seeds(seeds, chunk_size)), default=0)
     for source in sources:
+        steps = _episode_steps(source)
+        check_memory(largest_chunk * steps * ESTIMATION_BYTES_PER_STEP,
+                     f"a cell of {largest_chunk} sequence(s) of {steps} steps ({source.label})",
+                     "fewer steps per episode (the scenario's n_steps, or --cut) or fewer seeds")
         pairs = [resolve_estimator(e, source.scenario) if isinstance(e, str) else e for e in estimators]
         pairs = [p for p in pairs if p.scenario == source.label]
         for chunk in chunk_seeds(seeds, chunk_size):

@@ -57,6 +57,7 @@ from typing import Any
 import numpy as np
 
 from fkn_bench.envs.episodes import Episodes
+from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
 from fkn_bench.envs.measurements import MeasurementGenerator
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.recordings.reader import (
@@ -355,6 +356,10 @@ def read_recording(
             raise ValueError(f"dt must be a number of seconds, None or 'native' (got {dt!r})") from None
         if not np.isfinite(step) or step <= 0:
             raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")
+    span_s = (int(truth.stamps_ns[-1]) - int(truth.stamps_ns[0])) / 1e9
+    check_memory((span_s / step + 1) * ESTIMATION_BYTES_PER_STEP,
+                 f"replaying {rec.path}: its truth spans {span_s:.6g} s, {span_s / step + 1:.6g} steps of {step:g} s",
+                 "a larger time step (--dt SECONDS) or a recording without long gaps (--repair does not close them)")
     grid = _grid(int(truth.stamps_ns[0]), int(truth.stamps_ns[-1]), step)
     if len(grid) < 2:
         raise RecordingError(

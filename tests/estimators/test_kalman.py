@@ -317,7 +317,7 @@ def test_full_covariance_configuration(tmp_path: Path, hostile) -> None:
 @pytest.mark.parametrize(
     ("options", "message"),
     [
-        ({"r_std": [0.1] * 6 + [1e160]}, r"r_std\[6\] = 1e\+160 is outside \[1e-12, 1e\+06\]"),
+        ({"r_std": [0.1] * 6 + [1e160]}, r"r_std\[6\] = 1e\+160 is outside \[1e-100, 1e\+06\]"),
         ({"q_std": [0.0] + [0.005] * 12}, r"q_std\[0\] = 0\.0 is outside"),
         ({"p0_std": [float("nan")] * 13}, r"p0_std\[0\] = nan is outside"),
         ({"r_std": ["a"] * 7}, r"r_std must be 7 numbers"),

@@ -248,3 +248,18 @@ def test_errors_are_value_errors_with_context(simple_truth, tools) -> None:
     assert (info.value.path, info.value.topic, info.value.index) == (path, "/loc/truth/pose", 3)
     with pytest.raises(TopicNotFoundError):
         McapRecording(path).read_poses("/other")
+
+
+def test_a_stamp_gap_that_would_resample_to_more_than_memory_is_refused_first(make_mcap, tools, monkeypatch) -> None:
+    """300 poses with one 1e6 s stamp gap at dt 0.1 s would be 1e7 steps (about 75 GiB with the
+    estimators' covariances): refused before anything is allocated, naming the file, the span,
+    the limit and how to raise it."""
+    from fkn_bench.limits import MEMORY_LIMIT_VARIABLE, SizeLimitError
+
+    stamps, states = _truth(tools, n=300)
+    stamps = stamps.copy()
+    stamps[150:] += 10**15  # 1e6 s
+    path = make_mcap("gap.mcap", [tools.pose_channel("/loc/truth/pose", stamps, states[:, :7])])
+    monkeypatch.setenv(MEMORY_LIMIT_VARIABLE, "4")
+    with pytest.raises(SizeLimitError, match=rf"replaying {path}: its truth spans 1.00003e\+06 s, 1.00003e\+07 steps of 0.1 s would need about 74.5 GiB of memory, over the limit of 4 GiB \({MEMORY_LIMIT_VARIABLE}\); ask for a larger time step \(--dt SECONDS\)"):
+        read_recording(path, dt=0.1)

@@ -1,0 +1,85 @@
+"""No user error ends in a traceback: every command, given bad input, exits with status 2 and one
+readable line (argparse's own errors: its usage, then one error line), and Ctrl-C, start-up
+included, exits with 130 and one line (issue 19, item 7)."""
+
+from __future__ import annotations
+
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from fkn_bench.cli import main
+
+BAD_INPUTS = [
+    ("run --estimator nope", "unknown estimator 'nope'; valid estimators: manual-ekf"),
+    ("run --scenario nope", "unknown scenario 'nope'; valid scenarios: ds1"),
+    ("run --seeds 0", "--seeds must be a positive integer (got 0)"),
+    ("run --out afile --seeds 1 --estimator manual-ekf", "--out: afile is a file, not a directory"),
+    ("run --estimator flexkalmannet --estimator-option parameters=nope.json --seeds 1", "learned-parameter file not found: nope.json"),
+    ("run --estimator flexkalmannet --estimator-option parameters= --seeds 1", "the learned-parameter file name is empty"),
+    ("run --recording nope.mcap --estimator manual-ekf", "recording not found: nope.mcap"),
+    ("run --recording afile --estimator manual-ekf", "afile: not an MCAP file"),
+    ("run --scenario-file nope.toml", "scenario file not found: nope.toml"),
+    ("run --scenario-file latin1.toml", "scenario file latin1.toml is not UTF-8 text"),
+    ("run --cut -5 --seeds 1 --estimator manual-ekf", "--cut must be a non-negative integer (got -5)"),
+    ("run --seeds abc", "argument --seeds: invalid int value: 'abc'"),
+    ("train --estimator nope", "unknown estimator 'nope'"),
+    ("train --estimator flexkalmannet --out afile", "--out: afile is a file, not a directory"),
+    ("train --set hiddn=64 --estimator flexkalmannet --out t", "unknown FlexKalmanNet config keys ['hiddn']; valid:"),
+    ("record --scenario nope --out r.mcap", "unknown scenario 'nope'"),
+    ("record --out /proc/fkn-bench/r.mcap --steps 10", "cannot write /proc/fkn-bench/r.mcap: "),  # (not even root may)
+    ("reproduce --out afile", "--out: afile is a file, not a directory"),
+    ("sweep --space nope --out s", "search-space file not found: nope"),
+    ("sweep --space latin1.toml --out s", "search-space file latin1.toml is not UTF-8 text"),
+    ("simulate --scenario nope", "unknown scenario 'nope'"),
+    ("plot --results nope", "results directory not found: nope"),
+    ("leaderboard --results nope", "results directory not found: nope"),
+]
+
+
+@pytest.mark.parametrize(("command", "message"), BAD_INPUTS, ids=[c for c, _ in BAD_INPUTS])
+def test_bad_input_exits_2_with_one_readable_line(command: str, message: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "afile").write_text("x\n")
+    (tmp_path / "latin1.toml").write_bytes("name = 'caf\xe9'\n".encode("latin-1"))
+    with pytest.raises(SystemExit) if message.startswith("argument ") else _no_exit() as exited:
+        code = main(shlex.split(command))
+    code = exited.value.code if exited is not None else code
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert code == 2 and "Traceback" not in err
+    name = command.split()[0]
+    assert lines[-1].startswith(f"fkn-bench {name}: error: ") and message in lines[-1], lines
+    if not message.startswith("argument "):
+        assert len(lines) == 1, lines
+    assert "weights_only" not in err
+
+
+class _no_exit:
+    """``pytest.raises``' counterpart for commands that return their status (``value`` None)."""
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc: object) -> bool:
+        return False
+
+
+@pytest.mark.skipif(shutil.which("fkn-bench") is None or sys.platform == "win32", reason="needs the console script (POSIX signals)")
+@pytest.mark.parametrize("delay", [0.3, 1.5])
+def test_ctrl_c_at_start_up_or_while_running_exits_130_in_one_line(delay: float, tmp_path: Path) -> None:
+    """SIGINT while the command imports and builds its parser (0.3 s), and while it runs (1.5 s)."""
+    process = subprocess.Popen([shutil.which("fkn-bench"), "run", "--seeds", "2", "--no-progress"], cwd=tmp_path,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(delay)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130 and "Traceback" not in err
+    assert [line for line in err.splitlines() if line.strip()] in (["fkn-bench: interrupted"], ["fkn-bench run: interrupted"])
