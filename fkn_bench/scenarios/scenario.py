@@ -55,6 +55,11 @@ def _vector(value: Any, name: str, length: int) -> tuple[float, ...]:
     return items
 
 
+MAX_NOISE = 1e6
+"""The largest standard deviation a scenario's noise may have (m or rad, after ``noise_scale``):
+larger noise is no measurement of this problem, and 1e300 overflows to NaN poses."""
+
+
 @dataclass(frozen=True)
 class Scenario:
     """A named, validated episode configuration.
@@ -145,8 +150,11 @@ class Scenario:
         for name in ("position0_std", "sigma_position", "sigma_attitude", "noise_scale",
                      "outlier_position_sigma"):
             value = getattr(self, name)
-            _check(_is_finite_number(value) and value >= 0, name, "a finite number >= 0", value)
+            _check(_is_finite_number(value) and 0 <= value <= MAX_NOISE, name, f"a finite number in [0, {MAX_NOISE:g}]", value)
             set_(self, name, float(value))
+        for name in ("sigma_position", "sigma_attitude"):  # what the measurements get: noise_scale x sigma
+            _check(self.noise_scale * getattr(self, name) <= MAX_NOISE, "noise_scale",
+                   f"small enough that noise_scale x {name} <= {MAX_NOISE:g}", self.noise_scale)
         _check(_is_finite_number(self.dt) and self.dt > 0, "dt", "a finite number > 0 (s)", self.dt)
         set_(self, "dt", float(self.dt))
         for name, low in (("n_steps", 2), ("measurement_every", 1), ("burst_length", 0),

@@ -275,7 +275,8 @@ def test_bad_actions_raise_value_error(action: object, pattern: str) -> None:
     ("kwargs", "error", "pattern"),
     [
         ({"dropout": 1.5}, ConfigError, r"'dropout' must be a number in \[0, 1\]"),
-        ({"noise_scale": -1.0}, ConfigError, "'noise_scale' must be a finite number >= 0"),
+        ({"noise_scale": -1.0}, ConfigError, r"'noise_scale' must be a finite number in \[0, 1e\+06\]"),
+        ({"noise_scale": 1e300}, ConfigError, r"'noise_scale' must be a finite number in \[0, 1e\+06\]"),
         ({"measurement_every": 0}, ConfigError, "'measurement_every' must be an integer >= 1"),
         ({"bogus": 1}, ConfigError, "unknown scenario field.*bogus"),
         ({"scenario": "ds3"}, UnknownScenarioError, "unknown scenario 'ds3'; valid scenarios: ds1, ds2"),

@@ -63,9 +63,11 @@ def test_frozen() -> None:
 @pytest.mark.parametrize(
     ("changes", "field", "allowed"),
     [
-        ({"sigma_position": -0.1}, "sigma_position", ">= 0"),
-        ({"sigma_attitude": -1e-9}, "sigma_attitude", ">= 0"),
-        ({"noise_scale": -1.0}, "noise_scale", ">= 0"),
+        ({"sigma_position": -0.1}, "sigma_position", "in [0, 1e+06]"),
+        ({"sigma_attitude": -1e-9}, "sigma_attitude", "in [0, 1e+06]"),
+        ({"noise_scale": -1.0}, "noise_scale", "in [0, 1e+06]"),
+        ({"noise_scale": 1e300}, "noise_scale", "in [0, 1e+06]"),
+        ({"noise_scale": 1e5, "sigma_attitude": 100.0}, "noise_scale", "noise_scale x sigma_attitude <= 1e+06"),
         ({"noise_scale": float("nan")}, "noise_scale", "finite"),
         ({"position0_std": float("inf")}, "position0_std", "finite"),
         ({"measurement_every": 0}, "measurement_every", "integer >= 1"),
