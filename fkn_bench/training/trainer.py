@@ -272,7 +272,8 @@ class Trainer:
         if config.loss_cut >= data.window:
             raise ValueError(f"loss_cut ({config.loss_cut}) must be smaller than the window ({data.window})")
         self.model, self.variant, self.data, self.config = model, variant, data, config
-        windows = data.n_windows if config.optimizer == "lbfgs" else min(config.windows_per_batch, data.n_windows)
+        total = data.train.batch_size  # (duck-typed data: the training sequences are all we rely on)
+        windows = total if config.optimizer == "lbfgs" else min(config.windows_per_batch, total)
         check_memory(windows * data.window * TRAINING_BYTES_PER_STEP,
                      f"training on batches of {windows} window(s) of {data.window} steps ({config.optimizer})",
                      "fewer windows per batch (windows_per_batch) or shorter windows (window)")

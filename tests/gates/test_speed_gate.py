@@ -1,7 +1,7 @@
 """The speed-ratio gate (:mod:`fkn_bench.gates.speed`), run by the default test command.
 
-For every check with a regression threshold: the real implementation passes two gate
-evaluations in a row, and the same implementation made to do its work twice (injected here with
+For every check with a regression threshold: the real implementation passes a gate evaluation
+(up to three attempts), and the same implementation made to do its work twice (injected here with
 :func:`~fkn_bench.gates.speed.doubled`) fails the gate. Nothing here compares a time with a stored
 time: each check is a ratio against a reference timed beside it in this process.
 """
@@ -17,10 +17,13 @@ from fkn_bench.runtime import torch_threads
 
 pytestmark = pytest.mark.exclusive_cpu  # timed: the other xdist worker waits (tests/conftest.py)
 
-CONSECUTIVE_PASSES = 2
-"""Evaluations in a row the real implementation must pass (each up to three attempts): two show
-that passing is not luck; a third added 30 s to the test command for no further information (the
-measured spreads are in :data:`fkn_bench.gates.speed.MEASURED`)."""
+CONSECUTIVE_PASSES = 1
+"""Evaluations in a row the real implementation must pass (each up to three attempts). Two were
+required until the 30%-garbage fuzz of every estimator (issue 19) needed the time: the timed tests
+hold both cores (the other worker waits), so each evaluation costs the test command its wall time
+twice over, about 15 s for the second. How reliably the real implementation passes is measured
+offline with ``fkn-bench bench gate --calibrate N`` (the spreads in
+:data:`fkn_bench.gates.speed.MEASURED`: every measured ratio at least 1.3x its threshold)."""
 
 
 def _checks() -> list[speed.RatioCheck]:
@@ -48,7 +51,7 @@ def _workloads(cache: dict[str, speed.Workloads], check: speed.RatioCheck) -> sp
 
 
 @pytest.mark.parametrize("check", _checks(), ids=lambda c: c.name)
-def test_real_implementation_passes_two_evaluations_in_a_row(check: speed.RatioCheck, workloads: dict) -> None:
+def test_real_implementation_passes_the_gate(check: speed.RatioCheck, workloads: dict) -> None:
     built = _workloads(workloads, check)
     outcomes = [speed.evaluate(check, workloads=built) for _ in range(CONSECUTIVE_PASSES)]
     print("\n" + speed.format_outcomes(outcomes))
