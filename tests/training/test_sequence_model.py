@@ -84,7 +84,7 @@ class Cliff(Offset):
 
     def sequence_mse(self, sequences: Sequences, *, dt: float, loss_cut: int) -> Tensor:
         loss = super().sequence_mse(sequences, dt=dt, loss_cut=loss_cut)
-        if float(self.offset[0]) < self.edge:
+        if float(self.offset[0].detach()) < self.edge:
             if self.infinite_loss or not self.training:  # validation sees the divergence too
                 return loss * math.inf
             return loss + torch.sqrt(self.offset[0] - self.offset[0].detach())  # value 0, gradient inf
