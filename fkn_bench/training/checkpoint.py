@@ -66,8 +66,15 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         raise CheckpointError(f"{path} is not a readable checkpoint (truncated or corrupt?): {reason[:200]}") from None
     if isinstance(document, dict) and document.get("format") in LEGACY_FORMATS and "estimator" not in document:
         document = {**document, "format": CHECKPOINT_FORMAT, "estimator": LEGACY_FORMATS[document["format"]]}
-    return checked_document(document, path, CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION, "an fkn-bench checkpoint",
-                            ("estimator", "config", "scenario", "state_dict"), CheckpointError)
+    document = checked_document(document, path, CHECKPOINT_FORMAT, CHECKPOINT_FORMAT_VERSION, "an fkn-bench checkpoint",
+                                ("estimator", "config", "scenario", "state_dict"), CheckpointError)
+    state = document["state_dict"]
+    if not isinstance(state, dict):
+        raise CheckpointError(f"{path}: 'state_dict' must map names to tensors (got {type(state).__name__})")
+    for key, value in state.items():
+        if isinstance(value, torch.Tensor) and value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            raise CheckpointError(f"{path}: weights {key!r} hold non-finite values (corrupt, or saved from a diverged training)")
+    return document
 
 
 def checked_document(document: Any, path: Path, format: str, version: int, kind: str, required: tuple[str, ...],

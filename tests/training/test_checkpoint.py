@@ -36,3 +36,16 @@ def test_a_checkpoint_holding_python_objects_is_refused_without_pickle_advice(tm
     with pytest.raises(CheckpointError, match=r"cut\.pt is not a readable checkpoint \(truncated or corrupt\?\)") as info:
         load_checkpoint(tmp_path / "cut.pt")
     assert "weights_only" not in str(info.value)
+
+
+def test_a_checkpoint_with_non_finite_weights_is_refused_naming_the_tensor(tmp_path: Path) -> None:
+    from fkn_bench.training.artifacts import artifact_path, weights_of_artifact
+    from fkn_bench.training.checkpoint import save_checkpoint
+
+    document = load_checkpoint(weights_of_artifact(artifact_path("kalmannet", "ds1"), "kalmannet"))
+    key = sorted(k for k, v in document["state_dict"].items() if v.is_floating_point())[0]
+    state = dict(document["state_dict"])
+    state[key] = state[key] * float("inf")
+    save_checkpoint(tmp_path / "inf.pt", {**document, "state_dict": state})
+    with pytest.raises(CheckpointError, match=rf"inf\.pt: weights '{key}' hold non-finite values"):
+        load_checkpoint(tmp_path / "inf.pt")
