@@ -11,11 +11,11 @@ from __future__ import annotations
 import concurrent.futures
 import multiprocessing
 from collections.abc import Iterator, Sequence
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
-from fkn_bench.harness.cell import run_cell
-from fkn_bench.harness.grid import CellSpec
-from fkn_bench.harness.records import CellRecord
+if TYPE_CHECKING:  # (imported where cells run: listing BACKENDS must not import torch)
+    from fkn_bench.harness.grid import CellSpec
+    from fkn_bench.harness.records import CellRecord
 
 __all__ = ["Backend", "LocalBackend", "DaskBackend", "make_backend", "BACKENDS"]
 
@@ -41,6 +41,8 @@ class LocalBackend:
         self.workers = int(workers)
 
     def run(self, cells: Sequence[CellSpec]) -> Iterator[CellRecord]:
+        from fkn_bench.harness.cell import run_cell
+
         if self.workers == 1 or len(cells) <= 1:
             for cell in cells:
                 yield run_cell(cell)
@@ -73,6 +75,8 @@ class DaskBackend:
         import logging
 
         from distributed import Client, LocalCluster, as_completed
+
+        from fkn_bench.harness.cell import run_cell
 
         cluster = None
         if self.scheduler is None:

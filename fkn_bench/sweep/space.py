@@ -56,10 +56,11 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import optuna
-from optuna.distributions import BaseDistribution, CategoricalDistribution, FloatDistribution, IntDistribution
+if TYPE_CHECKING:  # optuna is imported where a space is used, not where its names are listed
+    import optuna
+    from optuna.distributions import BaseDistribution
 
 __all__ = [
     "SpaceError",
@@ -123,6 +124,8 @@ class Knob:
 
     def distribution(self) -> BaseDistribution:
         """The optuna distribution of the knob (the same in every stage of a sweep)."""
+        from optuna.distributions import CategoricalDistribution, FloatDistribution, IntDistribution
+
         if self.kind == "categorical":
             return CategoricalDistribution(self.values)
         low, high = self.low, self.high
@@ -133,6 +136,8 @@ class Knob:
 
     def suggest(self, trial: optuna.Trial) -> Any:
         """Ask ``trial`` for a value of :meth:`distribution` (the sampler decides which)."""
+        from optuna.distributions import CategoricalDistribution, IntDistribution
+
         d = self.distribution()
         if isinstance(d, CategoricalDistribution):
             return trial.suggest_categorical(self.name, list(d.choices))
@@ -193,6 +198,8 @@ class PrunerSpec:
     reduction_factor: int = 3
 
     def make(self) -> optuna.pruners.BasePruner:
+        import optuna
+
         if self.kind == "median":
             return optuna.pruners.MedianPruner(n_startup_trials=self.n_startup_trials, n_warmup_steps=self.n_warmup_steps)
         if self.kind == "percentile":
