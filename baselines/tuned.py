@@ -39,6 +39,7 @@ from typing import Any
 from fkn_bench.filters import ParameterSet
 from fkn_bench.training import DirectParameters, Trainable, TrainConfig, TrainingData
 from fkn_bench.training.artifacts import TrainedKalmanEstimator
+from fkn_bench.training.options import check_option_types
 from fkn_bench.training.pipeline import options_with_file
 
 __all__ = ["TUNED_OBJECTIVES", "DESCRIPTIONS", "OPTIMIZER_NOTES", "TunedEKFEstimator", "tuned_config", "tuned_trainable"]
@@ -92,6 +93,7 @@ def tuned_config(name: str, options: Mapping[str, Any]) -> TrainConfig:
     unknown = sorted(set(values) - known)
     if unknown:
         raise ValueError(f"unknown {name} training options {unknown}; valid: {sorted(known - {'objective'})}")
+    check_option_types(TrainConfig, values, name)
     if values.get("variant", "ekf") != "ekf":
         raise ValueError(f"the tuned baselines tune the EKF (variant 'ekf'; got {values['variant']!r})")
     optimizer = values.setdefault("optimizer", "lbfgs")

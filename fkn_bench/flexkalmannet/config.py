@@ -17,6 +17,7 @@ from typing import Any
 
 from fkn_bench.filters.parameters import LEARNABLE_ENTRIES
 from fkn_bench.training import TrainConfig
+from fkn_bench.training.options import check_option_types
 from fkn_bench.training.pipeline import options_with_file
 
 __all__ = ["FlexKalmanNetConfig", "DEVIATIONS", "PAPER_TABLE"]
@@ -94,7 +95,7 @@ class FlexKalmanNetConfig(TrainConfig):
     among its options: :meth:`to_dict` lists the options).
     """
 
-    learn: tuple[str, ...] = ("q_std", "r_std")
+    learn: tuple[str, ...] | str = ("q_std", "r_std")  # (a str: "q_std,r_std", a sweep's categorical value)
     positivity: str = "log"
     hidden: int = 512
     layers: int = 7
@@ -135,6 +136,7 @@ class FlexKalmanNetConfig(TrainConfig):
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"unknown FlexKalmanNet config keys {unknown}; valid: {sorted(known)}")
+        check_option_types(cls, data, "FlexKalmanNet")
         return cls(**dict(data))
 
     @classmethod

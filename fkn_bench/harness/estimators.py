@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from fkn_bench.estimators import Estimator, UnknownEstimatorError, estimator_names, make_estimator
+from fkn_bench.estimators import Estimator, UnknownEstimatorError, estimator_names, estimator_spec, make_estimator
 from fkn_bench.io import to_jsonable
 from fkn_bench.scenarios import Scenario
 
@@ -48,10 +48,20 @@ class ResolvedEstimator:
     error: str | None = None
     fingerprint: str = ""
     options: tuple[tuple[str, Any], ...] = ()
+    option_error: bool = False
+    """True when ``error`` comes from the ``options`` (the estimator builds without them)."""
 
     @property
     def available(self) -> bool:
         return self.error is None
+
+    def problem(self) -> str:
+        """Why the pair cannot run, in the command line's words: a rejected option names
+        ``--estimator-option``; anything else is unavailability for the scenario."""
+        if self.option_error:
+            given = " ".join(f"{key}={value}" for key, value in self.options)
+            return f"--estimator-option {given}: {self.error}"
+        return f"estimator {self.name!r} is not available for scenario {self.scenario}: {self.error}"
 
 
 class SelectionError(ValueError):
@@ -97,6 +107,10 @@ def resolve_estimator(name: str, scenario: Scenario, options: dict[str, Any] | N
         estimator = make_estimator(name, scenario=scenario, **(options or {}))
         config = estimator.to_config()
     except Exception as exc:  # noqa: BLE001 - reported to the user as unavailability
+        if items:
+            rejected = _option_problem(name, scenario, dict(items), exc)
+            if rejected is not None:
+                return ResolvedEstimator(name, scenario.name, error=rejected, options=items, option_error=True)
         return ResolvedEstimator(name, scenario.name, error=f"{type(exc).__name__}: {exc}", options=items)
     try:
         text = json.dumps(_rounded(to_jsonable(config)), sort_keys=True)
@@ -104,6 +118,50 @@ def resolve_estimator(name: str, scenario: Scenario, options: dict[str, Any] | N
     except (TypeError, ValueError):
         fingerprint = ""
     return ResolvedEstimator(name, scenario.name, estimator, fingerprint=fingerprint, options=items)
+
+
+def _option_problem(name: str, scenario: Scenario, options: dict[str, Any], exc: Exception) -> str | None:
+    """What is wrong with ``options`` when ``name`` builds for ``scenario`` without them (None
+    when it does not: then the failure is the estimator's, not the options'). An unknown key is
+    named with the options the estimator takes (its factory's keywords and, for a factory that
+    passes its keywords on, those of the estimator's class)."""
+    try:
+        plain = make_estimator(name, scenario=scenario)
+    except Exception:  # noqa: BLE001 - unavailable anyway
+        return None
+    factory = estimator_spec(name).factory
+    valid = _option_names(factory)
+    if _passes_keywords_on(factory):  # e.g. the built-in factories: **options go to the class
+        valid |= _option_names(type(plain).__init__)
+        if _passes_keywords_on(type(plain).__init__):  # the class's keywords are open too: its own message says
+            valid = set()
+    unknown = sorted(set(options) - valid) if valid else []
+    if unknown:
+        return (f"estimator {name!r} has no option{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))}; "
+                f"valid options: {', '.join(sorted(valid))}")
+    message = str(exc)
+    return message if isinstance(exc, ValueError) else f"{type(exc).__name__}: {message}"
+
+
+def _passes_keywords_on(function: Any) -> bool:
+    import inspect
+
+    try:
+        return any(p.kind is inspect.Parameter.VAR_KEYWORD for p in inspect.signature(function).parameters.values())
+    except (TypeError, ValueError):
+        return False
+
+
+def _option_names(function: Any) -> set[str]:
+    """Keyword parameters of ``function`` (not ``self``, ``scenario`` or ``**kwargs``)."""
+    import inspect
+
+    try:
+        parameters = inspect.signature(function).parameters.values()
+    except (TypeError, ValueError):
+        return set()
+    kinds = (inspect.Parameter.KEYWORD_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    return {p.name for p in parameters if p.kind in kinds and p.name not in ("self", "scenario")}
 
 
 def resolve(
@@ -165,7 +223,7 @@ def select_estimators(
         if pair.available:
             chosen.append(pair)
         elif names or not every:
-            raise SelectionError(f"estimator {pair.name!r} is not available for scenario {pair.scenario}: {pair.error}")
+            raise SelectionError(pair.problem())
         else:
             notes.append(f"skipping {pair.name} on {pair.scenario} (not available: {pair.error})")
     if not chosen:

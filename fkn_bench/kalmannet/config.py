@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Self
 
 from fkn_bench.training import TrainConfig
+from fkn_bench.training.options import check_option_types
 from fkn_bench.training.pipeline import options_with_file
 
 __all__ = ["KalmanNetConfig", "RecursiveKalmanNetConfig"]
@@ -91,6 +92,7 @@ class KalmanNetConfig(TrainConfig):
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"unknown {cls._label} config keys {unknown}; valid: {sorted(known)}")
+        check_option_types(cls, data, cls._label)
         return cls(**dict(data))
 
     @classmethod

@@ -1,6 +1,7 @@
 """No user error ends in a traceback: every command, given bad input, exits with status 2 and one
 readable line (argparse's own errors: its usage, then one error line), and Ctrl-C, start-up
-included, exits with 130 and one line (issue 19, item 7)."""
+included, exits with 130 and one line (issue 19, item 7); option errors name the option, the key
+and what is valid (issue 20, item 2)."""
 
 from __future__ import annotations
 
@@ -21,7 +22,12 @@ BAD_INPUTS = [
     ("run --scenario nope", "unknown scenario 'nope'; valid scenarios: ds1"),
     ("run --seeds 0", "--seeds must be a positive integer (got 0)"),
     ("run --out afile --seeds 1 --estimator manual-ekf", "--out: afile is a file, not a directory"),
-    ("run --estimator flexkalmannet --estimator-option parameters=nope.json --seeds 1", "learned-parameter file not found: nope.json"),
+    ("run --estimator flexkalmannet --estimator-option parameters=nope.json --seeds 1",
+     "--estimator-option parameters=nope.json: learned-parameter file not found: nope.json"),
+    ("run --estimator manual-ekf --estimator-option foo=bar --seeds 1",
+     "--estimator-option foo=bar: estimator 'manual-ekf' has no option 'foo'; valid options: description, inertia,"),
+    ("run --estimator sage-husa --estimator-option alpha=3 --seeds 1",
+     "--estimator-option alpha=3: unknown SageHusaEstimator options ['alpha']; valid: ['adapt_q',"),
     ("run --estimator flexkalmannet --estimator-option parameters= --seeds 1", "the learned-parameter file name is empty"),
     ("run --recording nope.mcap --estimator manual-ekf", "recording not found: nope.mcap"),
     ("run --recording afile --estimator manual-ekf", "afile: not an MCAP file"),
@@ -32,6 +38,7 @@ BAD_INPUTS = [
     ("train --estimator nope", "unknown estimator 'nope'"),
     ("train --estimator flexkalmannet --out afile", "--out: afile is a file, not a directory"),
     ("train --set hiddn=64 --estimator flexkalmannet --out t", "unknown FlexKalmanNet config keys ['hiddn']; valid:"),
+    ("train --set hidden=abc --estimator flexkalmannet --out t", "FlexKalmanNet config key 'hidden' must be an integer (got 'abc')"),
     ("record --scenario nope --out r.mcap", "unknown scenario 'nope'"),
     ("record --out /proc/fkn-bench/r.mcap --steps 10", "cannot write /proc/fkn-bench/r.mcap: "),  # (not even root may)
     ("reproduce --out afile", "--out: afile is a file, not a directory"),

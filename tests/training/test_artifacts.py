@@ -61,3 +61,24 @@ def test_parameter_files_are_complete_or_rejected_naming_file_and_key(tmp_path) 
         make_estimator("flexkalmannet", parameters=str(tmp_path))
     with pytest.raises(ValueError, match="either checkpoint=PATH or parameters=PATH, not both"):
         make_estimator("flexkalmannet", parameters=written("same.json", lambda d: None), checkpoint="x.pt")
+
+
+@pytest.mark.parametrize(
+    ("estimator", "options", "message"),
+    [
+        ("flexkalmannet", {"hidden": "abc"}, "FlexKalmanNet config key 'hidden' must be an integer (got 'abc')"),
+        ("flexkalmannet", {"lr": "fast"}, "FlexKalmanNet config key 'lr' must be a number (got 'fast')"),
+        ("flexkalmannet", {"epochs": 2.5}, "FlexKalmanNet config key 'epochs' must be an integer (got 2.5)"),
+        ("flexkalmannet", {"inertia": 1}, "FlexKalmanNet config key 'inertia' must be a list of 3 values or none (got 1)"),
+        ("kalmannet", {"window": True}, "KalmanNet config key 'window' must be an integer (got True)"),
+        ("nll-tuned-ekf", {"lr": "abc"}, "nll-tuned-ekf config key 'lr' must be a number (got 'abc')"),
+    ],
+)
+def test_training_options_of_the_wrong_type_name_the_key_and_what_is_valid(estimator: str, options: dict, message: str) -> None:
+    """Issue 20, item 2: `--set hidden=abc` said "'<' not supported between 'str' and 'int'"."""
+    from fkn_bench.training import trainable
+
+    with pytest.raises(ValueError) as info:
+        trainable(estimator).config(options)
+    assert str(info.value) == message
+    assert trainable("flexkalmannet").config({"learn": "q_std,r_std", "lr": 1, "samples_per_window": None}).learn == ("q_std", "r_std")
