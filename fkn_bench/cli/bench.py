@@ -9,7 +9,8 @@
   ratio against the reference timed beside it, its threshold and verdict;
 * ``fkn-bench bench train``: one epoch of FlexKalmanNet's batched trainer against one epoch of
   the sequential reference trainer (windows one after another, the network at every step) on the
-  same data and configuration, and their ratio.
+  same data and configuration, and their ratio; with ``--time-varying`` also the trainer's epoch in
+  time-varying mode against the constant mode, timed alternately.
 
 Examples::
 
@@ -68,6 +69,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--paper-windows", action="store_true", help="the paper's 512-sample windows with a measurement every step")
     train.add_argument("--reference-windows", type=int, help="time only this many reference windows and scale to an epoch")
     train.add_argument("--trainer-epochs", type=int, default=3, help="trainer epochs timed (median reported)")
+    train.add_argument("--time-varying", action="store_true",
+                       help="also time the trainer in time-varying mode and print its ratio to the constant mode")
     train.add_argument("--json", action="store_true")
     train.set_defaults(handler=run_train)
 
@@ -259,4 +262,10 @@ def run_train(args: argparse.Namespace) -> int:
     print(f"  sequential reference  {speed.reference_seconds_per_epoch:8.2f} s/epoch{timed}")
     print(f"  batched trainer       {speed.trainer_seconds_per_epoch:8.2f} s/epoch (median of {speed.trainer_epochs_timed})")
     print(f"  ratio                 {speed.ratio:8.1f}x")
+    if args.time_varying:
+        from fkn_bench.flexkalmannet.benchmark import time_varying_ratio
+
+        constant, varying = time_varying_ratio(args.scenario, config, epochs=args.trainer_epochs)
+        print(f"  trainer, constant     {constant:8.2f} s/epoch")
+        print(f"  trainer, time-varying {varying:8.2f} s/epoch: {varying / constant:.1f}x the constant mode (timed alternately)")
     return 0

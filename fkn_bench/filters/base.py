@@ -256,8 +256,9 @@ class KalmanFilter(ABC):
         initialised_steps = torch.zeros(steps, batch, dtype=torch.bool)
         no_innovation = torch.zeros(batch, m, dtype=dtype)
         unit_covariance = torch.eye(m, dtype=dtype).expand(batch, m, m)
+        per_step = noise.steps() if time_varying else None
         for t in range(steps):
-            step_noise = noise.at_step(t) if time_varying else noise
+            step_noise = per_step[t] if per_step is not None else noise
             if t > 0:
                 state = self.predict(state, step_noise.process, dt)
             if prior_means is not None:

@@ -79,6 +79,16 @@ class NoiseParameters:
         pick = lambda m: m[:, t] if m.dim() == 4 else m  # noqa: E731
         return NoiseParameters(pick(self.process), pick(self.measurement), pick(self.initial))
 
+    def steps(self) -> list[NoiseParameters]:
+        """The parameters of every step, ``T`` of them (:meth:`at_step` for all ``t`` at once).
+
+        One ``unbind`` per matrix: its backward stacks the steps' gradients once, where ``T``
+        separate selections each allocate and fill a gradient of the whole ``(B, T, k, k)``
+        tensor (quadratic in ``T``: 48% of a time-varying training epoch was that ``fill_``)."""
+        steps = next(m.shape[1] for m in (self.process, self.measurement, self.initial) if m.dim() == 4)
+        split = lambda m: m.unbind(1) if m.dim() == 4 else (m,) * steps  # noqa: E731
+        return [NoiseParameters(*parts) for parts in zip(split(self.process), split(self.measurement), split(self.initial))]
+
     @property
     def time_varying(self) -> bool:
         return any(m.dim() == 4 for m in (self.process, self.measurement, self.initial))

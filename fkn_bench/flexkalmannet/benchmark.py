@@ -23,7 +23,7 @@ from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.training import Trainer
 from fkn_bench.training.data import TrainingData, training_data
 
-__all__ = ["TrainingSpeed", "measure_training_speed", "training_benchmark"]
+__all__ = ["TrainingSpeed", "measure_training_speed", "training_benchmark", "time_varying_ratio"]
 
 
 @dataclass(frozen=True)
@@ -95,3 +95,25 @@ def measure_training_speed(
         trainer_seconds_per_epoch=durations[len(durations) // 2],
         trainer_epochs_timed=trainer_epochs,
     )
+
+
+def time_varying_ratio(scenario: str | Scenario = "ds1", config: FlexKalmanNetConfig | None = None, *,
+                       epochs: int = 3) -> tuple[float, float]:
+    """Median seconds per training epoch of the trainer in constant and in time-varying mode
+    (the same configuration otherwise), timed alternately in this process: ``(constant,
+    time_varying)``. Time-varying training runs the network on every valid measurement and the
+    filter on per-step noise; ``fkn-bench bench train --time-varying`` prints their ratio."""
+    scenario = get_scenario(scenario)
+    config = config if config is not None else FlexKalmanNetConfig()
+    trainers = [training_benchmark(scenario, config.replace(mode=mode))[1] for mode in ("constant", "time_varying")]
+    times: list[list[float]] = [[], []]
+    with torch_threads(config.threads):
+        for trainer in trainers:
+            trainer.run_epoch()  # warm-up
+        for _ in range(epochs):
+            for index, trainer in enumerate(trainers):
+                began = time.perf_counter()
+                trainer.run_epoch()
+                times[index].append(time.perf_counter() - began)
+    constant, varying = (sorted(t)[len(t) // 2] for t in times)
+    return constant, varying

@@ -32,6 +32,23 @@ def test_noise_parameters_from_std_to_and_at_step() -> None:
     assert batched.process.shape == (2, 4, 2, 2) and batched.time_varying
     step = batched.at_step(3)
     assert step.process.shape == (2, 2, 2) and step.measurement.shape == (1, 1) and not step.time_varying
+    steps = NoiseParameters.from_std(torch.rand(2, 4, 2) + 0.5, torch.ones(1), torch.ones(2)).steps()
+    assert len(steps) == 4
+
+
+def test_steps_are_at_step_of_every_step_and_carry_the_same_gradients() -> None:
+    """``steps()`` (one unbind) is ``at_step(t)`` for every ``t``, in value and in gradient."""
+    std = (torch.rand(2, 5, 3, dtype=torch.float64) + 0.5).requires_grad_()
+    noise = NoiseParameters.from_std(std, torch.ones(2, 5, 1, dtype=torch.float64), torch.ones(3))
+    weights = torch.rand(5, 3, 3, dtype=torch.float64)
+    unbound = sum((s.process * w).sum() + s.measurement.sum() for s, w in zip(noise.steps(), weights))
+    (gradient,) = torch.autograd.grad(unbound, std, retain_graph=True)
+    selected = sum((noise.at_step(t).process * weights[t]).sum() + noise.at_step(t).measurement.sum() for t in range(5))
+    (expected,) = torch.autograd.grad(selected, std)
+    torch.testing.assert_close(gradient, expected, rtol=0, atol=0)
+    for t, s in enumerate(noise.steps()):
+        torch.testing.assert_close(s.process, noise.at_step(t).process, rtol=0, atol=0)
+        assert s.initial is noise.initial  # constant entries are shared, not copied
 
 
 # ---------------------------------------------------------------------------- ParameterSet
