@@ -18,17 +18,18 @@ import sys
 from pathlib import Path
 
 from fkn_bench.cli import UsageError
-from fkn_bench.cli.options import add_command
+from fkn_bench.cli.options import add_command, default_leaderboards
 
 __all__ = ["add_parser", "run"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(subparsers, "leaderboard", "build leaderboards (Markdown, HTML, CSV) from stored results", __doc__)
-    parser.add_argument("--results", default="leaderboards/results", metavar="DIR",
-                        help="results directory written by fkn-bench run --out (default: leaderboards/results)")
-    parser.add_argument("--out", default="leaderboards", metavar="DIR",
-                        help="where to write the leaderboards (default: leaderboards)")
+    parser.add_argument("--results", metavar="DIR",
+                        help="results directory written by fkn-bench run --out (default: leaderboards/results, here "
+                             "or in the fkn-bench checkout)")
+    parser.add_argument("--out", metavar="DIR",
+                        help="where to write the leaderboards (default: the directory holding --results)")
     parser.add_argument("--cross", action="store_true",
                         help="instead: run every learned or tuned estimator with every family's committed parameters "
                              "on every named scenario and write the cross-scenario table (cross-scenario.md/.csv)")
@@ -37,6 +38,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.results is None:
+        args.results = str(default_leaderboards() / "results")
+    if args.out is None:
+        args.out = str(Path(args.results).parent)
     if args.cross:
         return _cross(args)
     from fkn_bench.harness.leaderboard import NOTES_FILE, write_leaderboards

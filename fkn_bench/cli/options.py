@@ -85,3 +85,19 @@ def output_directory(path: Any, option: str = "--out") -> Any:
     if not os.access(directory, os.W_OK | os.X_OK):
         raise UsageError(f"{option}: the directory {directory} is not writable")
     return directory
+
+
+def default_leaderboards() -> Any:
+    """The leaderboards directory the commands default to: ``./leaderboards`` when the current
+    directory has one (a checkout's root), else the ``leaderboards`` of the fkn-bench checkout
+    this package runs from (an editable or source install), so that README commands also work
+    from other directories; ``./leaderboards`` when neither exists."""
+    from pathlib import Path
+
+    here = Path("leaderboards")
+    if here.is_dir():
+        return here
+    import fkn_bench
+
+    checkout = Path(fkn_bench.__file__).resolve().parents[1] / "leaderboards"
+    return checkout if (checkout / "results").is_dir() else here

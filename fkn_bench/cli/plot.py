@@ -22,7 +22,7 @@ import argparse
 from pathlib import Path
 
 from fkn_bench.cli import usage_errors
-from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files
+from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, default_leaderboards, load_scenario_files
 
 __all__ = ["add_parser", "run"]
 
@@ -38,7 +38,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--split", default="test", choices=SPLITS, help="episode split (default: test)")
     parser.add_argument("--steps", type=int, metavar="N", help="draw only the first N steps (default: all)")
     parser.add_argument("--cut", type=int, default=100, metavar="STEPS", help="scored window start (default: 100)")
-    parser.add_argument("--results", metavar="DIR", help="also draw comparison bar charts from these results")
+    parser.add_argument("--results", metavar="DIR", nargs="?", const="",
+                        help="also draw comparison bar charts from these results (--results alone: leaderboards/results, "
+                             "here or in the fkn-bench checkout)")
     parser.add_argument("--out", default="figures", metavar="DIR", help="output directory (default: figures)")
     parser.add_argument("--ratios", action="store_true",
                         help="draw the inertia-ratio error over time instead (estimator default: rigid-body-ekf-ratios)")
@@ -70,6 +72,8 @@ def run(args: argparse.Namespace) -> int:
     with usage_errors(UnknownEstimatorError, SelectionError):
         resolved = select_estimators([args.estimator] if args.estimator else None, [scenario]).resolved[0]
     results = None
+    if args.results == "":  # --results without a directory
+        args.results = str(default_leaderboards() / "results")
     if args.results:
         with usage_errors(StoreError):
             results = ResultStore(args.results).load()

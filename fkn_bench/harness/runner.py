@@ -96,6 +96,6 @@ def run_grid(
             bar.update(1)
     results = Results(records)
     if store is not None:
-        store.write_summary(results, grid_provenance(cells, backend))
+        store.write_summary(results, grid_provenance(cells, backend), computed=len(records) - reused)
     failed = sum(r.status != "ok" for r in records)
     return GridRun(results=results, computed=len(records) - reused, reused=reused, failed=failed, mismatched=tuple(mismatched))

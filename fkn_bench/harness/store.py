@@ -41,7 +41,7 @@ import pandas as pd
 
 from fkn_bench.harness.grid import CellSpec, safe_name
 from fkn_bench.harness.records import CellRecord, Results
-from fkn_bench.io import read_json, write_bytes_atomic, write_json_atomic, write_text_atomic
+from fkn_bench.io import read_json, to_jsonable, write_bytes_atomic, write_json_atomic, write_text_atomic
 from fkn_bench.metrics import StatisticSums
 
 __all__ = [
@@ -251,7 +251,23 @@ class ResultStore:
             raise StoreError(f"no cell results under {self.root} (expected cells/<estimator>/<scenario>/seeds-*.json)")
         return Results(self.read_cell(path) for path in files)
 
-    def write_summary(self, results: Results, provenance: dict[str, Any]) -> None:
-        """Write ``results.csv`` (all rows, exact floats) and ``results.json`` (provenance)."""
-        write_text_atomic(self.root / "results.csv", rows_to_csv(results.rows))
-        write_json_atomic(self.root / "results.json", provenance)
+    def write_summary(self, results: Results, provenance: dict[str, Any], *, computed: int | None = None) -> None:
+        """Write ``results.csv`` (all rows, exact floats) and ``results.json`` (provenance).
+
+        Files whose content would not change are not rewritten, and a run that ``computed`` no
+        cell (every one reused) keeps the stored ``results.json`` when it describes the same grid
+        (estimators, sources, seeds, settings): its provenance stays that of the run that computed
+        the cells, and a no-op regeneration of committed results leaves the tree clean."""
+        csv_path, json_path = self.root / "results.csv", self.root / "results.json"
+        text = rows_to_csv(results.rows)
+        if not (csv_path.is_file() and csv_path.read_text(encoding="utf-8") == text):
+            write_text_atomic(csv_path, text)
+        if computed == 0 and json_path.is_file():
+            try:
+                stored = read_json(json_path)
+            except (OSError, ValueError):
+                stored = None
+            grid = lambda document: {k: v for k, v in document.items() if k not in ("environment", "backend")}  # noqa: E731
+            if isinstance(stored, dict) and grid(stored) == grid(to_jsonable(provenance)):
+                return
+        write_json_atomic(json_path, provenance)

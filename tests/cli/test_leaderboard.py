@@ -46,3 +46,17 @@ def test_missing_results_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture) -
     err = capsys.readouterr().err
     assert "not found" in err and "fkn-bench run --all --out" in err
     assert not (tmp_path / "out").exists()
+
+
+def test_the_default_results_are_found_from_any_directory(tmp_path, monkeypatch) -> None:  # noqa: ANN001
+    """Issue 20, item 6: `fkn-bench leaderboard` and `plot --results` default to the checkout's
+    leaderboards when the current directory has none."""
+    from pathlib import Path
+
+    from fkn_bench.cli.options import default_leaderboards
+
+    checkout = Path(__file__).resolve().parents[2] / "leaderboards"
+    monkeypatch.chdir(tmp_path)
+    assert default_leaderboards() == checkout
+    (tmp_path / "leaderboards").mkdir()
+    assert default_leaderboards() == Path("leaderboards")

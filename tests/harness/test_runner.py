@@ -114,3 +114,21 @@ def test_a_foreign_directory_is_refused_before_anything_runs(tmp_path: Path, sho
     with pytest.raises(ForeignDirectoryError, match="not an fkn-bench results directory"):
         run_grid(build_grid(["manual-ekf"], [short_ds1], range(2)), store=ResultStore(tmp_path), backend=backend, progress=False)
     assert backend.ran == [] and (tmp_path / "results.csv").read_text() == "mine\n"
+
+
+def test_a_run_that_computes_nothing_leaves_the_summary_files_untouched(tmp_path: Path, short_ds1: SimulatedSource,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 20, item 6: regenerating committed results with every cell reused must leave the
+    tree clean, even on another machine or commit (the provenance is the computing run's)."""
+    import fkn_bench.harness.runner as runner
+
+    store = ResultStore(tmp_path / "out")
+    cells = build_grid(["manual-ekf"], [short_ds1], [0, 1], chunk_size=1)
+    run_grid(cells, store=store, progress=False)
+    before = {name: (tmp_path / "out" / name).read_bytes() for name in ("results.csv", "results.json")}
+    monkeypatch.setattr(runner, "environment", lambda: {"commit": "another", "platform": "elsewhere"})
+    again = run_grid(cells, store=store, progress=False)
+    assert again.computed == 0
+    assert {name: (tmp_path / "out" / name).read_bytes() for name in before} == before
+    run_grid(cells[:1], store=store, progress=False)  # another grid (one cell): a new summary
+    assert b"elsewhere" in (tmp_path / "out" / "results.json").read_bytes()
