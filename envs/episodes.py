@@ -24,7 +24,9 @@ __all__ = ["Episodes", "EpisodeStream", "generate_episodes", "initial_states", "
 
 @dataclass(frozen=True, eq=False)
 class Episodes:
-    """A batch of episode segments (all the same length).
+    """A batch of episode segments (all the same length), batch first: one object for all the
+    sequences, whose arrays have the sequence axis first; ``episodes[i]`` is sequence ``i`` as an
+    :class:`Episodes` of one (``len(episodes)`` sequences).
 
     Attributes:
         scenario: the generating configuration.
@@ -51,6 +53,33 @@ class Episodes:
     @property
     def n_steps(self) -> int:
         return self.truth.shape[1]
+
+    def __len__(self) -> int:
+        """The number of sequences (the batch size)."""
+        return self.batch_size
+
+    def __getitem__(self, index: int | slice) -> Episodes:
+        """Sequence ``index`` (an :class:`Episodes` of one, still batch first: ``truth`` is
+        ``(1, T, 13)``) or a slice of the sequences; the arrays are views."""
+        if isinstance(index, slice):
+            rows = range(self.batch_size)[index]
+            picked: slice = index
+        elif isinstance(index, (int, np.integer)) and not isinstance(index, bool):
+            position = int(index) + (self.batch_size if index < 0 else 0)
+            if not 0 <= position < self.batch_size:
+                raise IndexError(f"sequence {index} out of range: these episodes hold {self.batch_size}")
+            rows, picked = range(position, position + 1), slice(position, position + 1)
+        else:
+            raise TypeError(f"episodes are indexed by an integer or a slice of sequences (got {index!r})")
+        return Episodes(
+            scenario=self.scenario,
+            seeds=tuple(self.seeds[i] for i in rows),
+            start=self.start,
+            times=self.times,
+            truth=self.truth[picked],
+            measurements=self.measurements[picked],
+            valid=self.valid[picked],
+        )
 
     def window(self, start: int, stop: int) -> Episodes:
         """Steps ``[start, stop)`` relative to this segment."""

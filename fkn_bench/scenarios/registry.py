@@ -96,6 +96,13 @@ def _from_table(name: str, table: Mapping[str, Any], earlier: Mapping[str, Scena
     if base_name is None:
         return Scenario.from_dict(data)
     base = earlier.get(str(base_name)) or get_scenario(str(base_name))
+    # a variant is not its base: unless the table says otherwise, it is described by what it
+    # changes, and does not inherit the base's tags (e.g. "paper": it is not the paper's data set)
+    changed = {k: v for k, v in data.items() if k not in ("name", "description", "tags")}
+    if "description" not in data:
+        what = ", ".join(f"{key} = {value!r}" for key, value in changed.items())
+        data["description"] = f"{base.name} with {what}" if what else f"{base.name} (same configuration)"
+    data.setdefault("tags", ())
     return base.replace(**data)
 
 

@@ -240,3 +240,17 @@ def test_tumble_flip_flips_within_the_test_split() -> None:
     q, w = episodes.truth[..., :4], episodes.truth[..., 7:10]
     body_x = quat.rotate(quat.conjugate(q.reshape(-1, 4)), w.reshape(-1, 3))[:, 0].reshape(2, -1)
     assert all(np.any(np.diff(np.sign(row)) != 0) for row in body_x)  # the spin axis reverses
+
+
+def test_episodes_index_by_sequence() -> None:
+    """Issue 20, item 7: `load_episodes(...)[0]` failed; an Episodes is one batched object."""
+    episodes = generate_episodes("ds1", [3, 4, 5], split="test")
+    assert len(episodes) == 3
+    first, last = episodes[0], episodes[-1]
+    assert first.seeds == (3,) and last.seeds == (5,) and first.truth.shape == (1, episodes.n_steps, 13)
+    np.testing.assert_array_equal(last.measurements[0], episodes.measurements[2])
+    assert episodes[1:].seeds == (4, 5) and episodes[1:].valid.shape == (2, episodes.n_steps)
+    with pytest.raises(IndexError, match="sequence 3 out of range: these episodes hold 3"):
+        episodes[3]
+    with pytest.raises(TypeError, match="integer or a slice"):
+        episodes["a"]

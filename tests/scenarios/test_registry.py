@@ -167,8 +167,10 @@ n_steps = 100
 """,
     )
     fast, faster, plain = load_scenarios(path)
-    assert fast == get_scenario("ds2").replace(name="my-fast", noise_scale=2.0, measurement_every=5)
-    assert faster == fast.replace(name="my-faster", dropout=0.1)
+    assert fast == get_scenario("ds2").replace(name="my-fast", noise_scale=2.0, measurement_every=5, tags=(),
+                                               description="ds2 with noise_scale = 2.0, measurement_every = 5")
+    assert faster == fast.replace(name="my-faster", dropout=0.1, description="my-fast with dropout = 0.1")
+    assert "paper" in get_scenario("ds2").tags and fast.tags == ()  # a variant is not the paper's data set
     assert plain == Scenario(name="plain", omega0=(0.0, 0.0, 0.1), n_steps=100)
     assert get_scenario("my-fast") == fast and get_scenario("my-faster") == faster
     # loading again replaces them
