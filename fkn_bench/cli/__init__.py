@@ -16,12 +16,17 @@ import sys
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
-__all__ = ["main", "UsageError", "usage_errors", "COMMANDS"]
+__all__ = ["main", "Interrupted", "UsageError", "usage_errors", "COMMANDS"]
 
 COMMANDS: tuple[str, ...] = (
     "scenarios", "simulate", "run", "train", "bench", "leaderboard", "plot", "record", "reproduce", "sweep",
 )
 """Subcommand modules, in the order ``--help`` lists them."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C during a command that saved its work: the message says what was kept and how to go
+    on (printed after "interrupted"; exit code 130)."""
 
 
 class UsageError(Exception):
@@ -71,8 +76,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, ConfigError, SizeLimitError) as exc:
         print(f"fkn-bench {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"fkn-bench {args.command}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as exc:
+        detail = f"; {exc}" if isinstance(exc, Interrupted) and str(exc) else ""
+        print(f"fkn-bench {args.command}: interrupted{detail}", file=sys.stderr)
         return 130
     except BrokenPipeError:  # e.g. `fkn-bench run | head`: the reader left, nothing to report
         devnull = os.open(os.devnull, os.O_WRONLY)

@@ -31,7 +31,7 @@ import json
 import sys
 from typing import Any
 
-from fkn_bench.cli import UsageError, usage_errors
+from fkn_bench.cli import Interrupted, UsageError, usage_errors
 from fkn_bench.cli.options import (add_command, add_scenario_file_option, check_minimum, load_scenario_files,
                                    parse_key_values)
 
@@ -162,6 +162,21 @@ def _recording_source(args: argparse.Namespace) -> Any:
     return source
 
 
+def _parameter_sources(resolved: Any) -> list[str]:
+    """One line per learned or tuned estimator: the parameter file (or checkpoint) it runs with,
+    and the scenario those parameters were trained on (several scenarios sharing a file: one line)."""
+    used: dict[tuple[str, str], list[str]] = {}
+    for pair in resolved:
+        metadata = getattr(pair.estimator, "metadata", None) or {}
+        source = metadata.get("artifact") or metadata.get("checkpoint") or getattr(pair.estimator, "checkpoint", None)
+        if source:
+            trained = metadata.get("scenario")
+            trained = trained.get("name") if isinstance(trained, dict) else trained
+            key = (pair.name, f"{source}" + (f" (trained on {trained})" if trained else ""))
+            used.setdefault(key, []).append(pair.scenario)
+    return [f"{name} on {', '.join(scenarios)}: parameters {source}" for (name, source), scenarios in used.items()]
+
+
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.harness import (
         MetricSettings,
@@ -188,10 +203,17 @@ def run(args: argparse.Namespace) -> int:
         scenarios = _scenarios(args)
         sources = [SimulatedSource(scenario, args.split) for scenario in scenarios]
     resolved = _estimators(args, scenarios)
+    for line in _parameter_sources(resolved):
+        print(line, file=sys.stderr)
     cells = build_grid(resolved, sources, range(args.seeds), settings=MetricSettings(cut=args.cut))
     store = _store(args) if args.out else None
     backend = make_backend(args.backend, workers=args.workers, scheduler=args.scheduler)
-    outcome = run_grid(cells, store=store, backend=backend, progress=not args.no_progress, rerun=args.rerun)
+    try:
+        outcome = run_grid(cells, store=store, backend=backend, progress=not args.no_progress, rerun=args.rerun)
+    except KeyboardInterrupt:
+        if store is None:
+            raise
+        raise Interrupted(f"the finished cells are saved in {args.out}: run the same command again to resume") from None
     order = [(r.name, r.scenario) for r in resolved]
     summaries = summarize_results(outcome.results, order)
     if args.json:

@@ -18,10 +18,11 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
-from fkn_bench.cli import usage_errors
+from fkn_bench.cli import Interrupted, usage_errors
 from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files, output_directory, parse_key_values
 
 __all__ = ["add_parser", "parse_options"]
@@ -78,9 +79,17 @@ def run(args: argparse.Namespace) -> int:
     scenarios = [get_scenario(name) for name in (args.scenario or ["ds1"])]
     label = "+".join(s.name for s in scenarios)
     out = output_directory(args.out if args.out is not None else Path("runs") / f"{args.estimator}-{label}")
-    with usage_errors(UnknownEstimatorError, ValueError, TypeError):
-        outcome = fit(args.estimator, scenarios, parse_options(args), out=out, resume=args.resume,
-                      progress=not args.no_progress, family=args.family)
+    started = time.time()
+    try:
+        with usage_errors(UnknownEstimatorError, ValueError, TypeError):
+            outcome = fit(args.estimator, scenarios, parse_options(args), out=out, resume=args.resume,
+                          progress=not args.no_progress, family=args.family)
+    except KeyboardInterrupt:
+        saved = Path(out) / "checkpoint.pt"
+        if not (saved.is_file() and saved.stat().st_mtime >= started):  # (not an earlier run's)
+            raise
+        raise Interrupted(f"{out / 'checkpoint.pt'} holds the last finished epoch: add --resume to the same "
+                          "command to continue from it") from None
     summary = outcome.summary()
     if args.write_artifact:
         from fkn_bench.training.artifacts import install_artifact
