@@ -313,6 +313,8 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         f"{trial.number}\nvalidation 13-state RMSE {trial.value:.6g} on scenario {settings.scenario.name}\n"
         f"searched: {', '.join(f'{k} = {v!r}' for k, v in trial.params.items())}\n"
         + (f"fixed by the search space: {', '.join(f'{k} = {v!r}' for k, v in settings.space.fixed.items())}\n"
+           "(the search's budget, not a recommendation: for a full training delete these lines below, or\n"
+           f"override them, e.g. {' '.join(f'--set {k}=<value>' for k in settings.space.fixed)})\n"
            if settings.space.fixed else "")
         + f"use: fkn-bench train --estimator {settings.estimator} --scenario {settings.scenario.name} --config best.toml"
     )
