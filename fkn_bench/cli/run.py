@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import sys
 from typing import Any
 
@@ -230,7 +231,10 @@ def run(args: argparse.Namespace) -> int:
         }
         print(json.dumps(to_jsonable(document), indent=2))
     else:
-        print(summary_text(summaries))
+        # on a terminal the table fits its width (two stacked tables when needed); piped or
+        # redirected output keeps the one wide table, for scripts
+        width = shutil.get_terminal_size().columns if sys.stdout.isatty() else None
+        print(summary_text(summaries, width=width))
     if args.out:
         mismatched = f", {len(outcome.mismatched)} after a checksum mismatch" if outcome.mismatched else ""
         print(f"fkn-bench run: {len(cells)} cells ({outcome.computed} computed{mismatched}, {outcome.reused} reused, "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import textwrap
 from collections.abc import Collection, Sequence
 from typing import Any
 
@@ -42,8 +43,26 @@ def format_percent(value: Any, missing: str = "-") -> str:
     return missing if value is None or not math.isfinite(float(value)) else f"{100 * float(value):.0f}%"
 
 
-def summary_text(summaries: Sequence[dict[str, Any]]) -> str:
-    """The run table: one line per (estimator, scenario), then a legend."""
+def _column_groups(header: Sequence[str], rows: Sequence[Sequence[str]], width: int) -> list[list[int]]:
+    """Columns ``1..`` packed in order into groups that fit ``width`` beside column 0 (the row
+    names, repeated in every group); a group holds at least one column."""
+    widths = [max(len(header[i]), *(len(row[i]) for row in rows)) + 2 for i in range(len(header))]
+    groups: list[list[int]] = [[]]
+    used = widths[0]
+    for index in range(1, len(header)):
+        if groups[-1] and used + widths[index] > width:
+            groups.append([])
+            used = widths[0]
+        groups[-1].append(index)
+        used += widths[index]
+    return groups
+
+
+def summary_text(summaries: Sequence[dict[str, Any]], width: int | None = None) -> str:
+    """The run table: one line per (estimator, scenario), then a legend. With ``width`` (a
+    terminal's columns), a table wider than that is printed as two stacked tables (accuracy;
+    settling, consistency and speed), each row led by its estimator and scenario, and the legend
+    is wrapped to the width."""
     header = [
         "estimator / scenario", "seeds", "13-state RMSE", "IQR", "att deg", "pos m", "w rad/s", "v m/s",
         "settle s", "diverged", "ANEES", "95% bounds", "in", "us/step",
@@ -77,7 +96,12 @@ def summary_text(summaries: Sequence[dict[str, Any]]) -> str:
         "lies in the 95% chi-square bounds. us/step: online step latency."
     )
     errors = [f"{s['estimator']} / {s['scenario']}: {e}" for s in summaries for e in s["errors"]]
-    text = text_table(header, rows) + "\n\n" + legend
+    table = text_table(header, rows)
+    if width is not None and max(map(len, table.splitlines())) > width:
+        table = "\n\n".join(text_table([header[0], *(header[i] for i in group)], [[row[0], *(row[i] for i in group)] for row in rows])
+                              for group in _column_groups(header, rows, width))
+        legend = "\n".join(textwrap.fill(line, width=max(width, 40)) for line in legend.splitlines())
+    text = table + "\n\n" + legend
     if errors:
         text += "\n\nFailures:\n" + "\n".join(f"  {e}" for e in errors)
     return text

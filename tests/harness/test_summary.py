@@ -61,6 +61,19 @@ def test_summary_text_has_one_line_per_pair(small_results_dir: Path) -> None:
     assert sum(" / ds" in line for line in lines[2:6]) == 4
 
 
+@pytest.mark.parametrize("width", [80, 120])
+def test_summary_text_fits_a_terminal(small_results_dir: Path, width: int) -> None:
+    """Issue 20, item 7: the table was ~150 columns wide; on a terminal it is stacked to fit, each
+    part led by the estimator and scenario, and the legend wrapped; every value still appears."""
+    summaries = summarize_results(ResultStore(small_results_dir).load())
+    wide, narrow = summary_text(summaries), summary_text(summaries, width=width)
+    assert max(map(len, wide.splitlines())) > 120
+    assert max(map(len, narrow.splitlines())) <= width
+    header = wide.splitlines()[0].split("  ")
+    assert all(column.strip() in narrow for column in header if column.strip())
+    assert narrow.count("manual-ekf / ds1") >= 2  # the row names lead every part
+
+
 def test_format_number() -> None:
     assert format_number(0.0197812) == "0.01978"
     assert format_number(5.4034, 3) == "5.40"
