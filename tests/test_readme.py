@@ -72,3 +72,23 @@ def test_add_your_estimator_example_registers_a_conforming_estimator(monkeypatch
     estimator = make_estimator("my-filter")
     assert estimator.name == "my-filter"
     check_input_rules(estimator)
+
+
+def test_readme_settings_of_the_quick_runs_are_the_codes() -> None:
+    """The figures README quotes about the quick runs come from the code (issue 20, item 3):
+    `reproduce --quick` (a 2x32 network, 3 epochs, 5 seeds) and the quick sweep space's fixed
+    values (`epochs = 4`, `episodes = 1`, `patience = 4`) and FlexKalmanNet's defaults README
+    gives for a full training (100 epochs, 4 episodes, patience 20)."""
+    import tomllib
+
+    from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
+    from fkn_bench.reproduce.pipeline import QUICK_EVAL_SEEDS, QUICK_OVERRIDES
+
+    text = " ".join(README.read_text().split())
+    quick = QUICK_OVERRIDES
+    assert (f"`--quick` runs the same pipeline with a {quick['layers']}x{quick['hidden']} network, "
+            f"{quick['epochs']} epochs and {QUICK_EVAL_SEEDS} seeds") in text
+    fixed = tomllib.loads((REPO / "fkn_bench" / "sweep" / "spaces" / "quick.toml").read_text())["fixed"]
+    assert f"(`epochs = {fixed['epochs']}`, `episodes = {fixed['episodes']}`, `patience = {fixed['patience']}`" in text
+    defaults = FlexKalmanNetConfig()
+    assert f"(the defaults are {defaults.epochs} epochs, {defaults.episodes} episodes, patience {defaults.patience})" in text
