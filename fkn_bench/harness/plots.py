@@ -1,5 +1,5 @@
-"""Figures in the style of the FlexKalmanNet paper, drawn headless (matplotlib's Agg canvas; no
-GUI backend is touched and pyplot's global state is never used).
+"""Figures in the style of the FlexKalmanNet paper, drawn headless in the house style of
+:mod:`fkn_bench.plotting` (Agg canvas, legends outside the data, units on every axis).
 
 Quaternions are drawn sign-aligned to the truth (``q`` and ``-q`` are the same attitude).
 """
@@ -11,31 +11,34 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.harness.reference import QuotedRow
 from fkn_bench.harness.trace import Trace
-from fkn_bench.io import atomic_path
 from fkn_bench.metrics import GROUP_UNITS, GROUPS, MetricSettings, group_errors, moving_rms, settling_time
+from fkn_bench.plotting import STATE_RMSE_UNIT, legend_beside, new_figure, save_png
 from fkn_bench.types import STATE_GROUPS, STATE_NAMES
 
-__all__ = ["states_figure", "uncertainty_figure", "errors_figure", "comparison_figure", "save_figure"]
+__all__ = ["states_figure", "uncertainty_figure", "errors_figure", "comparison_figure", "save_figure", "new_figure"]
 
-_GROUP_TITLES = {
+_GROUP_LABELS = {
     "attitude": "orientation q (-)",
     "position": "position r (m)",
-    "omega": "angular velocity w (rad/s)",
+    "omega": "angular velocity ω (rad/s)",
     "velocity": "velocity v (m/s)",
 }
+_GROUP_NAMES = {"omega": "angular velocity"}  # the others are named as in the metrics
+_STATE_UNITS = {"attitude": "-", "position": "m", "omega": "rad/s", "velocity": "m/s"}
 _COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red")
 
 
-def new_figure(width: float, height: float) -> Figure:
-    figure = Figure(figsize=(width, height), layout="constrained")
-    FigureCanvasAgg(figure)
-    return figure
+def _component_unit(component: int) -> str:
+    """The unit of state component ``component`` (0-12)."""
+    return next(_STATE_UNITS[g] for g, index in STATE_GROUPS.items() if index.start <= component < index.stop)
 
 
 def _aligned(trace: Trace, steps: int | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -54,23 +57,34 @@ def _title(trace: Trace) -> str:
     return f"{trace.estimator} on {trace.scenario}, seed {trace.seed}"
 
 
+def _component_legend(ax: Axes, names: Sequence[str], *, measured: bool) -> None:
+    """Legend beside ``ax``: one colour per component, one line style per kind (measured dots,
+    true dashed, estimate solid)."""
+    handles = [Line2D([], [], color=_COLOURS[k], linewidth=2, label=name) for k, name in enumerate(names)]
+    if measured:
+        handles.append(Line2D([], [], color="0.3", marker=".", linestyle="none", label="measured"))
+    handles += [Line2D([], [], color="0.3", linestyle="--", linewidth=1.0, label="true"),
+                Line2D([], [], color="0.3", linestyle="-", linewidth=1.4, label="estimate")]
+    legend_beside(ax, handles)
+
+
 def states_figure(trace: Trace, *, steps: int | None = None, title: str = "") -> Figure:
-    """Estimate (solid), measurement (dots) and truth (dashed) of the four state groups (the paper's
-    EKF result figures); ``title`` replaces the default one (estimator, scenario and seed)."""
+    """Estimate (solid), measurement (dots) and truth (dashed) of the four state groups over time
+    (s): orientation q (-), position r (m), angular velocity (rad/s), velocity (m/s); the paper's
+    EKF result figures. ``title`` replaces the default one (estimator, scenario and seed)."""
     times, truth, means, measured, ok = _aligned(trace, steps)
     figure = new_figure(10, 10)
     axes = figure.subplots(4, 1, sharex=True)
     for ax, (group, index) in zip(axes, STATE_GROUPS.items()):
+        has_measurement = index.start < 7
         for k, component in enumerate(range(index.start, index.stop)):
             colour = _COLOURS[k]
-            name = STATE_NAMES[component]
-            if component < 7:
-                ax.plot(times[ok], measured[ok, component], ".", color=colour, alpha=0.35, markersize=3,
-                        label=f"{name} measured")
-            ax.plot(times, truth[:, component], "--", color=colour, linewidth=1.0, label=f"{name} true")
-            ax.plot(times, means[:, component], "-", color=colour, linewidth=1.4, label=f"{name} estimate")
-        ax.set_title(_GROUP_TITLES[group], fontsize=10)
-        ax.legend(ncol=4, fontsize=7, loc="upper right")
+            if has_measurement:
+                ax.plot(times[ok], measured[ok, component], ".", color=colour, alpha=0.35, markersize=3)
+            ax.plot(times, truth[:, component], "--", color=colour, linewidth=1.0)
+            ax.plot(times, means[:, component], "-", color=colour, linewidth=1.4)
+        ax.set_ylabel(_GROUP_LABELS[group])
+        _component_legend(ax, [STATE_NAMES[c] for c in range(index.start, index.stop)], measured=has_measurement)
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
     figure.suptitle(title or _title(trace) + ": estimate, measurement and truth")
@@ -78,8 +92,9 @@ def states_figure(trace: Trace, *, steps: int | None = None, title: str = "") ->
 
 
 def uncertainty_figure(trace: Trace, *, steps: int | None = None) -> Figure:
-    """Each of the 13 components: estimate, truth and the +- 2 sigma band (~95.4%) from the
-    estimator's 13x13 state covariance (the paper's uncertainty figure)."""
+    """Each of the 13 components (in its unit) over time (s): estimate, truth and the +- 2 sigma
+    band (~95.4%) from the estimator's 13x13 state covariance (the paper's uncertainty figure).
+    The legend sits in the free panel of the 4 x 4 grid."""
     times, truth, means, _, _ = _aligned(trace, steps)
     covariances = trace.estimates.covariances
     sigma = (None if covariances is None
@@ -96,21 +111,28 @@ def uncertainty_figure(trace: Trace, *, steps: int | None = None) -> Figure:
             if sigma is not None:
                 ax.fill_between(times, means[:, component] - 2 * sigma[:, component],
                                 means[:, component] + 2 * sigma[:, component], color="tab:blue", alpha=0.2,
-                                linewidth=0, label="estimate ± 2σ")
-            ax.plot(times, truth[:, component], "k--", linewidth=1.0, label="true")
-            ax.plot(times, means[:, component], color="tab:blue", linewidth=1.2, label="estimate")
-            ax.set_title(STATE_NAMES[component], fontsize=10)
+                                linewidth=0)
+            ax.plot(times, truth[:, component], "k--", linewidth=1.0)
+            ax.plot(times, means[:, component], color="tab:blue", linewidth=1.2)
+            ax.set_ylabel(f"{STATE_NAMES[component]} ({_component_unit(component)})")
             ax.grid(alpha=0.3)
-    axes[0, 0].legend(fontsize=7)
-    for ax in axes[-1]:
+    handles = [Line2D([], [], color="k", linestyle="--", linewidth=1.0, label="true"),
+               Line2D([], [], color="tab:blue", linewidth=1.2, label="estimate")]
+    if sigma is not None:
+        handles.append(Patch(color="tab:blue", alpha=0.2, linewidth=0, label="estimate ± 2σ"))
+    axes[1, 3].legend(handles=handles, loc="center", fontsize=10)  # an empty panel: over no data
+    axes[0, 3].xaxis.set_tick_params(labelbottom=True)  # the panel below it is empty
+    axes[0, 3].set_xlabel("time (s)")
+    for ax in axes[-1, :3]:
         ax.set_xlabel("time (s)")
     figure.suptitle(_title(trace) + ": estimates with 2σ uncertainty bands")
     return figure
 
 
 def errors_figure(trace: Trace, *, settings: MetricSettings | None = None, steps: int | None = None) -> Figure:
-    """Group errors over the run with the settling band and time (:mod:`fkn_bench.metrics.settling`)
-    and the unscored transient (before the cut) shaded."""
+    """Group errors over time (s): attitude (deg), position (m), angular velocity (rad/s) and
+    velocity (m/s), with the moving RMS, the settling band and time
+    (:mod:`fkn_bench.metrics.settling`) and the unscored transient (before the cut) shaded."""
     settings = settings or MetricSettings()
     errors = group_errors(trace.truth[None], trace.estimates.means)
     n = len(trace.times) if steps is None else min(int(steps), len(trace.times))
@@ -128,44 +150,72 @@ def errors_figure(trace: Trace, *, settings: MetricSettings | None = None, steps
         if result.settled[0]:
             ax.axvline(result.time[0], color="tab:red", linewidth=1.2, label=f"settled at {result.time[0]:.1f} s")
         else:
-            ax.text(0.99, 0.9, "never settled", transform=ax.transAxes, ha="right", color="tab:red")
-        ax.set_ylabel(f"{group} ({GROUP_UNITS[group]})")
-        ax.legend(fontsize=7, loc="upper right")
+            ax.plot([], [], color="tab:red", linestyle="none", marker="x", label="never settled")
+        ax.set_ylabel(f"{_GROUP_NAMES.get(group, group)} error ({GROUP_UNITS[group]})")
+        legend_beside(ax)
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel("time (s)")
     figure.suptitle(_title(trace) + ": errors and settling")
     return figure
 
 
+def _rmse_label(name: str, diverged: float, value: float, off_scale: bool) -> str:
+    """An estimator's tick label, with its diverged share and its RMSE when the bar is off the scale."""
+    notes = [f"{100 * diverged:.0f}% diverged"] if diverged > 0 else []
+    notes += [f"RMSE {value:.2g}, off scale"] if off_scale else []
+    return name + (f"  [{'; '.join(notes)}]" if notes else "")
+
+
+def _rmse_limit(values: np.ndarray, spans: np.ndarray) -> tuple[float, np.ndarray]:
+    """The right end of the RMSE axis and which ``values`` lie beyond it: a value above ten times
+    the median (a diverged filter's 1e30) would squash every other bar, so it is left off the
+    scale; the axis ends 10% beyond the largest remaining value or interquartile end."""
+    finite = values[np.isfinite(values) & (values > 0)]
+    cap = 10.0 * float(np.median(finite)) if finite.size else np.inf
+    off = np.isfinite(values) & (values > cap)
+    shown = np.concatenate([values[~off], spans[np.isfinite(spans) & (spans <= cap)]])
+    shown = shown[np.isfinite(shown)]
+    return (1.1 * float(shown.max()) if shown.size and shown.max() > 0 else 1.0), off
+
+
 def comparison_figure(scenario: str, summaries: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow] = ()) -> Figure:
-    """Bar chart of the 13-state RMSE per estimator on ``scenario`` (mean over seeds; the line
-    spans the interquartile range; diverged shares annotated; quoted paper rows hatched)."""
-    labels = [s["estimator"] for s in summaries] + [q.label for q in quoted]
-    values = [s["state_rmse"] for s in summaries] + [q.state_rmse for q in quoted]
-    figure = new_figure(max(6.0, 1.2 * len(labels) + 2), 5)
+    """Horizontal bar chart of the 13-state RMSE (mixed SI units) per estimator on ``scenario``,
+    in the order given (best first, at the top): the bar is the mean over seeds, the black line
+    spans the interquartile range; quoted paper rows are hatched at the bottom. A diverged share,
+    and the value of a bar beyond ten times the median (drawn to the axis' end), are written in
+    the estimator's tick label (red), clear of the bars and lines."""
+    values = np.asarray([s["state_rmse"] for s in summaries] + [q.state_rmse for q in quoted], dtype=float)
+    iqr = [(s["statistics"]["state_rmse"]["q25"], s["statistics"]["state_rmse"]["q75"]) for s in summaries]
+    limit, off = _rmse_limit(values, np.asarray([high for _, high in iqr], dtype=float))
+    diverged = [float(s.get("diverged_fraction") or 0.0) for s in summaries] + [0.0] * len(quoted)
+    names = [s["estimator"] for s in summaries] + [q.label for q in quoted]
+    labels = [_rmse_label(n, d, v, o) for n, d, v, o in zip(names, diverged, values, off)]
+    # wide enough for the longest tick label beside a 5-inch bar area (about 0.08 in per character)
+    figure = new_figure(max(8.0, 5.2 + 0.08 * max(map(len, labels), default=0)), max(3.0, 0.32 * len(labels) + 1.8))
     ax = figure.subplots()
-    x = np.arange(len(labels))
-    bars = ax.bar(x, np.nan_to_num(np.asarray(values, dtype=float), nan=0.0), color="tab:blue")
+    y = np.arange(len(labels))
+    bars = ax.barh(y, np.minimum(np.nan_to_num(values, nan=0.0), limit), height=0.7, color="tab:blue")
     for bar in bars[len(summaries):]:
         bar.set_facecolor("white")
         bar.set_edgecolor("tab:gray")
         bar.set_hatch("//")
-    for i, s in enumerate(summaries):
-        st = s["statistics"]["state_rmse"]
-        if np.isfinite(st["q25"]) and np.isfinite(st["q75"]):
-            ax.plot([i, i], [st["q25"], st["q75"]], color="black", linewidth=2)
-        if s["diverged_fraction"] and s["diverged_fraction"] > 0:
-            ax.annotate(f"{100 * s['diverged_fraction']:.0f}% diverged", (i, values[i]), ha="center",
-                        va="bottom", fontsize=8, color="tab:red", xytext=(0, 3), textcoords="offset points")
-    ax.set_xticks(x, labels, rotation=20, ha="right")
-    ax.set_ylabel("13-state RMSE (mean over seeds; line: IQR)")
+    for i, (low, high) in enumerate(iqr):
+        if np.isfinite(low) and np.isfinite(high):
+            ax.plot([low, high], [i, i], color="black", linewidth=2, solid_capstyle="butt")
+    ax.set_yticks(y, labels)
+    for tick, d, o in zip(ax.get_yticklabels(), diverged, off):
+        if d > 0 or o:
+            tick.set_color("tab:red")
+    ax.set_xlim(0.0, limit)
+    ax.invert_yaxis()  # best at the top
+    ax.set_xlabel(f"13-state RMSE ({STATE_RMSE_UNIT})\nbar: mean over seeds; line: interquartile range")
+    ax.set_ylabel("estimator, best first")
     ax.set_title(f"{scenario}: estimators compared (lower is better)")
-    ax.grid(axis="y", alpha=0.3)
+    ax.grid(axis="x", alpha=0.3)
+    ax.set_axisbelow(True)
     return figure
 
 
-def save_figure(figure: Figure, path: str | Path, *, dpi: int = 120) -> Path:
-    """Write ``figure`` as PNG atomically; returns the path."""
-    with atomic_path(path, suffix=".png") as tmp:
-        figure.savefig(tmp, format="png", dpi=dpi)
-    return Path(path)
+def save_figure(figure: Figure, path: str | Path, *, dpi: int = 100) -> Path:
+    """Write ``figure`` as PNG atomically (:func:`fkn_bench.plotting.save_png`); returns the path."""
+    return save_png(figure, path, dpi=dpi)

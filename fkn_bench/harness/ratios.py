@@ -19,7 +19,7 @@ from fkn_bench.envs import generate_episodes
 from fkn_bench.envs.episodes import true_inertia
 from fkn_bench.filters.rigid_body import inertia_ratios
 from fkn_bench.harness.estimators import ResolvedEstimator
-from fkn_bench.harness.plots import new_figure
+from fkn_bench.plotting import legend_below, new_figure
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
 
@@ -74,9 +74,10 @@ def ratio_convergence(resolved: ResolvedEstimator, scenario: Scenario, seeds: in
 
 
 def ratio_figure(results: list[RatioConvergence], *, threshold: float = 0.02, at: float = 600.0):  # noqa: ANN201
-    """Error over time per scenario: the median and the 10-90% band over seeds, the threshold and
-    the time at which it is checked marked."""
-    figure = new_figure(9.0, 4.0)
+    """Inertia-ratio error ``max |k_est - k_true|`` (-, log scale) over time (s) per scenario: the
+    median and the 10-90% band over seeds, the threshold and the time at which it is checked
+    marked; the legend below the axes."""
+    figure = new_figure(9.0, 4.4)
     ax = figure.add_subplot(1, 1, 1)
     for result in results:
         median = np.nanmedian(result.errors, axis=0)
@@ -85,9 +86,9 @@ def ratio_figure(results: list[RatioConvergence], *, threshold: float = 0.02, at
         line = ax.semilogy(result.times, median, label=f"{result.scenario} (median; {share:.0%} of "
                                                        f"{len(result.seeds)} seeds < {threshold} at {at:g} s)")[0]
         ax.fill_between(result.times, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
-    ax.axhline(threshold, color="k", linestyle="--", linewidth=0.8)
-    ax.axvline(at, color="k", linestyle=":", linewidth=0.8)
-    ax.set(xlabel="time since the first sample (s)", ylabel="max |k_est - k_true|",
+    ax.axhline(threshold, color="k", linestyle="--", linewidth=0.8, label=f"threshold {threshold:g}")
+    ax.axvline(at, color="k", linestyle=":", linewidth=0.8, label=f"checked at {at:g} s")
+    ax.set(xlabel="time since the first sample (s)", ylabel="max |k_est - k_true| (-)",
            title=f"{results[0].estimator}: inertia-ratio error (band: 10-90% of seeds)")
-    ax.legend(fontsize=8)
+    legend_below(figure, ax.get_legend_handles_labels()[0], ncols=1 if len(results) > 1 else 3)
     return figure

@@ -13,8 +13,8 @@ from __future__ import annotations
 import numpy as np
 from matplotlib.figure import Figure
 
-from fkn_bench.harness.plots import new_figure
 from fkn_bench.harness.trace import Trace
+from fkn_bench.plotting import legend_beside, new_figure
 from fkn_bench.types import OMEGA, STATE_NAMES
 
 __all__ = ["omega_sigma", "omega_uncertainty_figure"]
@@ -35,8 +35,9 @@ def omega_sigma(trace: Trace, steps: int | None = None) -> np.ndarray:
 
 
 def omega_uncertainty_figure(trace: Trace, *, steps: int = 500, title: str = "") -> Figure:
-    """Angular-rate estimate, truth and ``estimate +- 2 sigma`` for the first ``steps`` samples
-    (the paper's figure of the uncertainties of the angular-rate estimates, 2 sigma ~ 95.4%)."""
+    """Angular-rate estimate, truth and ``estimate +- 2 sigma`` (rad/s) over time (s) for the first
+    ``steps`` samples (the paper's figure of the uncertainties of the angular-rate estimates,
+    2 sigma ~ 95.4%); the legend beside the top panel."""
     n = min(int(steps), len(trace.times))
     times = trace.times[:n]
     means = trace.estimates.means[0, :n, OMEGA]
@@ -55,7 +56,7 @@ def omega_uncertainty_figure(trace: Trace, *, steps: int = 500, title: str = "")
         centre = float(np.nanmean(truth[:, k])) if n else 0.0
         ax.set_ylim(centre - half, centre + half)
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, loc="upper right")
+    legend_beside(axes[0], fontsize=8)
     axes[-1].set_xlabel(f"time (s); first {n} samples")
     figure.suptitle(title or f"{trace.estimator} on {trace.scenario}, seed {trace.seed}: angular-rate uncertainty")
     return figure

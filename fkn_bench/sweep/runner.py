@@ -16,7 +16,7 @@ Outputs in ``out``:
   attributes such as ``best_epoch``, ``epochs_run``, ``error`` and the ``process`` id that ran
   it, the last reported epoch);
 * ``parallel_coordinates.png``: the completed trials' hyperparameters mapped to their validation
-  RMSE (like the paper's sweep figure; drawn with ``optuna.visualization.matplotlib``);
+  RMSE (like the paper's sweep figure; :mod:`fkn_bench.sweep.figure`);
 * ``sweep.json``: settings, the reduced grid of ``random-grid``, counts per state and the best
   trial.
 """
@@ -257,22 +257,15 @@ def write_toml(path: str | Path, values: dict[str, Any], *, table: str | None = 
 
 
 def parallel_coordinates(trials: list[FrozenTrial], space: SearchSpace, path: Path, title: str) -> Path | None:
-    """Parallel-coordinates figure of the completed ``trials`` (None when there are none)."""
-    from fkn_bench.training.plots import save_png  # headless: matplotlib's Agg backend
+    """Parallel-coordinates figure of the completed ``trials``
+    (:func:`fkn_bench.sweep.figure.parallel_coordinates_figure`; None when there are none)."""
+    from fkn_bench.plotting import save_png  # headless: matplotlib's Agg canvas
+    from fkn_bench.sweep.figure import parallel_coordinates_figure
 
     done = completed(trials)
     if not done:
         return None
-    study = optuna.create_study(direction="minimize")
-    study.add_trials(done)
-    params = [n for n in space.names if len({repr(t.params.get(n)) for t in done}) > 1] or space.names
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", category=optuna.exceptions.ExperimentalWarning)
-        axes = optuna.visualization.matplotlib.plot_parallel_coordinate(study, params=params, target_name="validation RMSE")
-    figure = axes.figure
-    figure.set_size_inches(max(7.0, 1.6 * (len(params) + 1)), 5.0)
-    axes.set_title(title)
-    return save_png(figure, path, dpi=120)
+    return save_png(parallel_coordinates_figure(done, space, title=title), path, dpi=100)
 
 
 def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: dict[str, list[Any]] | None) -> SweepResult:
@@ -321,8 +314,7 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
     best_config = write_toml(out / "best.toml", config, table=settings.estimator, header=header)
     figure = parallel_coordinates(
         everything, settings.space, out / "parallel_coordinates.png",
-        f"{settings.name}: hyperparameters vs validation RMSE ({settings.sampler}, "
-        f"{len(completed(everything))} completed trials)",
+        f"{settings.name}: hyperparameters vs validation RMSE ({settings.sampler})",
     )
     write_json_atomic(out / "sweep.json", {
         "study_name": settings.name,

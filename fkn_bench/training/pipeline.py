@@ -275,7 +275,7 @@ def fit(
     if plots and len(history):
         loss = OBJECTIVE_LABELS[settings.objective].removesuffix(" per update").removesuffix(" per step")
         plot_losses(history, directory / "loss.png", title=f"{estimator} on {label} ({loss})",
-                    best_epoch=trainer.best_epoch)
+                    best_epoch=trainer.best_epoch, loss=loss)
         if not isinstance(model, SequenceModel):  # a network's own recursion has no standard deviations
             plot_parameters(history, directory / "parameters.png",
                             title=f"{estimator}: learned standard deviations ({label})")
