@@ -83,8 +83,12 @@ class _no_exit:
 @pytest.mark.parametrize("delay", [0.3, 1.5])
 def test_ctrl_c_at_start_up_or_while_running_exits_130_in_one_line(delay: float, tmp_path: Path) -> None:
     """SIGINT while the command imports and builds its parser (0.3 s), and while it runs (1.5 s)."""
+    # SIGINT back to its default in the child: a test run started in the background (`cmd &` in
+    # a non-interactive shell, as CI may) inherits it ignored, and Python then never raises
+    # KeyboardInterrupt
     process = subprocess.Popen([shutil.which("fkn-bench"), "run", "--seeds", "2", "--no-progress"], cwd=tmp_path,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(delay)
     process.send_signal(signal.SIGINT)
     _, err = process.communicate(timeout=60)
