@@ -62,6 +62,34 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     if signal.getsignal(signal.SIGINT) is fkn_bench._startup_interrupt:  # Ctrl-C is ours from here on
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    previous_term = _handle_sigterm()
+    try:
+        return _main(argv)
+    finally:
+        if previous_term is not None:
+            signal.signal(signal.SIGTERM, previous_term)
+
+
+def _terminated(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt("terminated")
+
+
+def _handle_sigterm() -> object:
+    """SIGTERM (``kill``) ends a command as Ctrl-C does, so that it stops its worker processes
+    (killed outright, a run's process-pool workers were left orphaned); returns the previous
+    handler to restore, or None where none was installed (not the main thread, or SIGTERM
+    already handled by someone else)."""
+    try:
+        previous = signal.getsignal(signal.SIGTERM)
+        if previous is not signal.SIG_DFL:
+            return None
+        signal.signal(signal.SIGTERM, _terminated)
+        return previous
+    except (ValueError, AttributeError):  # not the main thread; no SIGTERM on this platform
+        return None
+
+
+def _main(argv: Sequence[str] | None) -> int:
     try:
         from fkn_bench.limits import SizeLimitError
         from fkn_bench.scenarios import ConfigError

@@ -94,3 +94,21 @@ def test_ctrl_c_at_start_up_or_while_running_exits_130_in_one_line(delay: float,
     _, err = process.communicate(timeout=60)
     assert process.returncode == 130 and "Traceback" not in err
     assert [line for line in err.splitlines() if line.strip()] in (["fkn-bench: interrupted"], ["fkn-bench run: interrupted"])
+
+
+def test_sigterm_ends_a_command_as_ctrl_c_does() -> None:
+    """`kill` (SIGTERM) raises KeyboardInterrupt inside a command, so that a run stops its worker
+    processes and says what it saved (killed outright, its pool workers were left orphaned)."""
+    from fkn_bench import cli
+
+    before = signal.getsignal(signal.SIGTERM)
+    if before is not signal.SIG_DFL:
+        pytest.skip("SIGTERM is handled by this test process's host")
+    try:
+        assert cli._handle_sigterm() is signal.SIG_DFL and signal.getsignal(signal.SIGTERM) is cli._terminated
+        with pytest.raises(KeyboardInterrupt, match="terminated"):
+            cli._terminated(signal.SIGTERM, None)
+        assert cli._handle_sigterm() is None  # already handled: left alone
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert main(["scenarios"]) == 0 and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored after a command
