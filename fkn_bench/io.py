@@ -91,12 +91,17 @@ def write_json_atomic(path: str | Path, document: Any, *, indent: int = 2) -> Pa
 
 
 def read_json(path: str | Path) -> Any:
-    """Read a JSON file; raises ``FileNotFoundError`` or ``ValueError`` naming the file."""
+    """Read a JSON file; raises ``FileNotFoundError`` (missing) or ``ValueError`` (a directory,
+    unreadable, not UTF-8, not JSON), naming the file."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise FileNotFoundError(f"file not found: {path}") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path} is a directory, not a JSON file") from None
+    except OSError as exc:
+        raise ValueError(f"{path} cannot be read ({exc.strerror or exc})") from None
     except UnicodeDecodeError as exc:
         raise ValueError(f"{path} is not UTF-8 text ({exc.reason})") from None
     try:

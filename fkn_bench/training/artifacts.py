@@ -192,11 +192,7 @@ def read_artifact(path: str | Path) -> dict[str, Any]:
         document = read_json(path)
     except FileNotFoundError:
         raise ArtifactError(f"learned-parameter file not found: {path}") from None
-    except IsADirectoryError:
-        raise ArtifactError(f"{path} is a directory, not a learned-parameter file (parameters.json)") from None
-    except OSError as exc:
-        raise ArtifactError(f"cannot read learned-parameter file {path}: {exc.strerror or exc}") from None
-    except ValueError as exc:
+    except ValueError as exc:  # a directory, unreadable, not UTF-8 or not JSON (read_json names the file)
         raise ArtifactError(str(exc)) from None
     return checked_document(document, path, ARTIFACT_FORMAT, ARTIFACT_FORMAT_VERSION, "a learned-parameter file",
                             ("estimator", "family", "estimator_config", "parameters"), ArtifactError)
