@@ -13,12 +13,17 @@ from gymnasium.vector.utils import batch_space
 
 from fkn_bench.envs.astrobee_tumble import _EpisodeWalk, episode_seed_for_reset
 from fkn_bench.envs.episodes import EpisodeStream
-from fkn_bench.envs.rewards import estimate_cost
-from fkn_bench.envs.spaces import MeasuredPose, action_space, observation_space, pose_space, validate_actions
+from fkn_bench.envs.rewards import estimate_cost_components, unit_quaternions
+from fkn_bench.envs.spaces import QUATERNION_NORM_MIN, MeasuredPose, action_space, observation_space, pose_space, validate_actions
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
 
-__all__ = ["AstrobeeTumbleVectorEnv"]
+__all__ = ["AstrobeeTumbleVectorEnv", "CHUNK_SAMPLES"]
+
+CHUNK_SAMPLES = 2**18
+"""Env-steps generated per chunk by default (``chunk_size=None``: ``CHUNK_SAMPLES // num_envs``
+steps, between 16 and 512): 256 steps at 1024 environments, the fastest of 32-512 there with the
+chunks' generation included (``fkn-bench bench run -k env_step``)."""
 
 
 class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
@@ -33,6 +38,15 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
     first observation of the next episode with reward 0. All sub-environments share the
     scenario, so their episodes end together. ``info`` carries ``step``, ``episode_seed`` and,
     with ``expose_truth=True``, ``truth (N, 13)``, each with its ``_key`` mask.
+
+    Autoreset: ``metadata["autoreset_mode"]`` is ``AutoresetMode.NEXT_STEP``, Gymnasium's
+    default, so ``gym.make_vec(..., vectorization_mode="sync")`` (a ``SyncVectorEnv`` of single
+    environments) gives the same outputs bit for bit, only slower; ``reset(options={"reset_mask":
+    ...})`` is refused (the episodes end together).
+
+    Speed: episode data are generated ``chunk_size`` steps at a time for all environments (see
+    :data:`CHUNK_SAMPLES`), step-major, so that a step reads contiguous memory; the reward is
+    computed on component rows (:func:`~fkn_bench.envs.rewards.estimate_cost_components`).
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -45,12 +59,14 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
         expose_truth: bool = False,
         reward_weights: Mapping[str, float] | None = None,
         render_mode: str | None = None,
-        chunk_size: int = 512,
+        chunk_size: int | None = None,
         **overrides: Any,
     ) -> None:
         if not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
         self.num_envs = num_envs
+        if chunk_size is None:
+            chunk_size = min(512, max(16, CHUNK_SAMPLES // num_envs))
         self._configure(scenario, expose_truth, reward_weights, render_mode, chunk_size, overrides)
         self.single_observation_space = observation_space(self.scenario.n_steps, self.scenario.dt)
         self.single_action_space = action_space()
@@ -65,21 +81,32 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
         self.episode_seeds = np.asarray(seeds, dtype=np.int64)
         self._start(EpisodeStream(self.scenario, [int(s) for s in seeds]))
 
+    def _load_chunk(self) -> None:
+        """Load the next chunk step-major, so that each step reads contiguous memory: poses
+        ``(n, N, 7)``, validity ``(n, N)`` and the truth component-major ``(n, 13, N)`` (each
+        component of one step a contiguous row, as the reward reads it), with the truth's
+        normalised quaternions ``(4, n, N)``."""
+        self._chunk_start = self._stream.index
+        self._times, self._truth_steps, self._pose_steps, valid = self._stream.advance(self._chunk_size, step_major=True)
+        self._valid_steps = valid.astype(np.int64)
+        self._unit_truth = unit_quaternions(self._truth_steps.transpose(1, 0, 2))
+
     def _observation(self) -> dict[str, Any]:
         i = self._index - self._chunk_start
         return {
-            "pose": self._meas[:, i].copy().view(MeasuredPose),
-            "valid": self._valid[:, i].astype(np.int64),
+            "pose": self._pose_steps[i].copy().view(MeasuredPose),
+            "valid": self._valid_steps[i].copy(),
             "time": np.full(self.num_envs, self._times[i]),
         }
 
     def _info(self) -> dict[str, Any]:
-        info: dict[str, Any] = {"step": np.full(self.num_envs, self._index, dtype=np.int64)}
+        n = self.num_envs
+        info: dict[str, Any] = {"step": np.full(n, self._index, dtype=np.int64)}
         info["episode_seed"] = self.episode_seeds.copy()
         if self.expose_truth:
-            info["truth"] = self._truth[:, self._index - self._chunk_start].copy()
+            info["truth"] = self._truth_steps[self._index - self._chunk_start].T.copy()
         for key in list(info):  # Gymnasium's masks: every sub-environment has every key
-            info[f"_{key}"] = np.ones(self.num_envs, dtype=bool)
+            info[f"_{key}"] = np.ones(n, dtype=bool)
         return info
 
     # ------------------------------------------------------------------ Gymnasium API
@@ -115,9 +142,23 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
             self._start_episodes([episode_seed_for_reset(None, rng) for rng in self._rngs])
             self._needs_autoreset = False
             return self._observation(), np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool), self._info()
-        estimates = validate_actions(actions, batch=n)
-        truth = self._truth[:, self._index - self._chunk_start]
-        rewards = -estimate_cost(truth, estimates, self.reward_weights)
+        rewards = self._rewards(actions)
         truncated = self._needs_autoreset = self._next_step()
         terminated = np.zeros(n, dtype=bool)
         return self._observation(), rewards, terminated, np.full(n, truncated), self._info()
+
+    def _rewards(self, actions: ArrayF) -> ArrayF:
+        """Rewards of ``actions (N, 13)`` at the current step, validated as
+        :func:`~fkn_bench.envs.spaces.validate_actions` does (same errors). The usual float64
+        ``(N, 13)`` array is scored first and checked through its result: a NaN or infinite
+        entry makes its reward non-finite, and then the full validation names the entry."""
+        n = self.num_envs
+        if not (type(actions) is np.ndarray and actions.dtype == np.float64 and actions.shape == (n, 13)):
+            actions = validate_actions(actions, batch=n)
+        estimate = np.ascontiguousarray(actions.T)
+        i = self._index - self._chunk_start
+        cost = estimate_cost_components(self._truth_steps[i], estimate, self.reward_weights, unit_truth=self._unit_truth[:, i])
+        e0, e1, e2, e3 = estimate[0], estimate[1], estimate[2], estimate[3]
+        if not (np.isfinite(cost).all() and (e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3).min() >= QUATERNION_NORM_MIN):
+            validate_actions(actions, batch=n)  # raises, naming the entry (else: finite actions whose error overflows)
+        return -cost

@@ -65,25 +65,33 @@ class ForcedRotation:
         self._rate = rate  # rad/s
         axis = self._omega / np.where(rate > 0, rate, 1.0)[:, None]
         self._axis_q0 = quat.multiply(np.concatenate([np.zeros((len(rate), 1)), axis], axis=1), self._q0)
+        # component-major copies for the step-major layout (broadcasting over a strided inner
+        # axis is 4x slower)
+        self._q0_t, self._axis_q0_t = np.ascontiguousarray(self._q0.T), np.ascontiguousarray(self._axis_q0.T)
+        self._omega_t = np.ascontiguousarray(self._omega.T)
         self._index = 0
 
-    def sample(self, start: int, n: int) -> tuple[ArrayF, ArrayF]:
-        """Samples ``start .. start+n-1``: attitudes ``(B, 4, n)`` and rates ``(B, 3, n)``.
+    def sample(self, start: int, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
+        """Samples ``start .. start+n-1``: attitudes ``(B, 4, n)`` and rates ``(B, 3, n)``
+        (``step_major``: ``(n, 4, B)`` and ``(n, 3, B)``, the same values).
 
         With ``h = |omega| t / 2`` and axis ``u``: ``exp(omega t / 2) (x) q0 =
         cos(h) q0 + sin(h) ([0, u] (x) q0)``, two precomputed quaternions per episode.
         """
-        batch = self._q0.shape[0]
-        half_angle = 0.5 * self._rate[:, None] * (np.arange(start, start + n) * self._dt)[None, :]
+        times = np.arange(start, start + n) * self._dt
+        if step_major:
+            half_angle = 0.5 * self._rate[None, :] * times[:, None]
+            q = np.multiply(np.cos(half_angle)[:, None, :], self._q0_t[None])
+            q += np.sin(half_angle)[:, None, :] * self._axis_q0_t[None]
+            return q, np.broadcast_to(self._omega_t[None], (n, 3, len(self._rate)))
+        half_angle = 0.5 * self._rate[:, None] * times[None, :]
         q = np.multiply(np.cos(half_angle)[:, None, :], self._q0[:, :, None])
         q += np.sin(half_angle)[:, None, :] * self._axis_q0[:, :, None]
-        omega = np.empty((batch, 3, n))
-        omega[...] = self._omega[:, :, None]
-        return q, omega
+        return q, np.broadcast_to(self._omega[:, :, None], (len(self._rate), 3, n))
 
-    def advance(self, n: int) -> tuple[ArrayF, ArrayF]:
+    def advance(self, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
         """Next ``n`` samples (see :meth:`sample`)."""
-        out = self.sample(self._index, n)
+        out = self.sample(self._index, n, step_major=step_major)
         self._index += n
         return out
 
@@ -154,11 +162,12 @@ class FreeTumble:
         k4 = self._derivative(y + h * k3)
         return y + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
-    def advance(self, n: int) -> tuple[ArrayF, ArrayF]:
-        """Next ``n`` samples: attitudes ``(B, 4, n)`` and world-frame rates ``(B, 3, n)``."""
+    def advance(self, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
+        """Next ``n`` samples: attitudes ``(B, 4, n)`` and world-frame rates ``(B, 3, n)``
+        (``step_major``: ``(n, 4, B)`` and ``(n, 3, B)``, the same values)."""
         batch = self._y.shape[0]
-        q_out = np.empty((batch, n, 4))
-        w_out = np.empty((batch, n, 3))
+        q_out = np.empty((n, 4, batch) if step_major else (batch, n, 4))
+        w_out = np.empty((n, 3, batch) if step_major else (batch, n, 3))
         y = self._y
         for i in range(n):
             if self._started:
@@ -166,7 +175,13 @@ class FreeTumble:
                     y = self._step(y)
                 y[:, :4] /= np.sqrt(np.sum(y[:, :4] * y[:, :4], axis=1))[:, None]
             self._started = True
-            q_out[:, i] = y[:, :4]
-            w_out[:, i] = _rotate(y[:, :4], y[:, 4:])
+            if step_major:
+                q_out[i] = y[:, :4].T
+                w_out[i] = _rotate(y[:, :4], y[:, 4:]).T
+            else:
+                q_out[:, i] = y[:, :4]
+                w_out[:, i] = _rotate(y[:, :4], y[:, 4:])
         self._y = y
+        if step_major:
+            return q_out, w_out
         return q_out.transpose(0, 2, 1), w_out.transpose(0, 2, 1)

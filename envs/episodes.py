@@ -174,19 +174,33 @@ class EpisodeStream:
                 self.index += n
         self.index = index
 
-    def advance(self, n: int) -> tuple[ArrayF, ArrayF, ArrayF, ArrayB]:
+    def advance(self, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF, ArrayF, ArrayB]:
         """The next ``n`` steps (clipped at the episode end).
 
         Returns:
             ``(times (n,), truth (B, n, 13), measurements (B, n, 7), valid (B, n))``; the two
-            state arrays are views of component-major buffers (not C-contiguous).
+            state arrays are views of component-major buffers (not C-contiguous). With
+            ``step_major`` (the vector environment's layout: each step's data contiguous), the
+            same values as ``truth (n, 13, B)`` (each component of a step a contiguous row),
+            ``measurements (n, B, 7)`` and ``valid (n, B)``, all C-contiguous.
         """
         n = max(0, min(int(n), self.scenario.n_steps - self.index))
         check_memory(len(self.seeds) * n * GENERATION_BYTES_PER_STEP,
                      f"generating {len(self.seeds)} episode(s) of {n} steps of scenario {self.scenario.name}",
                      "fewer seeds or a scenario with fewer steps (n_steps)")
         times = np.arange(self.index, self.index + n) * self.scenario.dt
-        q, omega = self._rotation.advance(n)
+        q, omega = self._rotation.advance(n, step_major=step_major)
+        if step_major:  # (n, 13, B)
+            truth = np.empty((n, 13, len(self.seeds)))
+            truth[:, 0:4] = q
+            v0, r0 = np.ascontiguousarray(self._v0.T), np.ascontiguousarray(self._r0.T)
+            np.multiply(v0[None], times[:, None, None], out=truth[:, 4:7])
+            truth[:, 4:7] += r0[None]
+            truth[:, 7:10] = omega
+            truth[:, 10:13] = v0[None]
+            measurements, valid = self._measurements.generate(truth[:, :7], self.index, step_major=True)
+            self.index += n
+            return times, truth, measurements, valid
         # component-major buffer (B, 13, n): long inner loops; returned as a (B, n, 13) view
         truth = np.empty((len(self.seeds), 13, n))
         truth[:, 0:4] = q

@@ -115,18 +115,24 @@ class MeasurementGenerator:
         last_start = np.maximum.accumulate(starts, axis=1)[:, start - lookback :]
         return np.arange(start, stop)[None, :] - last_start < sc.burst_length
 
-    def generate(self, truth_pose: ArrayF, start: int) -> tuple[ArrayF, ArrayB]:
+    def generate(self, truth_pose: ArrayF, start: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayB]:
         """Measurements of true poses at global steps ``start ..``, component-major.
 
         Args:
-            truth_pose: ``(B, 7, n)`` true ``[q, r]`` of the next ``n`` steps.
+            truth_pose: ``(B, 7, n)`` true ``[q, r]`` of the next ``n`` steps (``step_major``:
+                ``(n, 7, B)``).
             start: global step index of the first of them.
+            step_major: the layout of ``truth_pose`` and of the measurements returned.
 
         Returns:
-            ``(measurements, valid)``: ``(B, 7, n)`` with NaN where missing, and ``(B, n)``.
+            ``(measurements, valid)``: ``(B, 7, n)`` with NaN where missing, and ``(B, n)``
+            (``step_major``: ``(n, B, 7)`` and ``(n, B)``; the same values).
         """
         sc = self._scenario
-        batch, _, n = truth_pose.shape
+        if step_major:
+            n, _, batch = truth_pose.shape
+        else:
+            batch, _, n = truth_pose.shape
         stop = start + n
         steps = np.arange(start, stop)
         scheduled = steps[steps % sc.measurement_every == 0]
@@ -139,7 +145,7 @@ class MeasurementGenerator:
             valid &= ~self._burst_gaps(start, stop)
 
         # noisy poses at the scheduled steps only: (B, m, 7)
-        truth_at = truth_pose[:, :, columns].transpose(0, 2, 1)
+        truth_at = truth_pose[columns].transpose(2, 0, 1) if step_major else truth_pose[:, :, columns].transpose(0, 2, 1)
         pose = np.empty((batch, len(columns), 7))
         e = self.draws("attitude_noise", scheduled)
         e *= sc.sigma_attitude_effective
@@ -158,7 +164,11 @@ class MeasurementGenerator:
             flip = self.draws("sign_flip", scheduled) < sc.sign_flip_probability
             pose[..., :4] *= np.where(flip, -1.0, 1.0)[..., None]
 
+        kept = np.where(valid[:, columns, None], pose, np.nan)
+        if step_major:
+            out = np.full((n, batch, 7), np.nan)
+            out[columns] = kept.transpose(1, 0, 2)
+            return out, np.ascontiguousarray(valid.T)
         out = np.full((batch, 7, n), np.nan)
-        kept = valid[:, columns]
-        out[:, :, columns] = np.where(kept[..., None], pose, np.nan).transpose(0, 2, 1)
+        out[:, :, columns] = kept.transpose(0, 2, 1)
         return out, valid

@@ -24,6 +24,7 @@ from fkn_bench.types import STATE_DIM, STATE_NAMES, ArrayF
 __all__ = [
     "action_values",
     "MeasuredPose",
+    "QUATERNION_NORM_MIN",
     "PoseBox",
     "POSITION_LIMIT",
     "RATE_LIMIT",
@@ -97,6 +98,10 @@ def observation_space(n_steps: int, dt: float) -> spaces.Dict:
     )
 
 
+QUATERNION_NORM_MIN = 1e-12
+"""Smallest squared norm of an action's quaternion that can be scored (normalised)."""
+
+
 def action_space() -> spaces.Box:
     """The single-environment action space: a 13-dim state estimate in SI units.
 
@@ -113,7 +118,7 @@ def action_values(action: Any) -> list[float]:
     environment's step costs a few microseconds, and numpy's checks would dominate it."""
     if type(action) is np.ndarray and action.shape == (STATE_DIM,) and action.dtype == np.float64:
         values = action.tolist()
-        if all(map(math.isfinite, values)) and sum(v * v for v in values[:4]) >= 1e-12:
+        if all(map(math.isfinite, values)) and sum(v * v for v in values[:4]) >= QUATERNION_NORM_MIN:
             return values
     return validate_actions(action).tolist()
 
@@ -139,6 +144,6 @@ def validate_actions(actions: Any, batch: int | None = None) -> ArrayF:
             f"action must be finite: {where} ({STATE_NAMES[int(bad[-1])]}) is {array[tuple(bad)]}"
         )
     norm2 = np.sum(array[..., :4] ** 2, axis=-1)
-    if np.any(norm2 < 1e-12):
+    if np.any(norm2 < QUATERNION_NORM_MIN):
         raise ValueError("action quaternion action[..., 0:4] has zero norm; cannot score the attitude")
     return array

@@ -91,6 +91,39 @@ def test_vector_equals_single_envs_through_autoreset(scenario: str, overrides: d
     assert len(set(seeds)) == n_envs and not set(seeds) & {10, 11, 12}
 
 
+def test_sync_vectorization_equals_the_vector_entry_point() -> None:
+    """``gym.make_vec(..., vectorization_mode="sync")`` (Gymnasium's SyncVectorEnv of single
+    environments) and the batched ``vector_entry_point`` give the same bits: observations,
+    rewards, flags and infos (with their masks), through Gymnasium's next-step autoreset."""
+    n_steps = 20
+    kwargs = {"scenario": "ds1-flips", "n_steps": n_steps, "expose_truth": True, "measurement_every": 2}
+    sync = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="sync", **kwargs)
+    batched = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="vector_entry_point", chunk_size=7, **kwargs)
+    assert sync.metadata["autoreset_mode"] == batched.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+
+    def same(out_s: tuple, out_b: tuple, step: int) -> None:
+        *arrays_s, info_s = out_s
+        *arrays_b, info_b = out_b
+        for key in ("pose", "valid", "time"):
+            assert _bits(arrays_s[0][key]) == _bits(arrays_b[0][key]), (step, key)
+        for a, b in zip(arrays_s[1:], arrays_b[1:]):  # reward, terminated, truncated
+            assert _bits(a) == _bits(b), step
+        assert sorted(info_s) == sorted(info_b), step
+        for key in info_s:
+            assert _bits(info_s[key]) == _bits(info_b[key]), (step, key)
+
+    rng = np.random.default_rng(5)
+    out_s, out_b = sync.reset(seed=4), batched.reset(seed=4)
+    same(out_s, out_b, -1)
+    truncations = 0
+    for step in range(2 * n_steps + 3):  # two episodes, the autoreset steps, into a third
+        actions = out_b[-1]["truth"] + 0.05 * rng.standard_normal((3, 13))
+        out_s, out_b = sync.step(actions), batched.step(actions)
+        same(out_s, out_b, step)
+        truncations += int(out_b[3].sum())
+    assert truncations == 2 * 3
+
+
 def test_reset_with_list_of_seeds() -> None:
     kwargs = {"n_steps": 30, "expose_truth": True, "measurement_every": 2}
     vector = gym.make_vec(ENV_ID, num_envs=3, **kwargs)
