@@ -157,7 +157,8 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
             actions = validate_actions(actions, batch=n)
         estimate = np.ascontiguousarray(actions.T)
         i = self._index - self._chunk_start
-        cost = estimate_cost_components(self._truth_steps[i], estimate, self.reward_weights, unit_truth=self._unit_truth[:, i])
+        with np.errstate(all="ignore"):  # a bad action's NaN is caught below, and named
+            cost = estimate_cost_components(self._truth_steps[i], estimate, self.reward_weights, unit_truth=self._unit_truth[:, i])
         e0, e1, e2, e3 = estimate[0], estimate[1], estimate[2], estimate[3]
         if not (np.isfinite(cost).all() and (e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3).min() >= QUATERNION_NORM_MIN):
             validate_actions(actions, batch=n)  # raises, naming the entry (else: finite actions whose error overflows)
