@@ -93,6 +93,7 @@ def _main(argv: Sequence[str] | None) -> int:
     try:
         from fkn_bench.limits import SizeLimitError
         from fkn_bench.scenarios import ConfigError
+        from fkn_bench.wording import cli_words, one_line_warnings
 
         parser = build_parser()
         args = parser.parse_args(argv)
@@ -100,7 +101,8 @@ def _main(argv: Sequence[str] | None) -> int:
         print("fkn-bench: interrupted", file=sys.stderr)
         return 130
     try:
-        return int(args.handler(args) or 0)
+        with cli_words(), one_line_warnings(f"fkn-bench {args.command}"):  # flags, not keywords
+            return int(args.handler(args) or 0)
     except (UsageError, ConfigError, SizeLimitError) as exc:
         print(f"fkn-bench {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -81,6 +81,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     replay.add_argument("--measurement-topic", metavar="TOPIC", help="pose topic of the measurements (default: synthesise)")
     replay.add_argument("--repair", action="store_true", help="repair broken recordings (sort, deduplicate, renormalise)")
     replay.add_argument("--dt", metavar="SECONDS|native", help="replay time step (default: the scenario's)")
+    replay.add_argument("--time-source", choices=("auto", "header", "log"), default="auto",
+                        help="message times: header stamps, MCAP log times, or auto (header unless all zero)")
+    replay.add_argument("--quaternion-tolerance", type=float, default=1e-6, metavar="TOL",
+                        help="largest accepted |norm - 1| of a recorded quaternion (default: 1e-6)")
     add_scenario_file_option(parser)
     parser.set_defaults(handler=run)
 
@@ -149,6 +153,12 @@ def _recording_source(args: argparse.Namespace) -> Any:
     if args.scenario or args.all:
         raise UsageError("--recording replaces --scenario and --all")
     options: dict[str, Any] = {"repair": bool(args.repair)}
+    if args.time_source != "auto":
+        options["time_source"] = args.time_source
+    if args.quaternion_tolerance != 1e-6:
+        if not args.quaternion_tolerance > 0:
+            raise UsageError(f"--quaternion-tolerance must be a positive number (got {args.quaternion_tolerance})")
+        options["quaternion_tolerance"] = args.quaternion_tolerance
     for topic in ("truth_topic", "measurement_topic"):
         if getattr(args, topic):
             options[topic] = getattr(args, topic)

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from fkn_bench.cli import usage_errors
-from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files, output_directory
+from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files, output_directory
 
 __all__ = ["add_parser", "run"]
 
@@ -69,6 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.sweep import trial_config
     from fkn_bench.training import trainable
 
+    check_minimum(args, trials=1, grid_trials=1, top_k=1, workers=1, seed=0)
     load_scenario_files(args)
     with usage_errors(SpaceError):
         space: SearchSpace = load_space(resolve_space(args.space))

@@ -17,13 +17,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from fkn_bench.cli import Interrupted, usage_errors
-from fkn_bench.cli.options import add_command, add_scenario_file_option, load_scenario_files, output_directory, parse_key_values
+from fkn_bench.cli import Interrupted, UsageError, usage_errors
+from fkn_bench.cli.options import (add_command, add_scenario_file_option, check_minimum, load_scenario_files, output_directory,
+                                   parse_key_values)
 
 __all__ = ["add_parser", "parse_options"]
 
@@ -75,6 +77,9 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.scenarios import get_scenario
     from fkn_bench.training import fit
 
+    check_minimum(args, epochs=1, seed=0)
+    if args.lr is not None and not (math.isfinite(args.lr) and args.lr > 0):
+        raise UsageError(f"--lr must be a finite number > 0 (got {args.lr:g})")
     load_scenario_files(args)
     scenarios = [get_scenario(name) for name in (args.scenario or ["ds1"])]
     label = "+".join(s.name for s in scenarios)

@@ -47,8 +47,12 @@ class LocalBackend:
             for cell in cells:
                 yield run_cell(cell)
             return
+        from fkn_bench.wording import worker_initializer
+
         context = multiprocessing.get_context("spawn")  # no forked torch state
-        with concurrent.futures.ProcessPoolExecutor(max_workers=self.workers, mp_context=context) as pool:
+        initializer, initargs = worker_initializer()  # the command line's one-line warnings
+        with concurrent.futures.ProcessPoolExecutor(max_workers=self.workers, mp_context=context,
+                                                    initializer=initializer, initargs=initargs) as pool:
             futures = [pool.submit(run_cell, cell) for cell in cells]
             try:
                 for future in concurrent.futures.as_completed(futures):

@@ -86,9 +86,16 @@ class SimulatedSource:
 
 @lru_cache(maxsize=2)
 def _read_recording(path: str, options: tuple[tuple[str, Any], ...]) -> Any:
-    from fkn_bench.recordings import read_recording
+    """The recording, read without issuing its :class:`RecordingRepairWarning` s: the repairs
+    are in its report (``describe()["repairs"]``, the results' provenance, and the summary that
+    ``fkn-bench run`` prints), and every worker process reads the file again."""
+    import warnings
 
-    return read_recording(path, **dict(options))
+    from fkn_bench.recordings import RecordingRepairWarning, read_recording
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RecordingRepairWarning)
+        return read_recording(path, **dict(options))
 
 
 @dataclass(frozen=True)

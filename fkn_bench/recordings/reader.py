@@ -53,6 +53,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from fkn_bench.geometry.quaternion import xyzw_to_wxyz
 from fkn_bench.recordings.codecs import DecodeError, decode_stamped
 from fkn_bench.recordings.schemas import canonical_type_name
+from fkn_bench.wording import option, option_name
 
 __all__ = [
     "RecordingError", "TopicNotFoundError", "RecordingRepairWarning", "TopicInfo", "PoseSeries",
@@ -231,7 +232,7 @@ class McapRecording:
 
     def _skip_chunk(self, where: str, problem: str) -> None:
         self._repair(
-            f"{where} {problem}. Pass repair=True to skip damaged chunks (their messages are lost)",
+            f"{where} {problem}. Pass {option('repair')} to skip damaged chunks (their messages are lost)",
             f"skipped {where}, which {problem}",
         )
 
@@ -271,7 +272,7 @@ class McapRecording:
                     problem = f"its summary section cannot be read ({_describe(exc)})"
         if problem is not None:
             self._repair(
-                f"{problem}. Pass repair=True to read the messages stored before the damage, or recover the "
+                f"{problem}. Pass {option('repair')} to read the messages stored before the damage, or recover the "
                 "file with `mcap recover`",
                 f"{problem}; read the file front to back up to the damage",
             )
@@ -350,7 +351,7 @@ class McapRecording:
                 except Exception as exc:
                     problem = f"record {count} (near byte {fh.tell()}), which cannot be read ({_describe(exc)})"
                     self._repair(
-                        f"{problem}; the file is truncated or corrupt. Pass repair=True to use the messages before "
+                        f"{problem}; the file is truncated or corrupt. Pass {option('repair')} to use the messages before "
                         "the damage",
                         f"stopped reading at {problem}",
                     )
@@ -406,7 +407,7 @@ class McapRecording:
                         serial += 1
                 except (struct.error, ValueError) as exc:
                     self._repair(
-                        f"{where} is corrupt: its records cannot be parsed ({exc}). Pass repair=True to skip damaged chunks",
+                        f"{where} is corrupt: its records cannot be parsed ({exc}). Pass {option('repair')} to skip damaged chunks",
                         f"{where}: stopped at a damaged record ({exc})",
                     )
         return raw
@@ -530,7 +531,7 @@ class McapRecording:
             refuse(
                 i,
                 f"(log time {_seconds(log_time)}) cannot be decoded as {info.schema_name} ({_ENCODINGS[encoding]}): "
-                f"{exc}. Pass repair=True to drop undecodable messages",
+                f"{exc}. Pass {option('repair')} to drop undecodable messages",
                 f"dropped {len(dropped)} undecodable message(s) (first: #{i})",
             )
         if not rows:
@@ -550,7 +551,7 @@ class McapRecording:
             stamps, source = np.array(log, dtype=np.int64), "log"
         elif zero.all():
             raise self._error(
-                f"{role} topic {topic!r}: every header stamp is zero; use time_source='log' (or 'auto')",
+                f"{role} topic {topic!r}: every header stamp is zero; use {option('time_source', 'log')} (or 'auto')",
                 topic=topic, index=int(indices[0]),
             )
         else:
@@ -558,8 +559,8 @@ class McapRecording:
                 first = int(indices[np.argmax(zero)])
                 refuse(
                     first,
-                    "has a zero header stamp while others do not. Pass repair=True to drop such messages, or "
-                    "time_source='log'",
+                    "has a zero header stamp while others do not. "
+                    f"Pass {option('repair')} to drop such messages, or {option('time_source', 'log')}",
                     f"dropped {int(zero.sum())} message(s) with a zero header stamp (first: #{first})",
                 )
                 keep &= ~zero
@@ -583,7 +584,7 @@ class McapRecording:
             what = "a zero quaternion" if zero_q[i] else "a non-finite value (NaN or infinity)"
             refuse(
                 int(indices[i]),
-                f"has {what}; pass repair=True to drop such messages",
+                f"has {what}; pass {option('repair')} to drop such messages",
                 f"dropped {int(bad.sum())} message(s) with non-finite values or zero quaternions "
                 f"(first: #{int(indices[i])})",
             )
@@ -596,7 +597,7 @@ class McapRecording:
                 refuse(
                     int(indices[i]),
                     f"has a quaternion of norm {norms[i]:.9g}, not 1 (tolerance {quaternion_tolerance:g}); pass "
-                    "repair=True to renormalise such quaternions, or a larger quaternion_tolerance",
+                    f"{option('repair')} to renormalise such quaternions, or a larger {option_name('quaternion_tolerance')}",
                     f"renormalised {int(bad_norm.sum())} quaternion(s) with a norm off 1 by more than "
                     f"{quaternion_tolerance:g} (first: #{int(indices[i])}, norm {norms[i]:.9g})",
                 )
@@ -612,7 +613,7 @@ class McapRecording:
             refuse(
                 int(kept_indices[i]),
                 f"has stamp {_seconds(int(kept_stamps[i]))}, earlier than message #{int(kept_indices[i - 1])} "
-                f"({_seconds(int(kept_stamps[i - 1]))}): the time stamps are not monotonic. Pass repair=True to "
+                f"({_seconds(int(kept_stamps[i - 1]))}): the time stamps are not monotonic. Pass {option('repair')} to "
                 "sort the messages by stamp",
                 f"sorted the messages by stamp ({len(back)} went backwards; first: #{int(kept_indices[i])})",
             )
@@ -624,7 +625,7 @@ class McapRecording:
             refuse(
                 this,
                 f"has the same stamp {_seconds(int(kept_stamps[order[i]]))} as message #{before} (duplicate time "
-                "stamps). Pass repair=True to keep only the first message of each stamp",
+                f"stamps). Pass {option('repair')} to keep only the first message of each stamp",
                 f"dropped {len(same)} message(s) with a duplicate stamp, keeping the first of each "
                 f"(first dropped: #{this})",
             )

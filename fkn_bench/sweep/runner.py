@@ -42,6 +42,7 @@ from optuna.trial import FrozenTrial, TrialState
 from fkn_bench.io import atomic_path, write_json_atomic, write_text_atomic
 from fkn_bench.scenarios import Scenario
 from fkn_bench.sweep.objective import CATCH, SweepTask, make_objective, trial_config
+from fkn_bench.wording import worker_initializer
 from fkn_bench.sweep.space import SearchSpace, check_sweep_options
 from fkn_bench.sweep.study import completed, make_sampler, open_storage, reduced_grid, stage_names, storage_label
 
@@ -224,7 +225,9 @@ def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None
     out.mkdir(parents=True, exist_ok=True)
     stages = stage_names(settings.name, settings.sampler)
     spawn = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(settings.workers, mp_context=spawn) if settings.workers > 1 else nullcontext() as workers:
+    initializer, initargs = worker_initializer()  # the command line's one-line warnings, in workers too
+    with (ProcessPoolExecutor(settings.workers, mp_context=spawn, initializer=initializer, initargs=initargs)
+          if settings.workers > 1 else nullcontext()) as workers:
         for stage, name in stages:
             grid = _stage(settings, stage, name, stages[0][1], progress, say, workers)
     result = write_outputs(settings, stages, grid)

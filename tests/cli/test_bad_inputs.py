@@ -39,11 +39,15 @@ BAD_INPUTS = [
     ("train --estimator flexkalmannet --out afile", "--out: afile is a file, not a directory"),
     ("train --set hiddn=64 --estimator flexkalmannet --out t", "unknown FlexKalmanNet config keys ['hiddn']; valid:"),
     ("train --set hidden=abc --estimator flexkalmannet --out t", "FlexKalmanNet config key 'hidden' must be an integer (got 'abc')"),
+    ("train --epochs 0 --estimator flexkalmannet --out t", "--epochs must be a positive integer (got 0)"),
+    ("train --lr -1 --estimator flexkalmannet --out t", "--lr must be a finite number > 0 (got -1)"),
     ("record --scenario nope --out r.mcap", "unknown scenario 'nope'"),
     ("record --out /proc/fkn-bench/r.mcap --steps 10", "cannot write /proc/fkn-bench/r.mcap: "),  # (not even root may)
     ("reproduce --out afile", "--out: afile is a file, not a directory"),
     ("sweep --space nope --out s", "search-space file not found: nope"),
     ("sweep --space latin1.toml --out s", "search-space file latin1.toml is not UTF-8 text"),
+    ("sweep --space quick --trials 0 --out s", "--trials must be a positive integer (got 0)"),
+    ("sweep --space quick --workers 0 --out s", "--workers must be a positive integer (got 0)"),
     ("simulate --scenario nope", "unknown scenario 'nope'"),
     ("plot --results nope", "results directory not found: nope"),
     ("leaderboard --results nope", "results directory not found: nope"),
@@ -112,3 +116,27 @@ def test_sigterm_ends_a_command_as_ctrl_c_does() -> None:
     finally:
         signal.signal(signal.SIGTERM, before)
     assert main(["scenarios"]) == 0 and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored after a command
+
+
+@pytest.mark.parametrize("command", ["run", "record", "train", "reproduce", "sweep"])
+def test_warnings_reach_the_user_as_one_line_each(command: str, monkeypatch: pytest.MonkeyPatch,
+                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """A warning raised while a command runs is one line, ``fkn-bench CMD: warning: ...`` (no
+    file name, line number or source line), and messages spell options as flags."""
+    import importlib
+    import warnings
+
+    from fkn_bench.wording import option
+
+    def handler(args: object) -> int:
+        warnings.warn("first line\n  second line", UserWarning)
+        warnings.warn(f"pass {option('repair')}", DeprecationWarning)
+        return 0
+
+    monkeypatch.setattr(importlib.import_module(f"fkn_bench.cli.{command}"), "run", handler)
+    arguments = {"sweep": ["--space", "quick"], "record": ["--out", "r.mcap"]}.get(command, [])
+    assert main([command, *arguments]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == [f"fkn-bench {command}: warning: first line second line",
+                     f"fkn-bench {command}: warning (DeprecationWarning): pass --repair"]
+    assert option("repair") == "repair=True"  # outside a command: the Python spelling

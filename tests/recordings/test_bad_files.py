@@ -263,3 +263,26 @@ def test_a_stamp_gap_that_would_resample_to_more_than_memory_is_refused_first(ma
     monkeypatch.setenv(MEMORY_LIMIT_VARIABLE, "4")
     with pytest.raises(SizeLimitError, match=rf"replaying {path}: its truth spans 1.00003e\+06 s, 1.00003e\+07 steps of 0.1 s would need about 74.5 GiB of memory, over the limit of 4 GiB \({MEMORY_LIMIT_VARIABLE}\); ask for a larger time step \(--dt SECONDS\)"):
         read_recording(path, dt=0.1)
+
+
+def test_the_command_line_names_its_flags_and_prints_repairs_in_one_line_each(simple_truth, tools, capsys) -> None:
+    """Issue 18: the refusal that a Python caller reads as "Pass repair=True" reads "Pass
+    --repair" on the command line, and with ``--repair`` each repair is one line of the
+    recording's summary (no Python warning with its source line)."""
+    from fkn_bench.cli import main
+
+    stamps, _ = _truth(tools)
+    header = stamps.copy()
+    header[8] = header[7]
+    path = str(simple_truth(stamps=header, log=stamps))
+    _error(path, r"Pass repair=True to keep only the first")  # the Python spelling, outside the command line
+    command = ["run", "--recording", path, "--estimator", "manual-ekf", "--seeds", "1", "--no-progress", "--dt", "native",
+               "--cut", "5"]
+    assert main(command) == 2
+    err = capsys.readouterr().err
+    assert "Pass --repair to keep only the first message of each stamp" in err and "repair=True" not in err
+    assert len(err.strip().splitlines()) == 1
+    assert main([*command, "--repair"]) == 0
+    err = capsys.readouterr().err
+    assert "  repair: /loc/truth/pose: dropped 1 message(s) with a duplicate stamp" in err
+    assert "Warning" not in err and "warnings.warn" not in err and ".py:" not in err
