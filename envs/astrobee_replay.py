@@ -46,7 +46,8 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
       ``quaternion_tolerance``: as :func:`fkn_bench.recordings.read_recording` (every keyword
       that it takes; its defaults).
     * ``expose_truth``: put the true 13-dim state in ``info["truth"]``.
-    * ``reward_weights``, ``render_mode`` (``None`` or ``"ansi"``): as ``AstrobeeTumble-v0``.
+    * ``reward_weights``, ``render_mode`` (``None``, ``"ansi"``, ``"rgb_array"``, ``"human"``): as
+      ``AstrobeeTumble-v0``.
 
     ## Seeding
 

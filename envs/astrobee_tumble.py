@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
@@ -9,7 +10,8 @@ import gymnasium as gym
 import numpy as np
 
 from fkn_bench.envs.episodes import EpisodeStream
-from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, estimate_cost_scalar
+from fkn_bench.envs.rendering import HISTORY_STEPS
+from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, attitude_error_angle, estimate_cost_scalar
 from fkn_bench.envs.spaces import MeasuredPose, action_space, action_values, observation_space
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.types import ArrayF
@@ -141,7 +143,11 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
       ``dropout=0.2``, ``sign_flip_probability=0.5``, ``dynamics="free"``.
     * ``expose_truth``: put the true 13-dim state in ``info["truth"]`` (never in the observation).
     * ``reward_weights``: mapping with keys ``attitude``, ``position``, ``omega``, ``velocity``.
-    * ``render_mode``: ``None`` or ``"ansi"`` (a one-line text summary).
+    * ``render_mode``: ``None``, ``"ansi"`` (a one-line text summary), ``"rgb_array"`` (frames,
+      ``uint8 (H, W, 3)``: the body axes of the true, estimated and measured attitude and the
+      attitude error; see :mod:`fkn_bench.envs.rendering`) or ``"human"`` (the same in a window,
+      drawn at every step; needs a display). ``metadata["render_fps"]`` is the scenario's rate,
+      ``1 / dt``, so that ``gymnasium.wrappers.RecordVideo`` plays in real time.
 
     ## Seeding
 
@@ -150,7 +156,7 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
     episode seed from ``self.np_random``.
     """
 
-    metadata = {"render_modes": ["ansi"], "render_fps": 10}
+    metadata = {"render_modes": ["ansi", "rgb_array", "human"], "render_fps": 10}
 
     def __init__(
         self,
@@ -166,6 +172,50 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
         self.observation_space = observation_space(self.scenario.n_steps, self.scenario.dt)
         self.action_space = action_space()
         self.episode_seed: int | None = None
+        self._setup_rendering()
+
+    # ------------------------------------------------------------------ rendering
+    def _setup_rendering(self) -> None:
+        """Frames at the scenario's own rate (``render_fps`` = 1/dt, 1 to 60); a ``human``
+        window needs a display, checked here: without one, a warning at ``gym.make`` and frames
+        drawn off-screen only (Gymnasium's ``check_env`` makes every declared mode)."""
+        self.metadata = {**type(self).metadata, "render_fps": int(min(60, max(1, round(1.0 / self.scenario.dt))))}
+        self._renderer: Any = None
+        self._drawn = self.render_mode in ("rgb_array", "human")
+        self._shown_estimate: ArrayF | None = None  # the latest action and the step it answered
+        self._shown_step = 0
+        self._shown_truth: ArrayF | None = None
+        self._shown_measured = False
+        self._latest_measurement: ArrayF | None = None
+        self._error_history: deque[tuple[float, float]] = deque(maxlen=HISTORY_STEPS)
+        self._window = self.render_mode == "human"
+        if self._window:
+            import warnings
+
+            from fkn_bench.envs.rendering import display_problem
+
+            problem = display_problem()
+            if problem is not None:
+                warnings.warn(problem, RuntimeWarning, stacklevel=3)
+                self._window = False
+
+    def _note_observation(self) -> None:
+        """Remember what a frame shows of the current observation (only when rendering)."""
+        i = self._index - self._chunk_start
+        self._shown_step, self._shown_time = self._index, float(self._times[i])
+        self._shown_truth = np.array(self._truth[0, i])
+        self._shown_measured = bool(self._valid[0, i])
+        if self._shown_measured:
+            self._latest_measurement = np.array(self._meas[0, i])
+
+    def _frame_state(self) -> Any:
+        from fkn_bench.envs.rendering import FrameState
+
+        name, _ = self._render_name()
+        return FrameState(title=f"{name} seed {self.episode_seed}", step=self._shown_step, time=self._shown_time,
+                          truth=self._shown_truth, estimate=self._shown_estimate,
+                          measurement=self._latest_measurement, measured_now=self._shown_measured,
+                          history=tuple(np.array(self._error_history).reshape(-1, 2).T))
 
     def _new_stream(self, seed: int) -> Any:
         """The data of episode ``seed``: an object with ``index`` and ``advance(n) -> (times,
@@ -198,6 +248,12 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
         super().reset(seed=seed)
         self.episode_seed = episode_seed_for_reset(seed, self.np_random)
         self._start(self._new_stream(self.episode_seed))
+        if self._drawn:
+            self._shown_estimate, self._latest_measurement = None, None
+            self._error_history.clear()
+            self._note_observation()
+            if self.render_mode == "human":
+                self.render()
         return self._observation(), self._info()
 
     def step(self, action: ArrayF) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
@@ -208,20 +264,46 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
         values = action_values(action)
         truth = self._truth_rows[self._index - self._chunk_start]
         reward = -estimate_cost_scalar(truth, values, self.reward_weights)
+        if self._drawn:  # a frame shows the estimate against the truth of the step it answers
+            self._note_observation()
+            self._shown_estimate = np.array(values)
+            error = attitude_error_angle(self._shown_truth[None, :4], self._shown_estimate[None, :4])
+            self._error_history.append((self._shown_time, float(np.degrees(error[0]))))
         truncated = self._next_step()
+        if self.render_mode == "human":
+            self.render()
         return self._observation(), reward, False, truncated, self._info()
 
     def _render_name(self) -> tuple[str, int]:
         """What ``render`` calls the episode, and the decimals of its time."""
         return self.scenario.name, 1
 
-    def render(self) -> str | None:
-        if self.render_mode != "ansi" or self._stream is None:
+    def render(self) -> Any:
+        """``ansi``: a one-line summary; ``rgb_array``: the frame, ``uint8 (H, W, 3)``
+        (:mod:`fkn_bench.envs.rendering`); ``human``: the frame in a window (drawn by ``reset``
+        and ``step`` too). None before the first ``reset``."""
+        if self.render_mode is None or self._stream is None:
             return None
+        if self.render_mode in ("rgb_array", "human"):
+            if self._renderer is None:
+                from fkn_bench.envs.rendering import PoseRenderer
+
+                self._renderer = PoseRenderer(interactive=self._window, fps=self.metadata["render_fps"])
+            if self.render_mode == "human":
+                self._renderer.draw(self._frame_state())
+                return None
+            return self._renderer.rgb_array(self._frame_state())
         i = self._index - self._chunk_start
         shown = "missing" if not self._valid[0, i] else np.array2string(self._meas[0, i], precision=3)
         name, digits = self._render_name()
         return f"{name} seed={self.episode_seed} step={self._index} t={self._times[i]:.{digits}f}s pose={shown}"
+
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        super().close()
 
 
 def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:

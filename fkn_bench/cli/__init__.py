@@ -19,7 +19,7 @@ from contextlib import contextmanager
 __all__ = ["main", "Interrupted", "UsageError", "usage_errors", "COMMANDS"]
 
 COMMANDS: tuple[str, ...] = (
-    "scenarios", "simulate", "run", "train", "bench", "leaderboard", "plot", "record", "reproduce", "sweep",
+    "scenarios", "simulate", "run", "train", "bench", "leaderboard", "plot", "render", "record", "reproduce", "sweep",
 )
 """Subcommand modules, in the order ``--help`` lists them."""
 

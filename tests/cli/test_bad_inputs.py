@@ -49,6 +49,8 @@ BAD_INPUTS = [
     ("sweep --space quick --trials 0 --out s", "--trials must be a positive integer (got 0)"),
     ("sweep --space quick --workers 0 --out s", "--workers must be a positive integer (got 0)"),
     ("simulate --scenario nope", "unknown scenario 'nope'"),
+    ("render --out frame.txt", "--out must end in .png, .gif, .mp4 (got frame.txt)"),
+    ("render --estimator nope --out f.png", "unknown estimator 'nope'"),
     ("plot --results nope", "results directory not found: nope"),
     ("leaderboard --results nope", "results directory not found: nope"),
 ]
