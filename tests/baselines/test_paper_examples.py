@@ -6,8 +6,8 @@ Examples
 --------
 * **VBAKF** -- Y. Huang, Y. Zhang, Z. Wu, N. Li and J. Chambers (2018), "A novel adaptive Kalman
   filter with inaccurate process and measurement noise covariance matrices", IEEE TAC 63(2),
-  594-601, Section V (target tracking), with the settings of the authors' published MATLAB
-  example: 2-D constant velocity, ``x = [px, py, vx, vy]``, ``T = 1 s``,
+  594-601, Algorithm 1 and its target-tracking simulation, with the settings of the authors'
+  published MATLAB example: 2-D constant velocity, ``x = [px, py, vx, vy]``, ``T = 1 s``,
   ``F = [I T I; 0 I]``, ``H = [I 0]``, ``Q1 = q [T^3/3 I, T^2/2 I; T^2/2 I, T I]`` with ``q = 1``,
   ``R1 = r [1 0.5; 0.5 1]`` with ``r = 100``; true noise ``Q_t = (6.5 + 0.5 cos(pi t / 1000)) Q1``,
   ``R_t = (0.1 + 0.05 cos(pi t / 1000)) R1``; nominal ``Q~ = alpha I4`` (``alpha = 1``, ~7x too
@@ -28,8 +28,8 @@ Examples
   KF with the true noise.
 * **Akhlaghi** -- S. Akhlaghi, N. Zhou and Z. Huang (2017), "Adaptive adjustment of noise
   covariance in Kalman filter for dynamic state estimation", IEEE PES GM (arXiv:1702.00884),
-  eqs. (8)-(9) (``alpha = 0.3``), Section IV: an EKF of a synchronous machine in Kundur's
-  two-area system fed with PMU data, compared with the conventional EKF for wrong initial
+  the innovation-based ``Q`` and residual-based ``R`` rules (``alpha = 0.3``) and the
+  simulation: an EKF of a synchronous machine in Kundur's two-area system fed with PMU data, compared with the conventional EKF for wrong initial
   ``Q`` and ``R``; claim: the adaptive filter is "more robust against the initial errors in Q
   and R". The two-area simulation (network, machine and PMU data) is not reproducible from the
   paper alone; the most faithful linear example used here is the linearised swing equation of
@@ -72,7 +72,7 @@ from fkn_bench.baselines.sage_husa import SageHusaRule
 from fkn_bench.baselines.vbakf import VBAKFRule
 from fkn_bench.filters.models import LinearGaussianModel
 
-# ------------------------------------------------------------- Huang et al. (2018), Section V
+# ------------------------------------------ Huang et al. (2018), target-tracking simulation
 T, TS = 1.0, 1000  # sampling period, the paper's run length (in the noise profile)
 F = np.block([[np.eye(2), T * np.eye(2)], [np.zeros((2, 2)), np.eye(2)]])
 H = np.eye(2, 4)
@@ -145,7 +145,7 @@ def tracking():  # noqa: ANN201
 
 
 def test_vbakf_reproduces_huang_2018_target_tracking(tracking) -> None:  # noqa: ANN001
-    """Huang et al. (2018) Section V, the authors' settings (module docstring). Claimed (plots,
+    """Huang et al. (2018) target-tracking simulation, the authors' settings (module docstring). Claimed (plots,
     no numbers at hand): KFTCM < proposed < KFNCM in position and velocity RMSE, the proposed
     filter close to KFTCM, its ``R`` estimate far closer to the truth than the nominal one.
 
@@ -220,7 +220,7 @@ def test_innovation_rules_fail_on_huang_2018_nominal_noise(tracking) -> None:  #
 
 # ------------------------------------------------ Akhlaghi et al. (2017): linear swing example
 def test_akhlaghi_is_robust_to_the_initial_noise_on_a_swing_equation() -> None:
-    """Akhlaghi et al. (2017) Section IV claim, on the linear example of the module docstring:
+    """Akhlaghi et al. (2017) simulation claim, on the linear example of the module docstring:
     the adaptive filter is robust to the initial ``Q`` and ``R`` where the conventional filter
     is not. 8 runs of 300 steps (10 s), scored from step 100, errors normalised by ``sigma_R``.
 
