@@ -29,9 +29,9 @@ Examples
 * **Akhlaghi** -- S. Akhlaghi, N. Zhou and Z. Huang (2017), "Adaptive adjustment of noise
   covariance in Kalman filter for dynamic state estimation", IEEE PES GM (arXiv:1702.00884),
   the innovation-based ``Q`` and residual-based ``R`` rules (``alpha = 0.3``) and the
-  simulation: an EKF of a synchronous machine in Kundur's two-area system fed with PMU data, compared with the conventional EKF for wrong initial
-  ``Q`` and ``R``; claim: the adaptive filter is "more robust against the initial errors in Q
-  and R". The two-area simulation (network, machine and PMU data) is not reproducible from the
+  simulation: an EKF of a synchronous machine in Kundur's two-area system fed with PMU data,
+  compared with the conventional EKF for wrong initial ``Q`` and ``R``; claim (abstract): the
+  adaptive filter is "more robust against the initial errors in Q and R". The two-area simulation (network, machine and PMU data) is not reproducible from the
   paper alone; the most faithful linear example used here is the linearised swing equation of
   one machine (``delta``, ``omega`` in pu; ``H = 3.5 s``, synchronising coefficient 1.5 pu,
   damping 2 pu, 60 Hz, sampled at 30 Hz, both states measured, ``sigma_Q = (1e-3, 1e-5)``,
