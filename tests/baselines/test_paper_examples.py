@@ -31,9 +31,9 @@ Examples
   the innovation-based ``Q`` and residual-based ``R`` rules (``alpha = 0.3``) and the
   simulation: an EKF of a synchronous machine in Kundur's two-area system fed with PMU data,
   compared with the conventional EKF for wrong initial ``Q`` and ``R``; claim (abstract): the
-  adaptive filter is "more robust against the initial errors in Q and R". The two-area simulation (network, machine and PMU data) is not reproducible from the
-  paper alone; the most faithful linear example used here is the linearised swing equation of
-  one machine (``delta``, ``omega`` in pu; ``H = 3.5 s``, synchronising coefficient 1.5 pu,
+  adaptive filter is "more robust against the initial errors in Q and R". The two-area
+  simulation (network, machine and PMU data) is not reproducible from the paper alone; the most
+  faithful linear example used here is the linearised swing equation of one machine (``delta``, ``omega`` in pu; ``H = 3.5 s``, synchronising coefficient 1.5 pu,
   damping 2 pu, 60 Hz, sampled at 30 Hz, both states measured, ``sigma_Q = (1e-3, 1e-5)``,
   ``sigma_R = (1e-2, 1e-4)``), started from ``Q`` and ``R`` scaled by 1e-2 or 1e2.
 
@@ -145,9 +145,10 @@ def tracking():  # noqa: ANN201
 
 
 def test_vbakf_reproduces_huang_2018_target_tracking(tracking) -> None:  # noqa: ANN001
-    """Huang et al. (2018) target-tracking simulation, the authors' settings (module docstring). Claimed (plots,
-    no numbers at hand): KFTCM < proposed < KFNCM in position and velocity RMSE, the proposed
-    filter close to KFTCM, its ``R`` estimate far closer to the truth than the nominal one.
+    """Huang et al. (2018) target-tracking simulation, the authors' settings (module
+    docstring). Claimed (plots, no numbers at hand): KFTCM < proposed < KFNCM in position and
+    velocity RMSE, the proposed filter close to KFTCM, its ``R`` estimate far closer to the truth
+    than the nominal one.
 
     Ours (seed 0, 20 runs, steps 51-150): position 4.43 (KFTCM) < 5.52 (VBAKF) < 9.92 (KFNCM)
     m, velocity 4.15 < 5.27 < 6.26 m/s; over the paper's full 1000 steps (50 runs, measured
