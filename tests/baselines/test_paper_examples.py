@@ -33,9 +33,10 @@ Examples
   compared with the conventional EKF for wrong initial ``Q`` and ``R``; claim (abstract): the
   adaptive filter is "more robust against the initial errors in Q and R". The two-area
   simulation (network, machine and PMU data) is not reproducible from the paper alone; the most
-  faithful linear example used here is the linearised swing equation of one machine (``delta``, ``omega`` in pu; ``H = 3.5 s``, synchronising coefficient 1.5 pu,
-  damping 2 pu, 60 Hz, sampled at 30 Hz, both states measured, ``sigma_Q = (1e-3, 1e-5)``,
-  ``sigma_R = (1e-2, 1e-4)``), started from ``Q`` and ``R`` scaled by 1e-2 or 1e2.
+  faithful linear example used here is the linearised swing equation of one machine
+  (``delta``, ``omega`` in pu; ``H = 3.5 s``, synchronising coefficient 1.5 pu, damping 2 pu,
+  60 Hz, sampled at 30 Hz, both states measured, ``sigma_Q = (1e-3, 1e-5)``, ``sigma_R = (1e-2,
+  1e-4)``), started from ``Q`` and ``R`` scaled by 1e-2 or 1e2.
 
 Initialisation: the project's recursion initialises at the first measurement (``x = [z0, 0, 0]``,
 ``P0``) where the authors draw ``x0 + N(0, P0)``; the reference KFs here are initialised the same
