@@ -156,8 +156,8 @@ def test_vbakf_reproduces_huang_2018_target_tracking(tracking) -> None:  # noqa:
     once, not in the test): position 3.67 < 4.01 < 9.68, velocity 3.81 < 4.50 < 6.16, final
     ``R^`` diagonal 4.2 against the true 5.0. Reproduces. Tolerances: VBAKF at most 0.7x KFNCM
     in position (measured 0.56x) and 0.95x in velocity (0.84x), at most 1.45x KFTCM in both
-    (1.25x and 1.27x; 1.09x and 1.18x over 1000 steps: the 150-step window still holds the
-    adaptation transient); ``R^`` at step 150 within half the nominal's Frobenius error of the
+    (1.25x and 1.27x, 1.22x-1.29x for seeds 1-3; 1.09x and 1.18x over 1000 steps: the 150-step
+    window still holds the adaptation transient); ``R^`` at step 150 within half the nominal's Frobenius error of the
     truth (measured: 23.9 against 121; its diagonal is still 2x the true 14.5 there)."""
     truth, z, kftcm, kfncm = tracking
     result = adaptive(VBAKFRule(floor=0.0), z)  # the paper's algorithm has no floor
@@ -177,16 +177,18 @@ def test_sage_husa_recovers_r_with_the_process_model_right(tracking) -> None:  #
     ``100 I`` (module docstring). Claims: ``R^ -> R`` and the filter -> the KF with the true
     noise.
 
-    Ours (seed 0, 20 runs): ``R^`` diagonal over the true one, mean over runs, 1.26 at step 50
-    and 1.02-1.05 at step 150 (1.02-1.04 at steps 200-300, measured once); RMSE (steps 51-150)
-    1.015x KFTCM in position and 1.009x in velocity, better than the KF with ``Q`` right and
-    ``R = 100 I`` (1.24x and 1.18x).
-    Reproduces. Tolerances: ``R^`` at step 150 within 15 % of the truth; RMSE at most 1.08x
-    KFTCM's in position and velocity and below the KF with the starting ``R``."""
+    Ours (seed 0, 20 runs): ``R^`` diagonal over the true one, mean over runs, 1.26 at step 50,
+    1.02-1.07 over steps 101-150 (1.00-1.19 for seeds 0-5: a small upward bias, the start's
+    tail and the eigenvalue clamp); RMSE (steps 51-150) 1.015x KFTCM in position and 1.009x in
+    velocity (1.01-1.02x for seeds 1-3), better than the KF with ``Q`` right and ``R = 100 I``
+    (1.24x and 1.18x). Reproduces. Tolerances: ``R^`` over steps 101-150 within 25 % of the
+    truth; RMSE at most 1.08x KFTCM's in position and velocity and below the KF with the
+    starting ``R``."""
     truth, z, kftcm, _ = tracking
     result = adaptive(SageHusaRule(forgetting=0.99), z, Q0=6.5 * Q1)
-    ratio = result.r_diag[:, -1].mean(0) / np.diag(true_noise(STEPS)[1])
-    assert np.abs(ratio - 1.0).max() < 0.15, ratio
+    true_r = np.array([np.diag(true_noise(t)[1]) for t in range(101, STEPS + 1)])
+    ratio = (result.r_diag[:, 101:].mean(0) / true_r).mean(0)  # steps 101-150, mean over runs
+    assert np.abs(ratio - 1.0).max() < 0.25, ratio
     sh = rmse(result.means, truth)
     fixed = rmse(reference_kf(z, lambda t: (6.5 * Q1, 100.0 * np.eye(2))), truth)
     assert sh[0] <= 1.08 * kftcm[0] and sh[1] <= 1.08 * kftcm[1], (sh, kftcm)
@@ -203,10 +205,11 @@ def test_innovation_rules_fail_on_huang_2018_nominal_noise(tracking) -> None:  #
       innovations: in some runs ``R^`` runs away (here to 1.5e3, position error 61 m at step
       23 in the worst of the 20 runs; 4e4 and 270 m in the worst of 50 runs of another
       simulation). Position RMSE (steps 51-150) 13.4 m against KFNCM's 9.9 (1000 steps, 50
-      runs: 10.6 against 9.7).
+      runs: 10.6 against 9.7; 1.24x-1.6x KFNCM for seeds 1-3).
     * Akhlaghi et al. (``alpha = 0.3``): ``E[K nu nu^T K^T] = P- - P+``, which is ``Q`` only for
       ``F = I``; with a constant-velocity ``F`` the ``Q`` estimate grows without bound and the
-      filter diverges (position RMSE 425 m over steps 51-150, 14757 m over 1000). The literal
+      filter diverges (position RMSE 425 m over steps 51-150, 48x-61x KFNCM for seeds 1-3,
+      14757 m over 1000 steps). The literal
       transcription does the same (tests/baselines/test_adaptive_behaviour.py).
 
     Our implementations match their transcriptions to 1e-9 (test_adaptive_behaviour.py), so
@@ -233,9 +236,10 @@ def test_akhlaghi_is_robust_to_the_initial_noise_on_a_swing_equation() -> None:
     Reproduces the robustness claim; not shown in the paper, the price of it: with the right
     noise the adaptive filter is about 2x worse than the conventional one (alpha = 0.3 is a
     memory of about 1.4 samples: the noise estimates are as noisy as single samples).
-    Tolerances: the adaptive filter's spread over the three starts within 20 % (measured 11 %),
-    its worst case below 0.9x the conventional filter's worst (0.74x), below the conventional
-    one for both wrong starts, and above 1.5x it for the right start (2.2x)."""
+    Tolerances: the adaptive filter's spread over the three starts within 20 % (measured 11 %;
+    4-10 % for seeds 1-3), its worst case below 0.9x the conventional filter's worst (0.74x;
+    0.59x-0.74x), below the conventional one for both wrong starts, and above 1.5x it for the
+    right start (2.2x; 2.1x-2.2x)."""
     dt, inertia, sync, damping, ws = 1 / 30, 3.5, 1.5, 2.0, 2 * np.pi * 60
     A = expm(np.array([[0.0, ws], [-sync / (2 * inertia), -damping / (2 * inertia)]]) * dt)
     q, r = np.array([1e-3, 1e-5]), np.array([1e-2, 1e-4])
