@@ -25,7 +25,7 @@ import numpy as np
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.types import ArrayF
 
-__all__ = ["ForcedRotation", "FreeTumble"]
+__all__ = ["ForcedRotation", "FreeTumble", "PerturbedRotation"]
 
 
 def _rotate(q: ArrayF, v: ArrayF) -> ArrayF:
@@ -92,6 +92,54 @@ class ForcedRotation:
     def advance(self, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
         """Next ``n`` samples (see :meth:`sample`)."""
         out = self.sample(self._index, n, step_major=step_major)
+        self._index += n
+        return out
+
+    def seek(self, index: int) -> None:
+        """Continue from sample ``index``."""
+        self._index = int(index)
+
+
+class PerturbedRotation:
+    """Forced rotation whose world-frame rate is ``omega_world + offsets[k]`` over step ``k``
+    (unmodelled torque bursts, :func:`fkn_bench.envs.episodes.rate_offsets`): ``q_{k+1} =
+    exp((omega + d_k) dt / 2) (x) q_k``, each factor exact for a rate constant over the step.
+
+    The whole episode is evaluated at construction (its ``N`` increments by one vectorised
+    quaternion exponential, their product by a prefix scan of ``log2 N`` vectorised products,
+    renormalised), so that :meth:`sample` is random access like :class:`ForcedRotation`'s.
+
+    Args:
+        attitude0: initial attitudes ``(B, 4)``.
+        omega_world: nominal world-frame angular velocities ``(B, 3)``, rad/s.
+        offsets: rate offsets ``(B, N, 3)`` of the episode's ``N`` steps, rad/s.
+        dt: sample interval, s.
+    """
+
+    def __init__(self, attitude0: ArrayF, omega_world: ArrayF, offsets: ArrayF, dt: float) -> None:
+        omega = np.asarray(omega_world, dtype=float)[:, None, :] + np.asarray(offsets, dtype=float)
+        batch, steps, _ = omega.shape
+        # increments e_k = exp(omega_k dt / 2) (step k -> k + 1); the prefix products
+        # P_k = e_{k-1} (x) ... (x) e_0 by a Hillis-Steele scan (later factors on the left)
+        product = np.empty((batch, steps, 4))
+        product[:, 0] = (1.0, 0.0, 0.0, 0.0)
+        product[:, 1:] = quat.from_rotation_vector(omega[:, :-1] * float(dt))
+        shift = 1
+        while shift < steps:
+            product[:, shift:] = quat.multiply(product[:, shift:], product[:, :-shift])
+            shift *= 2
+        q = quat.multiply(product, np.broadcast_to(np.asarray(attitude0, dtype=float)[:, None, :], product.shape))
+        self._q = quat.normalize(q).transpose(0, 2, 1)  # (B, 4, N)
+        self._omega = omega.transpose(0, 2, 1)  # (B, 3, N)
+        self._index = 0
+
+    def sample(self, start: int, n: int) -> tuple[ArrayF, ArrayF]:
+        """Samples ``start .. start+n-1``: attitudes ``(B, 4, n)`` and rates ``(B, 3, n)``."""
+        return self._q[:, :, start : start + n].copy(), self._omega[:, :, start : start + n].copy()
+
+    def advance(self, n: int) -> tuple[ArrayF, ArrayF]:
+        """Next ``n`` samples (see :meth:`sample`)."""
+        out = self.sample(self._index, n)
         self._index += n
         return out
 

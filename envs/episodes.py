@@ -11,15 +11,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import lfilter
 
-from fkn_bench.envs.dynamics import ForcedRotation, FreeTumble
-from fkn_bench.envs.measurements import MeasurementGenerator, stream
+from fkn_bench.envs.dynamics import ForcedRotation, FreeTumble, PerturbedRotation
+from fkn_bench.envs.measurements import BLOCK, MeasurementGenerator, stream
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.limits import check_memory
 from fkn_bench.scenarios import SPLITS, Scenario, get_scenario
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["Episodes", "EpisodeStream", "generate_episodes", "initial_states", "true_inertia"]
+__all__ = ["Episodes", "EpisodeStream", "generate_episodes", "initial_states", "rate_offsets", "true_inertia"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,6 +131,29 @@ def true_inertia(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
     return np.array([nominal * (1.0 + stream(seed, "inertia").uniform(-error, error, 3)) for seed in seeds])
 
 
+def rate_offsets(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
+    """The world-frame rate offsets ``d (B, N, 3)`` (rad/s) of the unmodelled torque bursts of
+    each seed's whole episode (``N = n_steps``; zero without bursts; see :class:`Scenario`):
+    a burst of ``kick_length`` steps starts at step ``k`` where the ``kick`` stream's uniform
+    draw is below ``kick_rate``; during a burst ``d`` takes the step ``kick_sigma n_k`` (``n_k``
+    from the ``kick_noise`` stream) and it decays by ``exp(-dt / kick_decay)`` at every step."""
+    sc, steps = scenario, scenario.n_steps
+    out = np.zeros((len(seeds), steps, 3))
+    if not sc.has_kicks:
+        return out
+    blocks = range(-(-steps // BLOCK))
+    decay = float(np.exp(-sc.dt / sc.kick_decay))
+    for row, seed in enumerate(seeds):
+        starts = np.concatenate([stream(seed, "kick", b).random(BLOCK) for b in blocks])[:steps] < sc.kick_rate
+        noise = np.concatenate([stream(seed, "kick_noise", b).standard_normal((BLOCK, 3)) for b in blocks])[:steps]
+        # in a burst: a start in the last kick_length steps (this one included)
+        started = np.cumsum(starts)
+        before = np.concatenate([np.zeros(sc.kick_length, dtype=started.dtype), started[:-sc.kick_length]])[:steps]
+        increments = np.where((started - before > 0)[:, None], sc.kick_sigma * noise, 0.0)
+        out[row] = lfilter([1.0], [1.0, -decay], increments, axis=0)  # d_k = a d_{k-1} + u_k
+    return out
+
+
 GENERATION_BYTES_PER_STEP = 400
 """Memory that generating one step of one episode takes at its peak (truth, measurements and the
 generators' temporaries: 320-340 bytes measured with tracemalloc), for :func:`fkn_bench.limits.check_memory`."""
@@ -147,11 +171,13 @@ class EpisodeStream:
         self._measurements = MeasurementGenerator(scenario, self.seeds)
         self.index = 0
 
-    def _make_rotation(self) -> ForcedRotation | FreeTumble:
+    def _make_rotation(self) -> ForcedRotation | PerturbedRotation | FreeTumble:
         sc = self.scenario
         omega = np.tile(np.array(sc.omega0), (len(self.seeds), 1))
         if sc.omega0_frame == "body":
             omega = quat.rotate(self._q0, omega)
+        if sc.dynamics == "forced" and sc.has_kicks:
+            return PerturbedRotation(self._q0, omega, rate_offsets(sc, self.seeds), sc.dt)
         if sc.dynamics == "forced":
             return ForcedRotation(self._q0, omega, sc.dt)
         return FreeTumble(self._q0, omega, true_inertia(sc, self.seeds), sc.dt, sc.free_substeps)
@@ -162,7 +188,7 @@ class EpisodeStream:
         index = int(index)
         if not 0 <= index <= self.scenario.n_steps:
             raise ValueError(f"step index must be in [0, {self.scenario.n_steps}] (got {index})")
-        if isinstance(self._rotation, ForcedRotation):
+        if isinstance(self._rotation, (ForcedRotation, PerturbedRotation)):
             self._rotation.seek(index)
         else:
             if index < self.index:

@@ -14,7 +14,9 @@ the others one draw per step. Hence
   (common random numbers), whatever their noise scale, dropout, outliers or sign flips.
 
 Noise model (FlexKalmanNet, section 4.1): position ``r + n`` with ``n ~ N(0, s_r^2 I3)``;
-attitude ``exp(e / 2) (x) q`` with ``e ~ N(0, s_theta^2 I3)`` a world-frame error rotation.
+attitude ``exp(e / 2) (x) q`` with ``e ~ N(0, s_theta^2 I3)`` a world-frame error rotation; both
+standard deviations times :meth:`~fkn_bench.scenarios.Scenario.noise_factor` of the step (the
+scenario's noise step, 1 by default).
 Outliers replace the attitude by a uniformly random one and add ``N(0, s_out^2 I3)`` to the
 position; a sign flip negates the measured quaternion.
 """
@@ -44,9 +46,10 @@ _DRAWS: dict[str, tuple[str, tuple[int, ...]]] = {
 }
 """Per-step draw method and shape of each measurement stream."""
 
-STREAMS: tuple[str, ...] = ("attitude0", "position0", *_DRAWS, "inertia")
+STREAMS: tuple[str, ...] = ("attitude0", "position0", *_DRAWS, "inertia", "kick", "kick_noise")
 """Names of the independent random streams of an episode. Their order fixes their keys: append
-new streams at the end."""
+new streams at the end (``kick`` and ``kick_noise``: the torque bursts of
+:func:`fkn_bench.envs.episodes.rate_offsets`, one draw per step)."""
 
 BLOCK = 4096
 """Steps per random-stream block."""
@@ -147,11 +150,16 @@ class MeasurementGenerator:
         # noisy poses at the scheduled steps only: (B, m, 7)
         truth_at = truth_pose[columns].transpose(2, 0, 1) if step_major else truth_pose[:, :, columns].transpose(0, 2, 1)
         pose = np.empty((batch, len(columns), 7))
+        factor = sc.noise_factor(scheduled)[None, :, None]  # the noise step (1 unless configured)
         e = self.draws("attitude_noise", scheduled)
         e *= sc.sigma_attitude_effective
+        if sc.noise_step_scale != 1.0:
+            e *= factor
         quat.multiply(quat.from_rotation_vector(e), truth_at[..., :4], out=pose[..., :4])
         r = self.draws("position_noise", scheduled)
         r *= sc.sigma_position_effective
+        if sc.noise_step_scale != 1.0:
+            r *= factor
         np.add(truth_at[..., 4:7], r, out=pose[..., 4:])
         if sc.outlier_fraction > 0:
             is_outlier = valid[:, columns] & (self.draws("outlier", scheduled) < sc.outlier_fraction)

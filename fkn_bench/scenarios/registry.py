@@ -33,6 +33,7 @@ __all__ = [
     "scenario_names",
     "load_scenarios",
     "BUILTIN_SCENARIOS",
+    "DS1_NOISE_STEP",
 ]
 
 
@@ -228,6 +229,27 @@ for _scenario in (
     ),
 ):
     register_scenario(_scenario)
+
+DS1_NOISE_STEP = _DS1.replace(
+    name="ds1-noise-step",
+    description=(
+        "ds1 with non-stationary noise: five times the measurement noise (0.5 m, 0.5 rad) in the "
+        "middle third of each split, and bursts of unmodelled torque (2 s bursts starting with "
+        "probability 0.002 per step, rate random walk 0.01 rad/s per step, decaying back with a "
+        "5 s time constant)"
+    ),
+    noise_step_scale=5.0,
+    kick_rate=0.002,
+    kick_length=20,
+    kick_sigma=0.01,
+    kick_decay=5.0,
+    tags=(),
+)
+"""Issue 21's scenario where noise adaptation should pay. Defined, not yet registered: a
+registered scenario needs committed gate results and leaderboards (tests/gates,
+tests/cli/test_leaderboard.py), which its registration must come with
+(``register_scenario(DS1_NOISE_STEP)`` before :data:`BUILTIN_SCENARIOS`); until then
+``get_scenario(DS1_NOISE_STEP)`` and ``generate_episodes(DS1_NOISE_STEP, ...)`` use it."""
 
 BUILTIN_SCENARIOS: frozenset[str] = frozenset(_REGISTRY)
 """Names of the built-in scenarios, which a scenario file redefines only with ``override = true``."""

@@ -19,7 +19,10 @@ import json
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["Scenario", "ConfigError", "ASTROBEE_INERTIA", "ASTROBEE_MASS", "SPLITS"]
 
@@ -71,7 +74,12 @@ class Scenario:
         (Euler's equations and quaternion kinematics, RK4 with ``free_substeps`` sub-steps per
         sample), starting from rate ``omega0`` (rad/s) given in the world frame or, with
         ``omega0_frame = "body"``, in the body frame (so that, from a random attitude, the body
-        spins about a chosen body axis). ``inertia_error``: each seed's true principal moments
+        spins about a chosen body axis). Unmodelled torque bursts (forced dynamics only): a burst
+        of ``kick_length`` steps starts at any step with probability ``kick_rate``; during it the
+        world-frame rate takes a random-walk step ``N(0, kick_sigma^2 I3)`` (rad/s) per step, and
+        the accumulated offset decays back towards ``omega0`` with time constant ``kick_decay``
+        (s; the rate controller of the forced rotation restoring it): ``d_k = exp(-dt /
+        kick_decay) d_{k-1} + kick_sigma n_k [k in a burst]``, ``omega_k = omega0 + d_k``. ``inertia_error``: each seed's true principal moments
         are ``inertia * (1 + u)`` with ``u`` uniform in ``[-inertia_error, inertia_error]`` per
         axis (free dynamics only): ``inertia`` is then the nominal value an estimator is told.
         ``attitude0``: initial attitude (wxyz); ``None`` draws a uniformly random one per seed.
@@ -89,6 +97,10 @@ class Scenario:
         A fraction ``outlier_fraction`` of the surviving measurements is replaced by gross errors
         (uniformly random attitude, position offset N(0, ``outlier_position_sigma``^2) per axis)
         and each measured quaternion is negated with probability ``sign_flip_probability``.
+        ``noise_step_scale`` multiplies both noise standard deviations in the middle third of
+        each split (steps ``[a + (b - a) // 3, a + 2 (b - a) // 3)`` of each split ``[a, b)`` of
+        train, val and test: every sequence trained on or evaluated is calm, noisy, calm; see
+        :meth:`noise_factor`).
     Bookkeeping
         ``dataset_seed`` is the seed of the training data set; ``model_family`` names the
         committed learned model that applies to this scenario (``"ds1"`` or ``"ds2"`` for the
@@ -119,6 +131,11 @@ class Scenario:
     outlier_fraction: float = 0.0
     outlier_position_sigma: float = 1.0
     sign_flip_probability: float = 0.0
+    noise_step_scale: float = 1.0
+    kick_rate: float = 0.0
+    kick_length: int = 0
+    kick_sigma: float = 0.0
+    kick_decay: float = 5.0
     free_substeps: int = 1
     dataset_seed: int = 0
     model_family: str = "ds1"
@@ -148,24 +165,31 @@ class Scenario:
             _check(norm > 1e-9, "attitude0", "a non-zero quaternion (wxyz) or None", self.attitude0)
             set_(self, "attitude0", tuple(v / norm for v in q))
         for name in ("position0_std", "sigma_position", "sigma_attitude", "noise_scale",
-                     "outlier_position_sigma"):
+                     "outlier_position_sigma", "noise_step_scale", "kick_sigma"):
             value = getattr(self, name)
             _check(_is_finite_number(value) and 0 <= value <= MAX_NOISE, name, f"a finite number in [0, {MAX_NOISE:g}]", value)
             set_(self, name, float(value))
         for name in ("sigma_position", "sigma_attitude"):  # what the measurements get: noise_scale x sigma
             _check(self.noise_scale * getattr(self, name) <= MAX_NOISE, "noise_scale",
                    f"small enough that noise_scale x {name} <= {MAX_NOISE:g}", self.noise_scale)
+            _check(self.noise_step_scale * self.noise_scale * getattr(self, name) <= MAX_NOISE, "noise_step_scale",
+                   f"small enough that noise_step_scale x noise_scale x {name} <= {MAX_NOISE:g}", self.noise_step_scale)
+        _check(_is_finite_number(self.kick_decay) and self.kick_decay > 0, "kick_decay", "a finite number > 0 (s)",
+               self.kick_decay)
+        set_(self, "kick_decay", float(self.kick_decay))
         _check(_is_finite_number(self.dt) and self.dt > 0, "dt", "a finite number > 0 (s)", self.dt)
         set_(self, "dt", float(self.dt))
         for name, low in (("n_steps", 2), ("measurement_every", 1), ("burst_length", 0),
-                          ("free_substeps", 1), ("dataset_seed", 0)):
+                          ("free_substeps", 1), ("dataset_seed", 0), ("kick_length", 0)):
             value = getattr(self, name)
             _check(isinstance(value, int) and not isinstance(value, bool) and value >= low,
                    name, f"an integer >= {low}", value)
-        for name in ("dropout", "burst_rate", "outlier_fraction", "sign_flip_probability"):
+        for name in ("dropout", "burst_rate", "outlier_fraction", "sign_flip_probability", "kick_rate"):
             value = getattr(self, name)
             _check(_is_finite_number(value) and 0.0 <= value <= 1.0, name, "a number in [0, 1]", value)
             set_(self, name, float(value))
+        _check(not self.has_kicks or self.dynamics == "forced", "dynamics",
+               "'forced' when torque bursts are on (kick_rate, kick_length, kick_sigma)", self.dynamics)
         _check(not (self.dropout == 1.0), "dropout", "a number in [0, 1) (1 removes every measurement)",
                self.dropout)
         split = _vector(self.split, "split", 3)
@@ -187,6 +211,27 @@ class Scenario:
     def sigma_attitude_effective(self) -> float:
         """Attitude noise standard deviation actually applied, rad per axis."""
         return self.noise_scale * self.sigma_attitude
+
+    @property
+    def has_kicks(self) -> bool:
+        """True when unmodelled torque bursts perturb the rate (see the class docstring)."""
+        return self.kick_rate > 0 and self.kick_length > 0 and self.kick_sigma > 0
+
+    def noise_factor(self, steps: ArrayLike) -> Any:
+        """The factor on the measurement noise standard deviations at global ``steps``:
+        ``noise_step_scale`` in the middle third of each split (train, val, test), else 1."""
+        import numpy as np
+
+        steps = np.asarray(steps)
+        factor = np.ones(steps.shape)
+        if self.noise_step_scale == 1.0:
+            return factor
+        for name in SPLITS[:3]:
+            start, stop = self.split_bounds()[name]
+            length = stop - start
+            inside = (steps >= start + length // 3) & (steps < start + 2 * length // 3)
+            factor[inside] = self.noise_step_scale
+        return factor
 
     def split_bounds(self) -> dict[str, tuple[int, int]]:
         """Half-open step ranges ``[start, stop)`` of the train, val, test and full splits."""
@@ -225,7 +270,10 @@ class Scenario:
 
 
 _NO_DEFAULT = object()
-_LATER_DEFAULTS: dict[str, Any] = {"omega0_frame": "world", "inertia_error": 0.0}
+_LATER_DEFAULTS: dict[str, Any] = {
+    "omega0_frame": "world", "inertia_error": 0.0, "noise_step_scale": 1.0, "kick_rate": 0.0, "kick_length": 0,
+    "kick_sigma": 0.0, "kick_decay": 5.0,
+}
 """Fields added after the first release, with the defaults that leave them out of the hash."""
 
 
