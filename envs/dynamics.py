@@ -133,13 +133,17 @@ class PerturbedRotation:
         self._omega = omega.transpose(0, 2, 1)  # (B, 3, N)
         self._index = 0
 
-    def sample(self, start: int, n: int) -> tuple[ArrayF, ArrayF]:
-        """Samples ``start .. start+n-1``: attitudes ``(B, 4, n)`` and rates ``(B, 3, n)``."""
-        return self._q[:, :, start : start + n].copy(), self._omega[:, :, start : start + n].copy()
+    def sample(self, start: int, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
+        """Samples ``start .. start+n-1``: attitudes ``(B, 4, n)`` and rates ``(B, 3, n)``
+        (``step_major``: ``(n, 4, B)`` and ``(n, 3, B)``, the same values)."""
+        q, omega = self._q[:, :, start : start + n], self._omega[:, :, start : start + n]
+        if step_major:
+            return np.ascontiguousarray(q.transpose(2, 1, 0)), np.ascontiguousarray(omega.transpose(2, 1, 0))
+        return q.copy(), omega.copy()
 
-    def advance(self, n: int) -> tuple[ArrayF, ArrayF]:
+    def advance(self, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
         """Next ``n`` samples (see :meth:`sample`)."""
-        out = self.sample(self._index, n)
+        out = self.sample(self._index, n, step_major=step_major)
         self._index += n
         return out
 

@@ -1,5 +1,6 @@
 """Rendering of ``AstrobeeTumble-v0`` (issue 18): ``rgb_array`` frames that show the truth and the
-estimate, ``check_env`` with frames, ``RecordVideo``, and ``human`` on a machine without a display."""
+estimate, ``RecordVideo``, and ``human`` on a machine without a display (``check_env`` with
+frames: tests/envs/test_astrobee_tumble.py)."""
 
 from __future__ import annotations
 
@@ -43,14 +44,6 @@ def test_frames_show_the_estimate_and_move_with_it() -> None:
     assert changed.mean() > 0.002  # the estimate's axes (and its error's text and trace) moved
     rows, cols = np.nonzero(changed[: exact.shape[0] * 3 // 4, : exact.shape[1] // 2])
     assert len(rows) > 100  # ... in the attitude panel itself, not only in the text
-
-
-def test_check_env_passes_with_frames() -> None:
-    from gymnasium.utils.env_checker import check_env
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # Gymnasium's advice on Box bounds; 'human' has no display here
-        check_env(gym.make(ENV_ID, render_mode="rgb_array", n_steps=20).unwrapped)
 
 
 def test_human_mode_without_a_display_warns_once_and_draws_off_screen(monkeypatch: pytest.MonkeyPatch) -> None:
