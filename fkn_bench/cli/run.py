@@ -75,6 +75,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--estimator-option", action="append", default=[], metavar="KEY=VALUE",
                         help="option for the estimators' factories, e.g. parameters=runs/fkn/parameters.json "
                              "(repeatable)")
+    parser.add_argument("--dataset", metavar="DIR",
+                        help="run on this Minari dataset (fkn-bench dataset; instead of --scenario): its seeds, "
+                             "or seeds 0 .. N-1 with --seeds N")
     replay = parser.add_argument_group("recordings (instead of --scenario)")
     replay.add_argument("--recording", metavar="FILE.mcap", help="run on this MCAP recording")
     replay.add_argument("--truth-topic", metavar="TOPIC", help="pose topic of the ground truth")
@@ -145,6 +148,25 @@ def _scenarios(args: argparse.Namespace) -> list[Any]:
     return scenarios
 
 
+def _dataset_source(args: argparse.Namespace) -> Any:
+    """The source of ``--dataset`` (its problems are usage errors naming the directory)."""
+    from fkn_bench.harness import DatasetError, DatasetSource
+
+    if args.scenario or args.all or args.recording:
+        raise UsageError("--dataset replaces --scenario, --all and --recording")
+    source = DatasetSource(str(args.dataset), args.split)
+    with usage_errors(DatasetError, OSError):
+        stored = source.stored()
+        source.load(source.seeds if args.seeds == DEFAULT_SEEDS else range(args.seeds))  # the split and seeds exist
+    start, stop = source.scenario.split_bounds()[args.split] if stored.split == "full" else (0, stored.episodes.n_steps)
+    if args.cut >= stop - start:
+        raise UsageError(f"--cut {args.cut} leaves nothing to score in the {args.split} split of the dataset "
+                         f"({stop - start} steps)")
+    print(f"dataset {args.dataset}: {len(stored.episodes.seeds)} episode(s) of {source.scenario.name} "
+          f"({stored.split}), scoring the {args.split} split", file=sys.stderr)
+    return source
+
+
 def _recording_source(args: argparse.Namespace) -> Any:
     """The recording source of ``--recording`` (errors naming the file are usage errors)."""
     from fkn_bench.harness import RecordingSource
@@ -202,21 +224,27 @@ def run(args: argparse.Namespace) -> int:
 
     _check_arguments(args)
     load_scenario_files(args)
-    if args.recording:
+    seeds: Any = range(args.seeds)
+    if args.dataset:
+        dataset = _dataset_source(args)
+        seeds = dataset.seeds if args.seeds == DEFAULT_SEEDS else range(args.seeds)
+        scenarios = [dataset.scenario]
+        sources: list[Any] = [dataset]
+    elif args.recording:
         recording = _recording_source(args)
         if args.measurement_topic and args.seeds == DEFAULT_SEEDS:
             args.seeds = 1  # recorded measurements: every seed would score the same data
         if args.cut >= recording.scenario.n_steps:
             raise UsageError(f"--cut {args.cut} leaves nothing to score in the recording ({recording.scenario.n_steps} steps)")
         scenarios = [recording.scenario]
-        sources: list[Any] = [recording]
+        sources = [recording]
     else:
         scenarios = _scenarios(args)
         sources = [SimulatedSource(scenario, args.split) for scenario in scenarios]
     resolved = _estimators(args, scenarios)
     for line in _parameter_sources(resolved):
         print(line, file=sys.stderr)
-    cells = build_grid(resolved, sources, range(args.seeds), settings=MetricSettings(cut=args.cut))
+    cells = build_grid(resolved, sources, seeds, settings=MetricSettings(cut=args.cut))
     store = _store(args) if args.out else None
     backend = make_backend(args.backend, workers=args.workers, scheduler=args.scheduler)
     try:
@@ -232,7 +260,7 @@ def run(args: argparse.Namespace) -> int:
             "fkn_bench_command": "run",
             "split": args.split,
             "cut": args.cut,
-            "seeds": args.seeds,
+            "seeds": len(seeds),
             "backend": args.backend,
             "out": args.out,
             "cells": {"total": len(cells), "computed": outcome.computed, "reused": outcome.reused,
