@@ -13,7 +13,7 @@ from gymnasium.vector.utils import batch_space
 
 from fkn_bench.envs.astrobee_tumble import _EpisodeWalk, episode_seed_for_reset
 from fkn_bench.envs.episodes import EpisodeStream
-from fkn_bench.envs.rewards import estimate_cost_components, unit_quaternions
+from fkn_bench.envs.rewards import cost_and_quaternion_norm, unit_quaternions
 from fkn_bench.envs.spaces import QUATERNION_NORM_MIN, MeasuredPose, action_space, observation_space, pose_space, validate_actions
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
@@ -158,8 +158,8 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
         estimate = np.ascontiguousarray(actions.T)
         i = self._index - self._chunk_start
         with np.errstate(all="ignore"):  # a bad action's NaN is caught below, and named
-            cost = estimate_cost_components(self._truth_steps[i], estimate, self.reward_weights, unit_truth=self._unit_truth[:, i])
-        e0, e1, e2, e3 = estimate[0], estimate[1], estimate[2], estimate[3]
-        if not (np.isfinite(cost).all() and (e0 * e0 + e1 * e1 + e2 * e2 + e3 * e3).min() >= QUATERNION_NORM_MIN):
+            cost, norm2 = cost_and_quaternion_norm(self._truth_steps[i], estimate, self.reward_weights,
+                                                   unit_truth=self._unit_truth[:, i])
+        if not (np.isfinite(cost).all() and norm2.min() >= QUATERNION_NORM_MIN):
             validate_actions(actions, batch=n)  # raises, naming the entry (else: finite actions whose error overflows)
         return -cost

@@ -27,7 +27,7 @@ import numpy as np
 
 from fkn_bench.types import ArrayF
 
-__all__ = ["DEFAULT_WEIGHTS", "estimate_cost", "estimate_cost_components", "estimate_cost_scalar", "attitude_error_angle", "unit_quaternions"]
+__all__ = ["DEFAULT_WEIGHTS", "estimate_cost", "estimate_cost_components", "estimate_cost_scalar", "attitude_error_angle", "unit_quaternions", "cost_and_quaternion_norm"]
 
 DEFAULT_WEIGHTS: Mapping[str, float] = {"attitude": 1.0, "position": 1.0, "omega": 10.0, "velocity": 10.0}
 
@@ -67,23 +67,33 @@ def estimate_cost_components(
     truth: ArrayF, estimate: ArrayF, weights: Mapping[str, float] = DEFAULT_WEIGHTS, *, unit_truth: ArrayF | None = None
 ) -> ArrayF:
     """:func:`estimate_cost` of component-major ``(13, N)`` truth and estimates, computed
-    block-wise (a handful of numpy calls on ``(4, N)``, ``(9, N)`` blocks; a sum over the
-    component axis adds the rows in order, as the scalar form does). ``unit_truth (4, N)``: the
-    normalised true quaternions, if already computed (:func:`unit_quaternions`)."""
+    block-wise (a dozen numpy calls on ``(4, N)`` and ``(9, N)`` blocks; a sum over the component
+    axis adds the rows in order, as the scalar form does). ``unit_truth (4, N)``: the normalised
+    true quaternions, if already computed (:func:`unit_quaternions`)."""
+    return cost_and_quaternion_norm(truth, estimate, weights, unit_truth=unit_truth)[0]
+
+
+def cost_and_quaternion_norm(
+    truth: ArrayF, estimate: ArrayF, weights: Mapping[str, float] = DEFAULT_WEIGHTS, *, unit_truth: ArrayF | None = None
+) -> tuple[ArrayF, ArrayF]:
+    """:func:`estimate_cost_components` and the squared norms ``(N,)`` of the estimates'
+    quaternions (which the vector environment checks against zero)."""
     q = estimate[:4]
-    u = q / np.sqrt((q * q).sum(axis=0))
+    norm2 = (q * q).sum(axis=0)
+    u = q / np.sqrt(norm2)
     t = unit_quaternions(truth) if unit_truth is None else unit_truth
     m, p = u - t, u + t
-    minus, plus = np.sqrt((m * m).sum(axis=0)), np.sqrt((p * p).sum(axis=0))
-    angle = 4.0 * np.arctan2(np.minimum(minus, plus), np.maximum(minus, plus))
+    m *= m
+    p *= p
+    minus, plus = np.sqrt(m.sum(axis=0)), np.sqrt(p.sum(axis=0))
+    parts = np.empty((4, q.shape[1]))  # angle and the three norms, weighted, then added in that order
+    np.arctan2(np.minimum(minus, plus), np.maximum(minus, plus), out=parts[0])
+    parts[0] *= 4.0
     d = estimate[4:] - truth[4:]
-    norms = np.sqrt((d * d).reshape(3, 3, -1).sum(axis=1))
-    return (
-        weights["attitude"] * angle
-        + weights["position"] * norms[0]
-        + weights["omega"] * norms[1]
-        + weights["velocity"] * norms[2]
-    )
+    d *= d
+    np.sqrt(d.reshape(3, 3, -1).sum(axis=1), out=parts[1:])
+    parts *= np.array([weights["attitude"], weights["position"], weights["omega"], weights["velocity"]])[:, None]
+    return parts.sum(axis=0), norm2
 
 
 def unit_quaternions(states: ArrayF) -> ArrayF:
