@@ -224,10 +224,10 @@ def run(args: argparse.Namespace) -> int:
 
     _check_arguments(args)
     load_scenario_files(args)
-    seeds: Any = range(args.seeds)
+    seeds: Any = None  # range(--seeds), or a dataset's own seeds
     if args.dataset:
         dataset = _dataset_source(args)
-        seeds = dataset.seeds if args.seeds == DEFAULT_SEEDS else range(args.seeds)
+        seeds = dataset.seeds if args.seeds == DEFAULT_SEEDS else None
         scenarios = [dataset.scenario]
         sources: list[Any] = [dataset]
     elif args.recording:
@@ -244,7 +244,7 @@ def run(args: argparse.Namespace) -> int:
     resolved = _estimators(args, scenarios)
     for line in _parameter_sources(resolved):
         print(line, file=sys.stderr)
-    cells = build_grid(resolved, sources, seeds, settings=MetricSettings(cut=args.cut))
+    cells = build_grid(resolved, sources, range(args.seeds) if seeds is None else seeds, settings=MetricSettings(cut=args.cut))
     store = _store(args) if args.out else None
     backend = make_backend(args.backend, workers=args.workers, scheduler=args.scheduler)
     try:
@@ -260,7 +260,7 @@ def run(args: argparse.Namespace) -> int:
             "fkn_bench_command": "run",
             "split": args.split,
             "cut": args.cut,
-            "seeds": len(seeds),
+            "seeds": args.seeds if seeds is None else len(seeds),
             "backend": args.backend,
             "out": args.out,
             "cells": {"total": len(cells), "computed": outcome.computed, "reused": outcome.reused,
