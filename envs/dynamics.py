@@ -46,7 +46,27 @@ def _rotate(q: ArrayF, v: ArrayF) -> ArrayF:
     )
 
 
-class ForcedRotation:
+class _RandomAccess:
+    """A propagator with random access (:meth:`sample` any step range), walked by
+    :meth:`advance` from the step :meth:`seek` sets."""
+
+    _index: int
+
+    def sample(self, start: int, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
+        raise NotImplementedError
+
+    def advance(self, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
+        """Next ``n`` samples (see :meth:`sample`)."""
+        out = self.sample(self._index, n, step_major=step_major)
+        self._index += n
+        return out
+
+    def seek(self, index: int) -> None:
+        """Continue from sample ``index``."""
+        self._index = int(index)
+
+
+class ForcedRotation(_RandomAccess):
     """Constant world-frame angular velocity; attitude from the exact quaternion exponential.
 
     Random access: :meth:`sample` evaluates any step range in closed form.
@@ -89,18 +109,8 @@ class ForcedRotation:
         q += np.sin(half_angle)[:, None, :] * self._axis_q0[:, :, None]
         return q, np.broadcast_to(self._omega[:, :, None], (len(self._rate), 3, n))
 
-    def advance(self, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
-        """Next ``n`` samples (see :meth:`sample`)."""
-        out = self.sample(self._index, n, step_major=step_major)
-        self._index += n
-        return out
 
-    def seek(self, index: int) -> None:
-        """Continue from sample ``index``."""
-        self._index = int(index)
-
-
-class PerturbedRotation:
+class PerturbedRotation(_RandomAccess):
     """Forced rotation whose world-frame rate is ``omega_world + offsets[k]`` over step ``k``
     (unmodelled torque bursts, :func:`fkn_bench.envs.episodes.rate_offsets`): ``q_{k+1} =
     exp((omega + d_k) dt / 2) (x) q_k``, each factor exact for a rate constant over the step.
@@ -140,16 +150,6 @@ class PerturbedRotation:
         if step_major:
             return np.ascontiguousarray(q.transpose(2, 1, 0)), np.ascontiguousarray(omega.transpose(2, 1, 0))
         return q.copy(), omega.copy()
-
-    def advance(self, n: int, *, step_major: bool = False) -> tuple[ArrayF, ArrayF]:
-        """Next ``n`` samples (see :meth:`sample`)."""
-        out = self.sample(self._index, n, step_major=step_major)
-        self._index += n
-        return out
-
-    def seek(self, index: int) -> None:
-        """Continue from sample ``index``."""
-        self._index = int(index)
 
 
 class FreeTumble:
