@@ -177,8 +177,8 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
     # ------------------------------------------------------------------ rendering
     def _setup_rendering(self) -> None:
         """Frames at the scenario's own rate (``render_fps`` = 1/dt, 1 to 60); a ``human``
-        window needs a display, checked here: without one, a warning at ``gym.make`` and frames
-        drawn off-screen only (Gymnasium's ``check_env`` makes every declared mode)."""
+        window needs a display, checked here: without one, a warning at ``gym.make`` and nothing
+        drawn (Gymnasium's ``check_env`` makes every declared mode, so this must not fail)."""
         self.metadata = {**type(self).metadata, "render_fps": int(min(60, max(1, round(1.0 / self.scenario.dt))))}
         self._renderer: Any = None
         self._drawn = self.render_mode in ("rgb_array", "human")
@@ -284,6 +284,8 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
         and ``step`` too). None before the first ``reset``."""
         if self.render_mode is None or self._stream is None:
             return None
+        if self.render_mode == "human" and not self._window:  # no display (warned at construction)
+            return None
         if self.render_mode in ("rgb_array", "human"):
             if self._renderer is None:
                 from fkn_bench.envs.rendering import PoseRenderer
@@ -297,7 +299,6 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
         shown = "missing" if not self._valid[0, i] else np.array2string(self._meas[0, i], precision=3)
         name, digits = self._render_name()
         return f"{name} seed={self.episode_seed} step={self._index} t={self._times[i]:.{digits}f}s pose={shown}"
-
 
     def close(self) -> None:
         if self._renderer is not None:

@@ -7,7 +7,7 @@ attitude error of the estimate (sign-safe angle between estimate and truth, degr
 position error (m). A second panel traces the attitude error over the last
 :data:`HISTORY_STEPS` estimates (kept by the environment while it renders). Drawn with matplotlib: an Agg canvas for ``rgb_array`` (no GUI,
 no pyplot state), a pyplot window for ``human`` (which needs an interactive backend, i.e. a
-display; without one, ``human`` warns once and draws off-screen, so that Gymnasium's
+display; without one, ``human`` warns once and draws nothing, so that Gymnasium's
 ``check_env``, which makes every declared mode, passes on a headless machine).
 """
 
@@ -63,8 +63,8 @@ def display_problem() -> str | None:
     backend = matplotlib.get_backend().lower()
     if backend in ("agg", "pdf", "ps", "svg", "pgf", "cairo", "template") or backend.startswith("module://"):
         return (f"render_mode='human' has no window to draw in: matplotlib's backend is {backend!r} (no display, "
-                "or MPLBACKEND set); frames are drawn off-screen only. Use render_mode='rgb_array' "
-                "(e.g. with gymnasium.wrappers.RecordVideo) to keep them")
+                "or MPLBACKEND set), so nothing is drawn. Use render_mode='rgb_array' "
+                "(e.g. with gymnasium.wrappers.RecordVideo) for frames")
     return None
 
 

@@ -46,7 +46,7 @@ def test_frames_show_the_estimate_and_move_with_it() -> None:
     assert len(rows) > 100  # ... in the attitude panel itself, not only in the text
 
 
-def test_human_mode_without_a_display_warns_once_and_draws_off_screen(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_human_mode_without_a_display_warns_once_and_draws_nothing(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("MPLBACKEND", "agg")
     with pytest.warns(RuntimeWarning, match="render_mode='human' has no window .* Use render_mode='rgb_array'"):
         env = gym.make(ENV_ID, render_mode="human", n_steps=20)
