@@ -11,7 +11,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.signal import lfilter
 
 from fkn_bench.envs.dynamics import ForcedRotation, FreeTumble, PerturbedRotation
 from fkn_bench.envs.measurements import BLOCK, MeasurementGenerator, stream
@@ -137,6 +136,8 @@ def rate_offsets(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
     a burst of ``kick_length`` steps starts at step ``k`` where the ``kick`` stream's uniform
     draw is below ``kick_rate``; during a burst ``d`` takes the step ``kick_sigma n_k`` (``n_k``
     from the ``kick_noise`` stream) and it decays by ``exp(-dt / kick_decay)`` at every step."""
+    from scipy.signal import lfilter  # (here: scipy.signal takes 0.7 s to import)
+
     sc, steps = scenario, scenario.n_steps
     out = np.zeros((len(seeds), steps, 3))
     if not sc.has_kicks:

@@ -8,7 +8,7 @@ import json
 import subprocess
 import sys
 
-HEAVY = ("torch", "dask", "distributed", "optuna", "matplotlib")
+HEAVY = ("torch", "dask", "distributed", "optuna", "matplotlib", "scipy.signal", "minari", "h5py", "imageio")
 
 PROBE = """
 import contextlib, io, json, sys
