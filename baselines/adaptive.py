@@ -458,7 +458,10 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
 
     Subclasses set ``name``, ``description`` and ``rule_class`` (a :class:`NoiseRule` built from
     its ``knobs``). Keyword-only arguments: the rule's knobs, ``q_std``, ``r_std``, ``p0_std``
-    (starting noise and ``P0``; default the paper's manual tuning), ``name`` and ``description``.
+    (starting noise and ``P0``; default the paper's manual tuning), ``q_scale`` and ``r_scale``
+    (factors in ``(0, 1e6]`` on the starting standard deviations of ``Q`` and ``R``: the initial
+    noise as one number each, which a sweep searches), ``adapt`` (``"q"``, ``"r"`` or ``"qr"``:
+    what a rule with ``adapt_q``/``adapt_r`` adapts, as one choice), ``name`` and ``description``.
 
     ``estimate`` runs every sequence of the batch at once; ``reset``/``step`` run the same
     recursion on one sequence (with the observation-time rules of
@@ -475,6 +478,9 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         q_std: Sequence[float] | None = None,
         r_std: Sequence[float] | None = None,
         p0_std: Sequence[float] | None = None,
+        q_scale: float = 1.0,
+        r_scale: float = 1.0,
+        adapt: str | None = None,
         name: str | None = None,
         description: str | None = None,
         **knobs: Any,
@@ -482,14 +488,27 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         valid = self.rule_class.knobs
         unknown = sorted(set(knobs) - set(valid))
         if unknown:
-            raise ValueError(f"unknown {type(self).__name__} options {unknown}; valid: {sorted(valid + ('q_std', 'r_std', 'p0_std', 'name', 'description'))}")
+            options = valid + ("q_std", "r_std", "p0_std", "q_scale", "r_scale", "adapt", "name", "description")
+            raise ValueError(f"unknown {type(self).__name__} options {unknown}; valid: {sorted(options)}")
+        if adapt is not None:  # one categorical for the two booleans (a sweep never tries "neither")
+            if "adapt_q" not in valid:
+                raise ValueError(f"{type(self).__name__} has no choice of what to adapt (no option adapt)")
+            if adapt not in ("q", "r", "qr") or {"adapt_q", "adapt_r"} & set(knobs):
+                raise ValueError(f"adapt must be 'q', 'r' or 'qr', given instead of adapt_q/adapt_r (got {adapt!r})")
+            knobs = {**knobs, "adapt_q": "q" in adapt, "adapt_r": "r" in adapt}
         self.rule = self.rule_class(**knobs)
-        self.filter = AdaptiveKalmanFilter(self.rule, q_std=q_std, r_std=r_std, p0_std=p0_std)
-        self._stds = {  # the standard deviations given, for to_config
+        layout = PoseTwistModel().layout
+        scales = {"q_scale": check_range("q_scale", q_scale, high=1e6, closed_high=True),
+                  "r_scale": check_range("r_scale", r_scale, high=1e6, closed_high=True)}
+        start_q = None if scales["q_scale"] == 1.0 else [scales["q_scale"] * v for v in (q_std if q_std is not None else layout.q_default)]
+        start_r = None if scales["r_scale"] == 1.0 else [scales["r_scale"] * v for v in (r_std if r_std is not None else layout.r_default)]
+        self.filter = AdaptiveKalmanFilter(self.rule, q_std=start_q or q_std, r_std=start_r or r_std, p0_std=p0_std)
+        self._stds = {  # the standard deviations and scales given, for to_config
             key: [float(v) for v in value]
             for key, value in (("q_std", q_std), ("r_std", r_std), ("p0_std", p0_std))
             if value is not None
         }
+        self._scales = {key: float(value) for key, value in scales.items() if value != 1.0}
         if name is not None:
             self.name = name
         if description is not None:
@@ -521,4 +540,4 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         return state.x[0], state.P[0]
 
     def to_config(self) -> dict[str, Any]:
-        return {**self.rule.config(), **self._stds, "name": self.name, "description": self.description}
+        return {**self.rule.config(), **self._stds, **self._scales, "name": self.name, "description": self.description}

@@ -61,6 +61,9 @@ class AkhlaghiRule(ad.NoiseRule):
         self.adapt_r, self.adapt_q = bool(adapt_r), bool(adapt_q)
         self.adapts_q = self.adapt_q
         self.floor = ad.check_range("floor", floor, high=1.0, closed_high=False, closed_low=True)
+        if not (self.adapt_q or self.adapt_r):
+            raise ValueError("adapt_q and adapt_r are both false: a filter that adapts neither Q nor R is the plain EKF "
+                             "with its starting noise (manual-ekf, or q_std/r_std of a Kalman estimator), not this method")
 
     def initial(self, batch: int, Q0: ArrayF, R0: ArrayF) -> ad.Noise:
         return {

@@ -68,6 +68,9 @@ class SageHusaRule(ad.NoiseRule):
         self.adapt_r, self.adapt_q = bool(adapt_r), bool(adapt_q)
         self.adapts_q = self.adapt_q
         self.floor = ad.check_range("floor", floor, high=1.0, closed_high=False)
+        if not (self.adapt_q or self.adapt_r):
+            raise ValueError("adapt_q and adapt_r are both false: a filter that adapts neither Q nor R is the plain EKF "
+                             "with its starting noise (manual-ekf, or q_std/r_std of a Kalman estimator), not this method")
         self.warmup = ad.check_int("warmup", warmup, 0)
 
     def weight(self, k: ArrayF) -> ArrayF:

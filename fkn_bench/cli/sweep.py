@@ -28,7 +28,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from fkn_bench.cli import usage_errors
+from fkn_bench.cli import UsageError, usage_errors
 from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files, output_directory
 
 __all__ = ["add_parser", "run"]
@@ -58,6 +58,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, help="sampler seed (default: the space's, else 0)")
     parser.add_argument("--out", type=Path, metavar="DIR", help="output directory (default: runs/sweep-<study name>)")
     parser.add_argument("--no-progress", action="store_true", help="no per-trial messages")
+    parser.add_argument("--write-artifact", action="store_true",
+                        help="a non-trainable estimator (the adaptive baselines): install the best options as its "
+                             "committed settings for the scenario's model family")
     add_scenario_file_option(parser)
     parser.set_defaults(handler=run)
 
@@ -67,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.scenarios import get_scenario
     from fkn_bench.sweep import SearchSpace, SpaceError, SweepError, SweepSettings, load_space, resolve_space, run_sweep
     from fkn_bench.sweep import trial_config
+    from fkn_bench.sweep.objective import is_trainable
     from fkn_bench.training import trainable
 
     check_minimum(args, trials=1, grid_trials=1, top_k=1, workers=1, seed=0)
@@ -83,10 +87,21 @@ def run(args: argparse.Namespace) -> int:
     scenario = get_scenario(option("scenario", "ds1"))
     sampler = option("sampler", "random-grid")
     with usage_errors(UnknownEstimatorError, SpaceError, ValueError, TypeError):
-        space.check_fields(trainable(estimator).config({}).to_dict(), f"{estimator} training config")
-        trial_config(estimator, space, {})  # the fixed values on their own must be valid
+        if is_trainable(estimator):
+            space.check_fields(trainable(estimator).config({}).to_dict(), f"{estimator} training config")
+            trial_config(estimator, space, {})  # the fixed values on their own must be valid
+        else:  # its options: every knob's first value with the fixed ones must build it
+            try:
+                trial_config(estimator, space, {k.name: k.values[0] if k.values else k.low for k in space.knobs})
+            except (ValueError, TypeError) as exc:
+                raise UsageError(f"{space.source}: {estimator} is not trainable, so a sweep searches its options, "
+                                 f"and these do not build it: {exc}") from None
         if sampler == "grid":
             space.grid()
+    if args.write_artifact and is_trainable(estimator):
+        raise UsageError(f"--write-artifact installs the searched options of an estimator that is not trained; train "
+                         f"{estimator} with the sweep's best.toml instead: fkn-bench train --estimator {estimator} "
+                         f"--scenario {scenario.name} --config OUT/best.toml --write-artifact")
     study_name = args.study_name or f"{estimator}-{scenario.name}"
     with usage_errors(ValueError):
         settings = SweepSettings(
@@ -119,4 +134,8 @@ def run(args: argparse.Namespace) -> int:
     for path in (result.best_config, result.trials_csv, result.figure):
         if path is not None:
             print(f"  {path}")
+    if args.write_artifact:
+        from fkn_bench.sweep.artifact import install_sweep_options
+
+        print(f"  installed {install_sweep_options(settings, result)}")
     return 0

@@ -13,6 +13,14 @@ objectives rank on one scale).
 A configuration that the estimator refuses (e.g. ``loss_cut >= window``) or a training that
 diverges (non-finite loss) fails the trial with the message as its ``error`` attribute; the sweep
 goes on.
+
+An estimator that is not trainable (the adaptive baselines: Sage-Husa, Akhlaghi, VBAKF) is swept
+over its options (its factory's keywords: forgetting factors, windows, iteration counts, the
+initial noise scales): a trial builds it with the trial's options and runs it over the same
+validation data, with the same loss cut, as FlexKalmanNet's training validates on (the val split
+of the scenario's data set, :func:`fkn_bench.training.data.training_data` with FlexKalmanNet's
+default data protocol), and its value is that validation 13-state RMSE: the same objective and,
+with the same trial counts, the same tuning budget as the learned filters (issue 21).
 """
 
 from __future__ import annotations
@@ -29,7 +37,7 @@ import optuna
 from fkn_bench.scenarios import Scenario
 from fkn_bench.sweep.space import SearchSpace
 
-__all__ = ["TrialError", "SweepTask", "make_objective", "trial_config", "CATCH"]
+__all__ = ["TrialError", "SweepTask", "EstimatorOptions", "is_trainable", "make_objective", "trial_config", "CATCH"]
 
 
 class TrialError(Exception):
@@ -43,19 +51,89 @@ CATCH: tuple[type[BaseException], ...] = (TrialError,)
 @dataclass(frozen=True)
 class SweepTask:
     """What every worker needs to evaluate trials (picklable: sent to worker processes): the
-    trainable estimator, the training scenario (its train and val splits) and the search space."""
+    estimator, the training scenario (its train and val splits) and the search space."""
 
     estimator: str
     scenario: Scenario
     space: SearchSpace
 
 
+@dataclass(frozen=True)
+class EstimatorOptions:
+    """The configuration a sweep of a non-trainable estimator searches: its factory's options
+    (``to_dict()`` is what ``best.toml`` holds, for ``--estimator-option KEY=VALUE``)."""
+
+    estimator: str
+    options: Mapping[str, Any]
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.options)
+
+    def build(self, scenario: Scenario | None = None) -> Any:
+        """The estimator with these options (ValueError or TypeError when it refuses them)."""
+        from fkn_bench.estimators import make_estimator
+
+        return make_estimator(self.estimator, scenario=scenario, **self.options)
+
+
+def is_trainable(estimator: str) -> bool:
+    """Whether ``estimator`` declares a training (else a sweep searches its options)."""
+    from fkn_bench.estimators.registry import estimator_spec
+
+    return estimator_spec(estimator).trainable is not None
+
+
 def trial_config(estimator: str, space: SearchSpace, params: Mapping[str, Any]) -> Any:
-    """The training config of ``estimator`` for a trial: its defaults, then ``[fixed]``, then the
-    trial's ``params`` (raises ``ValueError`` or ``TypeError`` when invalid)."""
+    """The configuration of ``estimator`` for a trial: its defaults, then ``[fixed]``, then the
+    trial's ``params`` (raises ``ValueError`` or ``TypeError`` when invalid): a training config,
+    or for a non-trainable estimator its :class:`EstimatorOptions` (checked by building it)."""
+    if not is_trainable(estimator):
+        config = EstimatorOptions(estimator, {**space.fixed, **params})
+        config.build()
+        return config
     from fkn_bench.training import trainable
 
     return trainable(estimator).config({**space.fixed, **params})
+
+
+def _validation_data(scenario: Scenario) -> Any:
+    """The validation sequences FlexKalmanNet's training validates on, and its loss cut."""
+    from fkn_bench.training import trainable
+    from fkn_bench.training.data import training_data
+
+    settings = trainable("flexkalmannet").config({}).train_config()
+    return training_data(scenario, settings).val, int(settings.loss_cut)
+
+
+def _evaluation_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
+    """A non-trainable estimator's objective (module docstring): one evaluation per trial."""
+    import numpy as np
+    import torch
+
+    from fkn_bench.training.objectives import state_mse
+
+    val, loss_cut = _validation_data(task.scenario)
+    measurements, mask = val.measurements.numpy(), val.mask.numpy()
+
+    def objective(trial: optuna.Trial) -> float:
+        trial.set_user_attr("process", os.getpid())
+        params = task.space.suggest(trial)
+        began = time.perf_counter()
+        try:
+            estimator = trial_config(task.estimator, task.space, params).build(task.scenario)
+        except (ValueError, TypeError) as exc:
+            trial.set_user_attr("error", f"invalid configuration: {exc}")
+            raise TrialError(f"trial {trial.number}: invalid configuration: {exc}") from None
+        means = estimator.estimate(np.array(measurements), np.array(mask), float(task.scenario.dt)).means
+        rmse = math.sqrt(float(state_mse(torch.from_numpy(np.ascontiguousarray(means)), val.truth, loss_cut)))
+        if not math.isfinite(rmse):
+            trial.set_user_attr("error", "non-finite validation RMSE")
+            raise TrialError(f"trial {trial.number}: non-finite validation RMSE")
+        trial.set_user_attr("seconds", time.perf_counter() - began)
+        trial.report(rmse, 1)
+        return rmse
+
+    return objective
 
 
 def _value(val_rmse: float, val_loss: float) -> float:
@@ -65,9 +143,10 @@ def _value(val_rmse: float, val_loss: float) -> float:
 
 def make_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
     """The objective of ``task`` (module docstring)."""
-    from fkn_bench.training import fit, trainable
+    from fkn_bench.training import fit
 
-    trainable(task.estimator)  # raises ValueError when it is not trainable
+    if not is_trainable(task.estimator):
+        return _evaluation_objective(task)
 
     def objective(trial: optuna.Trial) -> float:
         trial.set_user_attr("process", os.getpid())

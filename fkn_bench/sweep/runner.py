@@ -41,7 +41,7 @@ from optuna.trial import FrozenTrial, TrialState
 
 from fkn_bench.io import atomic_path, write_json_atomic, write_text_atomic
 from fkn_bench.scenarios import Scenario
-from fkn_bench.sweep.objective import CATCH, SweepTask, make_objective, trial_config
+from fkn_bench.sweep.objective import CATCH, SweepTask, is_trainable, make_objective, trial_config
 from fkn_bench.wording import worker_initializer
 from fkn_bench.sweep.space import SearchSpace, check_sweep_options
 from fkn_bench.sweep.study import completed, make_sampler, open_storage, reduced_grid, stage_names, storage_label
@@ -304,6 +304,10 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         raise SweepError(f"no trial completed ({json.dumps(counts)}); see {trials_csv} for the errors")
     trial, stage = best
     config = trial_config(settings.estimator, settings.space, dict(trial.params)).to_dict()
+    use = (f"use: fkn-bench train --estimator {settings.estimator} --scenario {settings.scenario.name} --config best.toml"
+           if is_trainable(settings.estimator) else
+           f"use: fkn-bench run --estimator {settings.estimator} "
+           + " ".join(f"--estimator-option {k}={_option_text(v)}" for k, v in config.items()))
     header = (
         f"Best configuration of fkn-bench sweep study {settings.name!r} ({settings.sampler}), {stage} trial "
         f"{trial.number}\nvalidation 13-state RMSE {trial.value:.6g} on scenario {settings.scenario.name}\n"
@@ -311,8 +315,8 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         + (f"fixed by the search space: {', '.join(f'{k} = {v!r}' for k, v in settings.space.fixed.items())}\n"
            "(the search's budget, not a recommendation: for a full training delete these lines below, or\n"
            f"override them, e.g. {' '.join(f'--set {k}=<value>' for k in settings.space.fixed)})\n"
-           if settings.space.fixed else "")
-        + f"use: fkn-bench train --estimator {settings.estimator} --scenario {settings.scenario.name} --config best.toml"
+           if settings.space.fixed and is_trainable(settings.estimator) else "")
+        + use
     )
     best_config = write_toml(out / "best.toml", config, table=settings.estimator, header=header)
     figure = parallel_coordinates(
@@ -339,3 +343,12 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         best_value=float(trial.value), best_params=dict(trial.params), best_stage=stage,  # type: ignore[arg-type]
         best_number=trial.number, best_config=best_config, trials_csv=trials_csv, figure=figure, counts=counts,
     )
+
+
+def _option_text(value: Any) -> str:
+    """``value`` as ``--estimator-option KEY=VALUE`` reads it (lists comma-separated)."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, (list, tuple)):
+        return ",".join(_option_text(v) for v in value)
+    return str(value)

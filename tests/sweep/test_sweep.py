@@ -166,6 +166,33 @@ def test_any_trainable_estimator_is_swept_and_pruned_through_on_epoch(tmp_path: 
     assert not any(tmp_path.iterdir())  # trials write no files
 
 
+def test_a_non_trainable_estimator_is_swept_over_its_options(tmp_path: Path) -> None:
+    """Issue 21: an adaptive filter's options are searched with FlexKalmanNet's objective, the
+    validation 13-state RMSE of one run over the val split; invalid options fail their trial."""
+    import math
+
+    import numpy as np
+    import torch
+
+    from fkn_bench.estimators import make_estimator
+    from fkn_bench.sweep.objective import _validation_data
+    from fkn_bench.training.objectives import state_mse
+
+    scenario = get_scenario("ds1", n_steps=3000)
+    space = parse_space({"fixed": {"warmup": 20}, "params": {"forgetting": {"values": [1.5, 0.97]}}}, "inline")
+    study = optuna.create_study(direction="minimize")
+    for forgetting in (1.5, 0.97):
+        study.enqueue_trial({"forgetting": forgetting})
+    study.optimize(make_objective(SweepTask("sage-husa-default", scenario, space)), n_trials=2, catch=CATCH)
+    failed, done = study.trials
+    assert failed.state == TrialState.FAIL and "forgetting" in failed.user_attrs["error"]
+    val, cut = _validation_data(scenario)
+    means = make_estimator("sage-husa-default", forgetting=0.97, warmup=20).estimate(
+        val.measurements.numpy().copy(), val.mask.numpy().copy(), scenario.dt).means
+    expected = math.sqrt(float(state_mse(torch.from_numpy(np.ascontiguousarray(means)), val.truth, cut)))
+    assert done.value == pytest.approx(expected, rel=1e-12) and done.intermediate_values == {1: done.value}
+
+
 def test_cli_usage_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     space = tmp_path / "space.toml"
     space.write_text("[params.hiddn]\nvalues = [8, 16]\n")
@@ -177,7 +204,7 @@ def test_cli_usage_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert main(["sweep", "--space", str(space), "--sampler", "grid", "--out", str(tmp_path / "o")]) == 2
     assert "grid_points" in capsys.readouterr().err
     assert main(["sweep", "--space", "quick", "--estimator", "manual-ekf", "--out", str(tmp_path / "o")]) == 2
-    assert "not trainable" in capsys.readouterr().err
+    assert "manual-ekf is not trainable, so a sweep searches its options" in capsys.readouterr().err
     assert main(["sweep", "--space", "quick", "--workers", "0", "--out", str(tmp_path / "o")]) == 2
     assert "workers" in capsys.readouterr().err
     space.write_text("[fixed]\nepochs = 0\n[params.lr]\nvalues = [0.01]\n")
