@@ -500,8 +500,11 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         layout = PoseTwistModel().layout
         scales = {"q_scale": check_range("q_scale", q_scale, high=1e6, closed_high=True),
                   "r_scale": check_range("r_scale", r_scale, high=1e6, closed_high=True)}
-        start_q = None if scales["q_scale"] == 1.0 else [scales["q_scale"] * v for v in (q_std if q_std is not None else layout.q_default)]
-        start_r = None if scales["r_scale"] == 1.0 else [scales["r_scale"] * v for v in (r_std if r_std is not None else layout.r_default)]
+        # the given deviations are checked as given (an error names the caller's value), then scaled
+        given_q = KalmanEstimator._check_std("q_std", q_std, layout.q_default)
+        given_r = KalmanEstimator._check_std("r_std", r_std, layout.r_default)
+        start_q = None if scales["q_scale"] == 1.0 else [scales["q_scale"] * float(v) for v in given_q]
+        start_r = None if scales["r_scale"] == 1.0 else [scales["r_scale"] * float(v) for v in given_r]
         self.filter = AdaptiveKalmanFilter(self.rule, q_std=start_q or q_std, r_std=start_r or r_std, p0_std=p0_std)
         self._stds = {  # the standard deviations and scales given, for to_config
             key: [float(v) for v in value]

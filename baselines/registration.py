@@ -32,6 +32,10 @@ def _tuned_adaptive(cls: type, description: str, scenario: Scenario | None = Non
     if document["estimator"] != cls.name:
         raise ArtifactError(f"{path} holds {document['estimator']!r} settings, not {cls.name}'s")
     tuned = {k: v for k, v in document["estimator_config"].items() if k not in ("name", "description")}
+    if {"adapt_q", "adapt_r"} & set(options):  # the caller's choice of what to adapt replaces the tuned one
+        tuned.pop("adapt", None)
+    if "adapt" in options:
+        tuned = {k: v for k, v in tuned.items() if k not in ("adapt_q", "adapt_r")}
     source = f"tuned on {document.get('scenario', {}).get('name', document['family'])}"
     return cls(**{"description": f"{description} ({source})", **tuned, **options})
 

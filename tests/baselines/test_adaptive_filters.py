@@ -121,15 +121,23 @@ def test_subclassed_models_run_the_same_step() -> None:
 
 # ---------------------------------------------------------------------------- configuration
 def test_registry_descriptions_and_knobs(tmp_path: Path) -> None:
+    """``<name>`` runs the committed tuned settings of the scenario's family (issue 21), and
+    ``<name>-default`` the paper's settings."""
+    from fkn_bench.training.artifacts import artifact_path, read_artifact
+
     scenario = get_scenario("ds1")
     for name, cls in (("sage-husa", SageHusaEstimator), ("akhlaghi", AkhlaghiEstimator), ("vbakf", VBAKFEstimator)):
-        spec = estimator_spec(name)
-        assert spec.description and not spec.trainable
-        estimator = make_estimator(name, scenario=scenario)
-        assert isinstance(estimator, cls) and estimator.name == name
-    assert make_estimator("sage-husa").to_config()["forgetting"] == 0.99
-    assert make_estimator("akhlaghi").to_config()["alpha"] == 0.3
-    vb = make_estimator("vbakf").to_config()
+        for variant in (name, f"{name}-default"):
+            spec = estimator_spec(variant)
+            assert spec.description and not spec.trainable
+            estimator = make_estimator(variant, scenario=scenario)
+            assert isinstance(estimator, cls) and estimator.name == variant
+        tuned = read_artifact(artifact_path(name, "ds1"))["estimator_config"]
+        config = make_estimator(name, scenario=scenario).to_config()
+        assert all(config[k] == v for k, v in tuned.items() if k != "adapt") and tuned.get("q_scale")
+    assert make_estimator("sage-husa-default").to_config()["forgetting"] == 0.99
+    assert make_estimator("akhlaghi-default").to_config()["alpha"] == 0.3
+    vb = make_estimator("vbakf-default").to_config()
     assert (vb["tau_p"], vb["tau_r"], vb["iterations"]) == (3.0, 3.0, 10) and vb["rho"] == pytest.approx(1 - np.exp(-4))
     tuned = make_estimator("vbakf", iterations=3, r_std=[0.05] * 7, name="vb3")
     again = load_estimator(tuned.save(tmp_path / "vb3.json"))

@@ -6,8 +6,9 @@ worker that runs its file.
 
 Every estimator but ``manual-ekf`` is gated on part of the named scenarios (:data:`GATED_ON`):
 ``manual-ekf`` gates the EKF and the measurement stream's shared handling (dropouts, gaps, sign
-flips, noise) on every scenario; the UKF, MEKF and adaptive filters are gated on
-:data:`STREAM_SCENARIOS`; the rigid-body EKF (known and estimated inertia) on ds1 and two free
+flips, noise) on every scenario; the UKF and MEKF are gated on :data:`STREAM_SCENARIOS`, the
+adaptive filters' code (their papers' settings, ``*-default``) on its three stream variants and
+their tuned settings once per committed file; the rigid-body EKF (known and estimated inertia) on ds1 and two free
 tumbles, FlexKalmanNet on it once per committed parameter file, the rigid-body UKF and MEKF on two
 free tumbles (the rigid-body model's prediction is the same code in every filter); every free
 tumble is gated by at least one rigid-body estimator. The learned-gain networks are gated once per
@@ -47,7 +48,11 @@ GATED_ON = {
     "rigid-body-ekf-ratios": ("ds1", "tumble-fast", "tumble-inertia-error"),
     "flexkalmannet-rigid-body": ("ds1", "ds2", "tumble-fast"),  # once per committed parameter file
     **{name: ("tumble-fast", "tumble-flip") for name in ("rigid-body-ukf", "rigid-body-ukf-ratios", "rigid-body-mekf", "rigid-body-mekf-ratios")},
-    **{name: STREAM_SCENARIOS for name in ("manual-ukf", "manual-mekf", "sage-husa", "akhlaghi", "vbakf")},
+    **{name: STREAM_SCENARIOS for name in ("manual-ukf", "manual-mekf")},
+    # the adaptive filters: their code on the stream variants (the papers' settings), and each
+    # committed file of tuned settings once (ds1, ds2, tumble-fast for the tumble family's)
+    **{f"{name}-default": ("ds1-noise5x", "ds1-gap100", "ds1-flips") for name in ("sage-husa", "akhlaghi", "vbakf")},
+    **{name: ("ds1", "ds2", "tumble-fast") for name in ("sage-husa", "akhlaghi", "vbakf")},
     "kalmannet": ("ds1", "ds2", "ds1-gap100", "ds1-flips", "tumble-fast"),
     "recursive-kalmannet": ("ds1", "ds2", "tumble-fast"),
     # the EKF with a committed parameter file per family: the filter is gated on every scenario
