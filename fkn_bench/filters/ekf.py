@@ -25,6 +25,7 @@ import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
+from fkn_bench.filters.structured import pose_predict, pose_update
 from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, solve_spd, symmetrize
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
@@ -188,9 +189,14 @@ class ExtendedKalmanFilter(KalmanFilter):
     def __init__(self, *, model: StateSpaceModel | None = None) -> None:
         self.model = model if model is not None else PoseTwistModel()
         self.layout = self.model.layout
+        self._structured = type(self.model) is PoseTwistModel
 
     def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
+        if self._structured and not isinstance(state.mean, np.ndarray):
+            return pose_predict(state, process_noise, dt)
         return ekf_predict(self.model, state, process_noise, dt)
 
     def update(self, state: FilterState, z: Array, measurement_noise: Array) -> tuple[FilterState, Array, Array]:
+        if self._structured and not isinstance(state.mean, np.ndarray):
+            return pose_update(self.model, state, z, measurement_noise)
         return linear_measurement_update(self.model, state, z, measurement_noise)

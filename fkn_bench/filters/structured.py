@@ -1,0 +1,224 @@
+"""The EKF step of :class:`~fkn_bench.filters.models.PoseTwistModel` on torch batches, written for
+the model's structure (the batched hot path of :class:`~fkn_bench.filters.ekf.ExtendedKalmanFilter`).
+
+The generic step (:func:`fkn_bench.filters.ekf.ekf_predict`, :func:`~fkn_bench.filters.ekf.joseph_update`)
+forms ``F P F^T`` and the Joseph products as dense ``(B, 13, 13)`` batched matrix products. For
+13 x 13 matrices a batched product costs about as much per matrix for its call overhead as for
+its arithmetic, so these functions instead work *batch-last*: a covariance is read as a
+``(13, 13, B)`` view (``P.permute(1, 2, 0)``; free when it is stored that way, as every covariance
+they return is) and each small product ``X (a, k, B) @ Y (k, c, B)`` is one broadcast multiply
+and one sum over ``k`` (:func:`_product`), elementwise work vectorised over the batch.
+Inputs and outputs keep the public shapes: means ``(B, 13)``, covariances ``(B, 13, 13)``
+(views of batch-last storage), so :meth:`KalmanFilter.run` and everything downstream see no
+difference but for the strides.
+
+Structure used (state ``[q(4), r(3), w(3), v(3)]``, FlexKalmanNet eqs. 6-11):
+
+* The transition Jacobian is ``F = A + E``: ``A`` the identity plus ``r += dt v``, ``E`` nonzero
+  only in the quaternion rows, on the columns ``u = [q, w]``: ``F[q, u] = G = [I + dt/2 Omega(w) |
+  dt/2 Theta(q)]`` (4 x 7). So ``M = F P`` changes only the ``q`` rows (``G P[u, :]``, 4 x 7 x 13)
+  and the ``r`` rows (``P[r] + dt P[v]``), and ``M F^T`` only the ``q`` columns (``M[:, u] G^T``,
+  13 x 7 x 4) and the ``r`` columns: 728 multiply-adds instead of two dense 13^3 products
+  (4394).
+* ``H = [I7 0]``: ``S = P[o, o] + R`` with ``o = 0:7``, ``K = P[:, o] S^-1`` (13 x 7 x 7). The
+  Joseph update (Bucy & Joseph 1968; Simon, Optimal State Estimation, 2006, eq. 5.19) followed by
+  the normalisation's projection ``T`` (identity but for ``N = (I - u u^T)/|q|`` on the ``q``
+  block), ``P+ = (T A) P (T A)^T + (T K) R (T K)^T`` with ``A = I - K H``, is formed as
+  ``Y = T P - (T K) P[o, :]`` and ``P+ = Y T^T + ((T K) R - Y[:, o]) (T K)^T``: two 13 x 7 x 13
+  products (the same sum of terms as the Joseph form, regrouped; no term dropped, so it
+  holds for any gain).
+
+Every covariance returned is symmetrised (``(P + P^T) / 2``), as the generic step does. The
+quaternion sign alignment and the measured slice go through the model's own ``align`` and
+``measure`` hooks on the public layout, so the sign rule is the model's, unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from fkn_bench.filters.base import FilterState
+from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.linalg import constant
+
+__all__ = ["pose_predict", "pose_update", "batch_last", "batch_first"]
+
+_U = (0, 1, 2, 3, 7, 8, 9)
+"""The state components ``[q, w]`` on which the quaternion rows of ``F`` depend."""
+
+
+def batch_last(P: Tensor) -> Tensor:
+    """``(B, k, k)`` -> ``(k, k, B)`` view (``(k, k)`` -> ``(k, k, 1)``)."""
+    return P.unsqueeze(-1) if P.dim() == 2 else P.permute(1, 2, 0)
+
+
+def batch_first(P: Tensor) -> Tensor:
+    """``(k, k, B)`` -> ``(B, k, k)`` view."""
+    return P.permute(2, 0, 1)
+
+
+def _product(X: Tensor, Y: Tensor) -> Tensor:
+    """``X @ Y`` of batch-last matrices ``X (a, k, B)``, ``Y (k, c, B)`` (a batch axis of 1
+    broadcasts): ``sum_k X[:, k] Y[k]`` (:func:`_sum_of_outer`)."""
+    return _sum_of_outer(X.unbind(1), Y.unbind(0))
+
+
+def _sum_of_outer(columns: Sequence[Tensor], rows: Sequence[Tensor]) -> Tensor:
+    """``sum_k columns[k] rows[k]^T`` per batch column: ``columns[k] (a, B)``, ``rows[k] (c, B)``
+    -> ``(a, c, B)``, i.e. the product of the matrices with these columns and rows. Without
+    autograd, ``k`` fused multiply-adds into one ``(a, c, B)`` buffer (it stays in cache); with
+    it, one broadcast product and one sum (two graph nodes instead of ``k``)."""
+    if torch.is_grad_enabled() and any(t.requires_grad for t in (*columns, *rows)):
+        return (torch.stack(columns, 1).unsqueeze(2) * torch.stack(rows).unsqueeze(0)).sum(1)
+    out = columns[0].unsqueeze(1) * rows[0].unsqueeze(0)
+    for column, row in zip(columns[1:], rows[1:]):
+        out.addcmul_(column.unsqueeze(1), row.unsqueeze(0))
+    return out
+
+
+def _g_basis(dt: float) -> np.ndarray:
+    """``C (29, 7)``: column 0 ... 27 of ``[1 | x_u] @ C.T`` hold ``G (4, 7)`` row-major, with
+    ``x_u = [q, w]`` and ``G = [I + dt/2 Omega(w) | dt/2 Theta(q)]``; returned transposed for
+    ``addmm``: ``G_flat (28, B) = bias + C x_u``."""
+    basis = np.zeros((4, 7, 7))  # [row i, column k of G, component j of x_u]
+    theta, omega = qx.theta_matrix(np.eye(4)), qx.omega_matrix(np.eye(3))  # (4, 4, 3), (3, 4, 4)
+    for j in range(4):  # d(Theta(q))/dq_j
+        basis[:, 4:7, j] = theta[j]
+    for j in range(3):  # d(Omega(w))/dw_j
+        basis[:, 0:4, 4 + j] = omega[j]
+    return (0.5 * dt) * basis.reshape(28, 7)
+
+
+def _g_constants(like: Tensor, dt: float) -> tuple[Tensor, Tensor]:
+    """``(C (28, 7), bias (28, 1))``: ``G_flat = bias + C x_u`` (see :func:`_g_basis`)."""
+    C = constant(like, ("pose-G", dt), lambda: _g_basis(dt))
+    bias = constant(like, "pose-G-bias", lambda: np.concatenate((np.eye(4), np.zeros((4, 3))), axis=1).reshape(28, 1))
+    return C, bias
+
+
+def pose_predict(state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
+    """EKF prediction of :class:`PoseTwistModel` (module docstring): ``x- = f(x+)``,
+    ``P- = F P+ F^T + Q``, symmetrised. ``state``: means ``(B, 13)``, covariances ``(B, 13, 13)``
+    (any strides; exactly symmetric, as every covariance of the filters is: the gradient with
+    respect to the mean relies on it); ``Q`` ``(13, 13)`` or ``(B or 1, 13, 13)``; ``dt`` in
+    seconds. Returns views of batch-last storage with the public shapes. Differentiable through a
+    hand-written backward (:class:`_PosePredict`), which keeps the autograd graph at one node
+    per step."""
+    mean, P_next = _PosePredict.apply(state.mean.transpose(0, 1), batch_last(state.covariance), batch_last(process_noise), float(dt))
+    return FilterState(mean.transpose(0, 1), batch_first(P_next))
+
+
+def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Batch-last prediction: ``(x- (13, B), P- (13, 13, B), G (4, 7, B), M (13, 13, B))``
+    with ``M = F P`` (the last two for the backward pass)."""
+    batch = xb.shape[1]
+    C, bias = _g_constants(xb, dt)
+    xu = torch.cat((xb[0:4], xb[7:10]))  # (7, B)
+    G = torch.addmm(bias, C, xu).view(4, 7, batch)  # [I + dt/2 Omega(w) | dt/2 Theta(q)]
+    q_next = (G[:, 0:4] * xb[0:4].unsqueeze(0)).sum(1)  # (I + dt/2 Omega(w)) q
+    mean = torch.cat((q_next, torch.add(xb[4:7], xb[10:13], alpha=dt), xb[7:13]))  # (13, B)
+    # M = F P: the q rows G P[u], the r rows P[r] + dt P[v], the w and v rows unchanged
+    G_columns, P_rows = G.unbind(1), Pb.unbind(0)
+    M = torch.cat((_sum_of_outer(G_columns, [P_rows[i] for i in _U]), torch.add(Pb[4:7], Pb[10:13], alpha=dt), Pb[7:13]))
+    # M F^T: the q columns M[:, u] G^T, the r columns M[:, r] + dt M[:, v], w and v unchanged
+    M_columns = M.unbind(1)
+    P_next = torch.cat((_sum_of_outer([M_columns[i] for i in _U], G_columns), torch.add(M[:, 4:7], M[:, 10:13], alpha=dt), M[:, 7:13]), dim=1)
+    P_next += Qb
+    return mean, _symmetrized(P_next), G, M
+
+
+class _PosePredict(torch.autograd.Function):
+    """``(x (13, B), P (13, 13, B), Q (13, 13, B or 1), dt) -> (x-, P-)`` batch-last, with the
+    backward pass written out (``Gbar = sym(dL/dP-)``):
+
+    * ``dL/dQ = Gbar`` (summed over a broadcast batch axis), ``dL/dP = F^T Gbar F`` (the same
+      structured products as the forward pass, with ``F^T``);
+    * ``dL/dG = 2 Gbar[q, :] (F P)[:, u]`` (``P`` symmetric) plus ``dL/dq- q^T`` from the mean
+      ``q- = G[:, q] q``; ``dL/dx`` collects ``C^T dL/dG`` (``G`` is affine in ``x_u``) and the
+      mean's direct terms.
+    """
+
+    @staticmethod
+    def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor]:  # type: ignore[override]
+        mean, P_next, G, M = _predict_forward(xb, Pb, Qb, dt)
+        ctx.save_for_backward(xb, G, M)
+        ctx.dt = dt
+        ctx.q_shape = Qb.shape
+        return mean, P_next
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx: Any, g_mean: Tensor, g_P: Tensor) -> tuple[Tensor | None, Tensor | None, Tensor | None, None]:  # type: ignore[override]
+        xb, G, M = ctx.saved_tensors
+        dt = ctx.dt
+        batch = xb.shape[1]
+        Gbar = _symmetrized(g_P)
+        dQ = None
+        if ctx.needs_input_grad[2]:
+            dQ = Gbar if ctx.q_shape[-1] == batch and batch != 1 else Gbar.sum(-1, keepdim=True)
+        dP = None
+        if ctx.needs_input_grad[1]:
+            # X = F^T Gbar: rows u = G^T Gbar[q] (+ Gbar[w] on w), r = Gbar[r], v = Gbar[v] + dt Gbar[r]
+            Xu = _product(G.transpose(0, 1), Gbar[0:4])  # (7, 13, B)
+            X = torch.cat((Xu[0:4], Gbar[4:7], Xu[4:7] + Gbar[7:10], torch.add(Gbar[10:13], Gbar[4:7], alpha=dt)))
+            # X F: columns u = X[:, q] G (+ X[:, w] on w), r = X[:, r], v = X[:, v] + dt X[:, r]
+            Yu = _product(X[:, 0:4], G)  # (13, 7, B)
+            dP = torch.cat((Yu[:, 0:4], X[:, 4:7], Yu[:, 4:7] + X[:, 7:10], torch.add(X[:, 10:13], X[:, 4:7], alpha=dt)), dim=1)
+        dx = None
+        if ctx.needs_input_grad[0]:
+            g_q = g_mean[0:4]
+            dG = _product(Gbar[0:4], torch.cat((M[:, 0:4], M[:, 7:10]), dim=1))  # Gbar[q, :] M[:, u] (4, 7, B)
+            dG *= 2.0
+            dG[:, 0:4] += g_q.unsqueeze(1) * xb[0:4].unsqueeze(0)
+            C, _ = _g_constants(xb, dt)
+            du = C.transpose(0, 1) @ dG.reshape(28, batch)  # (7, B)
+            dq = (G[:, 0:4] * g_q.unsqueeze(1)).sum(0) + du[0:4]
+            g_r = g_mean[4:7]
+            dx = torch.cat((dq, g_r, g_mean[7:10] + du[4:7], torch.add(g_mean[10:13], g_r, alpha=dt)))
+        return dx, dP, dQ, None
+
+
+def _symmetrized(Pb: Tensor) -> Tensor:
+    """``(P + P^T) / 2`` of a batch-last ``(k, k, B)`` batch (exactly symmetric; the transposed
+    operand is read along the contiguous batch axis, so this costs one vectorised add)."""
+    out = Pb + Pb.transpose(0, 1)
+    out *= 0.5
+    return out
+
+
+def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
+    """EKF measurement update of :class:`PoseTwistModel` for every row (module docstring):
+    ``z (B, 7)`` sanitised measurements, ``R`` ``(7, 7)`` or ``(B or 1, 7, 7)``. The measured
+    quaternion's sign is aligned by ``model.align`` (as the generic update does); the posterior
+    quaternion is renormalised and the covariance projected with ``N = (I - u u^T) / |q|``.
+    Returns the posterior (means ``(B, 13)``, covariances ``(B, 13, 13)``, symmetrised), the
+    innovation ``nu (B, 7)`` and its covariance ``S (B, 7, 7)`` (exactly symmetric)."""
+    x, P = state.mean, state.covariance
+    z = model.align(z, x)  # type: ignore[attr-defined]
+    nu = z - model.measure(x)  # type: ignore[attr-defined]
+    batch = x.shape[0]
+    Pb = batch_last(P)
+    Rb = batch_last(measurement_noise)
+    S = Pb[0:7, 0:7] + Rb  # a block of P plus R: exactly symmetric, as they are
+    S_inv = batch_last(torch.linalg.inv_ex(batch_first(S))[0])
+    K = _product(Pb[:, 0:7], S_inv)  # (13, 7, B): P H^T S^-1
+    xb = x.transpose(0, 1) + (K * nu.transpose(0, 1).unsqueeze(0)).sum(1)  # (13, B)
+    q = xb[0:4]
+    norm = torch.sqrt((q * q).sum(0, keepdim=True))  # (1, B)
+    unit = q / norm
+    N = (constant(x, "eye4-bl", lambda: np.eye(4)[:, :, None]) - unit.unsqueeze(1) * unit.unsqueeze(0)) / norm  # (4, 4, B)
+    mean = torch.cat((unit, xb[4:13]))
+    TK = torch.cat((_product(N, K[0:4]), K[4:13]))  # (13, 7, B)
+    # Y = T A P = T P - (T K) P[o, :];  P+ = Y T^T + ((T K) R - Y[:, o]) (T K)^T
+    TP = torch.cat((_product(N, Pb[0:4]), Pb[4:13]))
+    Y = TP - _product(TK, Pb[0:7])
+    YT = torch.cat((_product(Y[:, 0:4], N.transpose(0, 1)), Y[:, 4:13]), dim=1)
+    W = _product(TK, Rb) - Y[:, 0:7]
+    P_post = YT + _product(W, TK.transpose(0, 1))
+    del batch
+    return FilterState(mean.transpose(0, 1), batch_first(_symmetrized(P_post))), nu, batch_first(S)
