@@ -64,21 +64,52 @@ def batch_first(P: Tensor) -> Tensor:
 
 def _product(X: Tensor, Y: Tensor) -> Tensor:
     """``X @ Y`` of batch-last matrices ``X (a, k, B)``, ``Y (k, c, B)`` (a batch axis of 1
-    broadcasts): ``sum_k X[:, k] Y[k]`` (:func:`_sum_of_outer`)."""
+    broadcasts): ``sum_k X[:, k] Y[k]`` (:func:`_sum_of_outer`); differentiable
+    (:class:`_BatchLastProduct`)."""
+    if torch.is_grad_enabled() and (X.requires_grad or Y.requires_grad):
+        return _BatchLastProduct.apply(X, Y)
     return _sum_of_outer(X.unbind(1), Y.unbind(0))
 
 
-def _sum_of_outer(columns: Sequence[Tensor], rows: Sequence[Tensor]) -> Tensor:
+def _sum_of_outer(columns: Sequence[Tensor], rows: Sequence[Tensor], out: Tensor | None = None) -> Tensor:
     """``sum_k columns[k] rows[k]^T`` per batch column: ``columns[k] (a, B)``, ``rows[k] (c, B)``
-    -> ``(a, c, B)``, i.e. the product of the matrices with these columns and rows. Without
-    autograd, ``k`` fused multiply-adds into one ``(a, c, B)`` buffer (it stays in cache); with
-    it, one broadcast product and one sum (two graph nodes instead of ``k``)."""
+    -> ``(a, c, B)`` (into ``out`` when given), i.e. the product of the matrices with these
+    columns and rows: ``k`` fused multiply-adds into one ``(a, c, B)`` buffer, which stays in
+    cache (a broadcast product and a sum would write a ``k`` times larger intermediate).
+    Differentiable through :func:`_product` only."""
     if torch.is_grad_enabled() and any(t.requires_grad for t in (*columns, *rows)):
-        return (torch.stack(columns, 1).unsqueeze(2) * torch.stack(rows).unsqueeze(0)).sum(1)
-    out = columns[0].unsqueeze(1) * rows[0].unsqueeze(0)
+        result = _product(torch.stack(tuple(columns), 1), torch.stack(tuple(rows)))
+        return result if out is None else out.copy_(result)
+    out = torch.mul(columns[0].unsqueeze(1), rows[0].unsqueeze(0), out=out)
     for column, row in zip(columns[1:], rows[1:]):
         out.addcmul_(column.unsqueeze(1), row.unsqueeze(0))
     return out
+
+
+class _BatchLastProduct(torch.autograd.Function):
+    """``X (a, k, B) @ Y (k, c, B)`` batch-last (either batch axis may be 1), with the backward
+    pass ``dX = dO Y^T``, ``dY = X^T dO`` as the same fused multiply-adds (summed over a broadcast
+    batch axis): no ``(a, k, c, B)`` intermediate forward or backward."""
+
+    @staticmethod
+    def forward(ctx: Any, X: Tensor, Y: Tensor) -> Tensor:  # type: ignore[override]
+        ctx.save_for_backward(X, Y)
+        return _sum_of_outer(X.unbind(1), Y.unbind(0))
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx: Any, g: Tensor) -> tuple[Tensor | None, Tensor | None]:  # type: ignore[override]
+        X, Y = ctx.saved_tensors
+        dX = dY = None
+        if ctx.needs_input_grad[0]:
+            dX = _sum_of_outer(g.unbind(1), Y.unbind(1))  # sum_c dO[:, c] Y[:, c]^T
+            if X.shape[-1] == 1 and dX.shape[-1] != 1:
+                dX = dX.sum(-1, keepdim=True)
+        if ctx.needs_input_grad[1]:
+            dY = _sum_of_outer(X.unbind(0), g.unbind(0))  # sum_i X[i]^T dO[i]
+            if Y.shape[-1] == 1 and dY.shape[-1] != 1:
+                dY = dY.sum(-1, keepdim=True)
+        return dX, dY
 
 
 def _g_basis(dt: float) -> np.ndarray:
@@ -113,23 +144,40 @@ def pose_predict(state: FilterState, process_noise: Tensor, dt: float) -> Filter
     return FilterState(mean.transpose(0, 1), batch_first(P_next))
 
 
-def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-    """Batch-last prediction: ``(x- (13, B), P- (13, 13, B), G (4, 7, B), M (13, 13, B))``
-    with ``M = F P`` (the last two for the backward pass)."""
+def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float, keep: bool) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
+    """Batch-last prediction ``(x- (13, B), P- (13, 13, B), Ghat (4, 7, B), D[:, u] (7, 7, B))``,
+    the last two for the backward pass (``D[:, u]`` only when ``keep``).
+
+    ``F = I + Delta`` with ``Delta`` nonzero on the ``q`` rows (``Ghat = [dt/2 Omega(w) | dt/2
+    Theta(q)]`` on the columns ``u``) and the ``r`` rows (``dt`` on the ``v`` columns). With
+    ``D = (Delta P)[q r, :]`` (7 x 13) and ``N = D + (Delta P Delta^T)[q r, q r] / 2`` (its 7 x 7
+    block only), ``F P F^T = P + N + N^T`` with ``N`` placed on the rows ``q r`` and ``N^T`` on the
+    columns ``q r``. Written as ``(P + Q) + N`` on one side of the diagonal, ``(P + Q) + N^T`` on
+    the other and ``(P + Q) + (N + N^T)`` on the 7 x 7 block, the result is exactly symmetric when
+    ``P`` and ``Q`` are (``Q`` is symmetrised here; ``P`` is every covariance the filter
+    produces), with no symmetrising pass over the whole matrix.
+    """
     batch = xb.shape[1]
-    C, bias = _g_constants(xb, dt)
+    C, _ = _g_constants(xb, dt)
     xu = torch.cat((xb[0:4], xb[7:10]))  # (7, B)
-    G = torch.addmm(bias, C, xu).view(4, 7, batch)  # [I + dt/2 Omega(w) | dt/2 Theta(q)]
-    q_next = (G[:, 0:4] * xb[0:4].unsqueeze(0)).sum(1)  # (I + dt/2 Omega(w)) q
+    Ghat = (C @ xu).view(4, 7, batch)  # [dt/2 Omega(w) | dt/2 Theta(q)]
+    q_next = xb[0:4] + (Ghat[:, 0:4] * xb[0:4].unsqueeze(0)).sum(1)  # q + dt/2 Omega(w) q
     mean = torch.cat((q_next, torch.add(xb[4:7], xb[10:13], alpha=dt), xb[7:13]))  # (13, B)
-    # M = F P: the q rows G P[u], the r rows P[r] + dt P[v], the w and v rows unchanged
-    G_columns, P_rows = G.unbind(1), Pb.unbind(0)
-    M = torch.cat((_sum_of_outer(G_columns, [P_rows[i] for i in _U]), torch.add(Pb[4:7], Pb[10:13], alpha=dt), Pb[7:13]))
-    # M F^T: the q columns M[:, u] G^T, the r columns M[:, r] + dt M[:, v], w and v unchanged
-    M_columns = M.unbind(1)
-    P_next = torch.cat((_sum_of_outer([M_columns[i] for i in _U], G_columns), torch.add(M[:, 4:7], M[:, 10:13], alpha=dt), M[:, 7:13]), dim=1)
-    P_next += Qb
-    return mean, _symmetrized(P_next), G, M
+    G_columns, P_rows = Ghat.unbind(1), Pb.unbind(0)
+    D = torch.empty(7, 13, batch, dtype=Pb.dtype)
+    _sum_of_outer(G_columns, [P_rows[i] for i in _U], out=D[0:4])  # Ghat P[u]
+    torch.mul(Pb[10:13], dt, out=D[4:7])  # dt P[v]
+    Du = torch.cat((D[:, 0:4], D[:, 7:10]), dim=1) if keep else None
+    D_columns = D.unbind(1)
+    corner = _sum_of_outer([D_columns[i] for i in _U], G_columns)  # (Delta P Delta^T)[q r, q]: D[:, u] Ghat^T
+    N = D  # D + (Delta P Delta^T)[q r, q r] / 2, in place (the q and r columns; D[:, u] and D[:, v] were read)
+    N[:, 0:4].add_(corner, alpha=0.5)
+    N[:, 4:7].add_(D[:, 10:13], alpha=0.5 * dt)
+    P_next = Pb + _symmetrized(Qb)
+    P_next[0:7, 0:7] += N[:, 0:7] + N[:, 0:7].transpose(0, 1)
+    P_next[0:7, 7:13] += N[:, 7:13]
+    P_next[7:13, 0:7] += N[:, 7:13].transpose(0, 1)
+    return mean, P_next, Ghat, Du
 
 
 class _PosePredict(torch.autograd.Function):
@@ -145,8 +193,8 @@ class _PosePredict(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor]:  # type: ignore[override]
-        mean, P_next, G, M = _predict_forward(xb, Pb, Qb, dt)
-        ctx.save_for_backward(xb, G, M)
+        mean, P_next, Ghat, Du = _predict_forward(xb, Pb, Qb, dt, keep=ctx.needs_input_grad[0])
+        ctx.save_for_backward(xb, Pb, Ghat, Du)
         ctx.dt = dt
         ctx.q_shape = Qb.shape
         return mean, P_next
@@ -154,9 +202,10 @@ class _PosePredict(torch.autograd.Function):
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx: Any, g_mean: Tensor, g_P: Tensor) -> tuple[Tensor | None, Tensor | None, Tensor | None, None]:  # type: ignore[override]
-        xb, G, M = ctx.saved_tensors
+        xb, Pb, Ghat, Du = ctx.saved_tensors
         dt = ctx.dt
         batch = xb.shape[1]
+        G = Ghat + _g_constants(xb, dt)[1].view(4, 7, 1)  # F[q, u]
         Gbar = _symmetrized(g_P)
         dQ = None
         if ctx.needs_input_grad[2]:
@@ -172,7 +221,9 @@ class _PosePredict(torch.autograd.Function):
         dx = None
         if ctx.needs_input_grad[0]:
             g_q = g_mean[0:4]
-            dG = _product(Gbar[0:4], torch.cat((M[:, 0:4], M[:, 7:10]), dim=1))  # Gbar[q, :] M[:, u] (4, 7, B)
+            Mu = torch.cat((Pb[:, 0:4], Pb[:, 7:10]), dim=1)  # (F P)[:, u] = P[:, u] + (Delta P)[:, u]
+            Mu[0:7] += Du
+            dG = _product(Gbar[0:4], Mu)  # Gbar[q, :] (F P)[:, u] (4, 7, B)
             dG *= 2.0
             dG[:, 0:4] += g_q.unsqueeze(1) * xb[0:4].unsqueeze(0)
             C, _ = _g_constants(xb, dt)
