@@ -68,21 +68,28 @@ def _product(X: Tensor, Y: Tensor) -> Tensor:
     (:class:`_BatchLastProduct`)."""
     if torch.is_grad_enabled() and (X.requires_grad or Y.requires_grad):
         return _BatchLastProduct.apply(X, Y)
-    return _sum_of_outer(X.unbind(1), Y.unbind(0))
+    return _sum_of_outer(_columns(X), _rows(Y))
+
+
+def _columns(X: Tensor) -> tuple[Tensor, ...]:
+    """The columns of batch-last ``X (a, k, B)`` as ``k`` views ``(a, 1, B)``."""
+    return X.unsqueeze(2).unbind(1)
+
+
+def _rows(Y: Tensor) -> tuple[Tensor, ...]:
+    """The rows of batch-last ``Y (k, c, B)`` as ``k`` views ``(1, c, B)``."""
+    return Y.unsqueeze(0).unbind(1)
 
 
 def _sum_of_outer(columns: Sequence[Tensor], rows: Sequence[Tensor], out: Tensor | None = None) -> Tensor:
-    """``sum_k columns[k] rows[k]^T`` per batch column: ``columns[k] (a, B)``, ``rows[k] (c, B)``
-    -> ``(a, c, B)`` (into ``out`` when given), i.e. the product of the matrices with these
-    columns and rows: ``k`` fused multiply-adds into one ``(a, c, B)`` buffer, which stays in
-    cache (a broadcast product and a sum would write a ``k`` times larger intermediate).
-    Differentiable through :func:`_product` only."""
-    if torch.is_grad_enabled() and any(t.requires_grad for t in (*columns, *rows)):
-        result = _product(torch.stack(tuple(columns), 1), torch.stack(tuple(rows)))
-        return result if out is None else out.copy_(result)
-    out = torch.mul(columns[0].unsqueeze(1), rows[0].unsqueeze(0), out=out)
+    """``sum_k columns[k] rows[k]`` with ``columns[k] (a, 1, B)`` and ``rows[k] (1, c, B)``
+    (:func:`_columns`, :func:`_rows`) -> ``(a, c, B)`` (into ``out`` when given): the product of
+    the matrices with these columns and rows, as ``k`` fused multiply-adds into one ``(a, c, B)``
+    buffer, which stays in cache (a broadcast product and a sum would write a ``k`` times larger
+    intermediate). Not differentiable: :func:`_product` is."""
+    out = torch.mul(columns[0], rows[0], out=out)
     for column, row in zip(columns[1:], rows[1:]):
-        out.addcmul_(column.unsqueeze(1), row.unsqueeze(0))
+        out.addcmul_(column, row)
     return out
 
 
@@ -94,7 +101,7 @@ class _BatchLastProduct(torch.autograd.Function):
     @staticmethod
     def forward(ctx: Any, X: Tensor, Y: Tensor) -> Tensor:  # type: ignore[override]
         ctx.save_for_backward(X, Y)
-        return _sum_of_outer(X.unbind(1), Y.unbind(0))
+        return _sum_of_outer(_columns(X), _rows(Y))
 
     @staticmethod
     @torch.autograd.function.once_differentiable
@@ -102,11 +109,11 @@ class _BatchLastProduct(torch.autograd.Function):
         X, Y = ctx.saved_tensors
         dX = dY = None
         if ctx.needs_input_grad[0]:
-            dX = _sum_of_outer(g.unbind(1), Y.unbind(1))  # sum_c dO[:, c] Y[:, c]^T
+            dX = _sum_of_outer(_columns(g), _rows(Y.transpose(0, 1)))  # sum_c dO[:, c] Y[:, c]^T
             if X.shape[-1] == 1 and dX.shape[-1] != 1:
                 dX = dX.sum(-1, keepdim=True)
         if ctx.needs_input_grad[1]:
-            dY = _sum_of_outer(X.unbind(0), g.unbind(0))  # sum_i X[i]^T dO[i]
+            dY = _sum_of_outer(_columns(X.transpose(0, 1)), _rows(g))  # sum_i X[i]^T dO[i]
             if Y.shape[-1] == 1 and dY.shape[-1] != 1:
                 dY = dY.sum(-1, keepdim=True)
         return dX, dY
@@ -163,13 +170,13 @@ def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float, keep: bool) 
     Ghat = (C @ xu).view(4, 7, batch)  # [dt/2 Omega(w) | dt/2 Theta(q)]
     q_next = xb[0:4] + (Ghat[:, 0:4] * xb[0:4].unsqueeze(0)).sum(1)  # q + dt/2 Omega(w) q
     mean = torch.cat((q_next, torch.add(xb[4:7], xb[10:13], alpha=dt), xb[7:13]))  # (13, B)
-    G_columns, P_rows = Ghat.unbind(1), Pb.unbind(0)
+    P_rows = _rows(Pb)
     D = torch.empty(7, 13, batch, dtype=Pb.dtype)
-    _sum_of_outer(G_columns, [P_rows[i] for i in _U], out=D[0:4])  # Ghat P[u]
+    _sum_of_outer(_columns(Ghat), [P_rows[i] for i in _U], out=D[0:4])  # Ghat P[u]
     torch.mul(Pb[10:13], dt, out=D[4:7])  # dt P[v]
     Du = torch.cat((D[:, 0:4], D[:, 7:10]), dim=1) if keep else None
-    D_columns = D.unbind(1)
-    corner = _sum_of_outer([D_columns[i] for i in _U], G_columns)  # (Delta P Delta^T)[q r, q]: D[:, u] Ghat^T
+    D_columns = _columns(D)
+    corner = _sum_of_outer([D_columns[i] for i in _U], _rows(Ghat.transpose(0, 1)))  # (Delta P Delta^T)[q r, q]: D[:, u] Ghat^T
     N = D  # D + (Delta P Delta^T)[q r, q r] / 2, in place (the q and r columns; D[:, u] and D[:, v] were read)
     N[:, 0:4].add_(corner, alpha=0.5)
     N[:, 4:7].add_(D[:, 10:13], alpha=0.5 * dt)
