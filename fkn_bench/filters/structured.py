@@ -263,7 +263,7 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
     Pb = batch_last(P)
     Rb = batch_last(measurement_noise)
     S = Pb[0:7, 0:7] + Rb  # a block of P plus R: exactly symmetric, as they are
-    S_inv = batch_last(torch.linalg.inv_ex(batch_first(S))[0])
+    S_inv = torch.linalg.inv_ex(batch_first(S))[0].permute(1, 2, 0).contiguous()  # batch-last, contiguous
     K = _product(Pb[:, 0:7], S_inv)  # (13, 7, B): P H^T S^-1
     xb = x.transpose(0, 1) + (K * nu.transpose(0, 1).unsqueeze(0)).sum(1)  # (13, B)
     q = xb[0:4]
@@ -272,11 +272,12 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
     N = (constant(x, "eye4-bl", lambda: np.eye(4)[:, :, None]) - unit.unsqueeze(1) * unit.unsqueeze(0)) / norm  # (4, 4, B)
     mean = torch.cat((unit, xb[4:13]))
     TK = torch.cat((_product(N, K[0:4]), K[4:13]))  # (13, 7, B)
-    # Y = T A P = T P - (T K) P[o, :];  P+ = Y T^T + ((T K) R - Y[:, o]) (T K)^T
-    TP = torch.cat((_product(N, Pb[0:4]), Pb[4:13]))
-    Y = TP - _product(TK, Pb[0:7])
-    YT = torch.cat((_product(Y[:, 0:4], N.transpose(0, 1)), Y[:, 4:13]), dim=1)
-    W = _product(TK, Rb) - Y[:, 0:7]
-    P_post = YT + _product(W, TK.transpose(0, 1))
-    del batch
+    # Y = T A P = T P - (T K) P[o, :], formed in place in the product's buffer
+    Y = _product(TK, Pb[0:7]).neg_()
+    Y[0:4] += _product(N, Pb[0:4])
+    Y[4:13] += Pb[4:13]
+    # P+ = Y T^T + ((T K) R - Y[:, o]) (T K)^T, the first term added into the second's buffer
+    P_post = _product(_product(TK, Rb) - Y[:, 0:7], TK.transpose(0, 1))
+    P_post[:, 0:4] += _product(Y[:, 0:4], N.transpose(0, 1))
+    P_post[:, 4:13] += Y[:, 4:13]
     return FilterState(mean.transpose(0, 1), batch_first(_symmetrized(P_post))), nu, batch_first(S)
