@@ -217,14 +217,6 @@ class _PosePredict(torch.autograd.Function):
         dQ = None
         if ctx.needs_input_grad[2]:
             dQ = Gbar if ctx.q_shape[-1] == batch and batch != 1 else Gbar.sum(-1, keepdim=True)
-        dP = None
-        if ctx.needs_input_grad[1]:
-            # X = F^T Gbar: rows u = G^T Gbar[q] (+ Gbar[w] on w), r = Gbar[r], v = Gbar[v] + dt Gbar[r]
-            Xu = _product(G.transpose(0, 1), Gbar[0:4])  # (7, 13, B)
-            X = torch.cat((Xu[0:4], Gbar[4:7], Xu[4:7] + Gbar[7:10], torch.add(Gbar[10:13], Gbar[4:7], alpha=dt)))
-            # X F: columns u = X[:, q] G (+ X[:, w] on w), r = X[:, r], v = X[:, v] + dt X[:, r]
-            Yu = _product(X[:, 0:4], G)  # (13, 7, B)
-            dP = torch.cat((Yu[:, 0:4], X[:, 4:7], Yu[:, 4:7] + X[:, 7:10], torch.add(X[:, 10:13], X[:, 4:7], alpha=dt)), dim=1)
         dx = None
         if ctx.needs_input_grad[0]:
             g_q = g_mean[0:4]
@@ -238,6 +230,20 @@ class _PosePredict(torch.autograd.Function):
             dq = (G[:, 0:4] * g_q.unsqueeze(1)).sum(0) + du[0:4]
             g_r = g_mean[4:7]
             dx = torch.cat((dq, g_r, g_mean[7:10] + du[4:7], torch.add(g_mean[10:13], g_r, alpha=dt)))
+        dP = None
+        if ctx.needs_input_grad[1]:  # F^T Gbar F, in place in Gbar's buffer (a fresh tensor; copied when it is dQ)
+            X = Gbar.clone() if dQ is Gbar else Gbar
+            # F^T X: rows q = G[:, q]^T X[q], w += G[:, w]^T X[q], v += dt X[r] (r unchanged)
+            Xu = _product(G.transpose(0, 1), X[0:4])  # (7, 13, B)
+            X[0:4] = Xu[0:4]
+            X[7:10] += Xu[4:7]
+            X[10:13].add_(X[4:7], alpha=dt)
+            # (F^T X) F: columns q = X[:, q] G[:, q], w += X[:, q] G[:, w], v += dt X[:, r]
+            Yu = _product(X[:, 0:4], G)  # (13, 7, B)
+            X[:, 0:4] = Yu[:, 0:4]
+            X[:, 7:10] += Yu[:, 4:7]
+            X[:, 10:13].add_(X[:, 4:7], alpha=dt)
+            dP = X
         return dx, dP, dQ, None
 
 
@@ -272,12 +278,17 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
     N = (constant(x, "eye4-bl", lambda: np.eye(4)[:, :, None]) - unit.unsqueeze(1) * unit.unsqueeze(0)) / norm  # (4, 4, B)
     mean = torch.cat((unit, xb[4:13]))
     TK = torch.cat((_product(N, K[0:4]), K[4:13]))  # (13, 7, B)
-    # Y = T A P = T P - (T K) P[o, :], formed in place in the product's buffer
-    Y = _product(TK, Pb[0:7]).neg_()
-    Y[0:4] += _product(N, Pb[0:4])
-    Y[4:13] += Pb[4:13]
-    # P+ = Y T^T + ((T K) R - Y[:, o]) (T K)^T, the first term added into the second's buffer
-    P_post = _product(_product(TK, Rb) - Y[:, 0:7], TK.transpose(0, 1))
-    P_post[:, 0:4] += _product(Y[:, 0:4], N.transpose(0, 1))
-    P_post[:, 4:13] += Y[:, 4:13]
+    # Y = T A P = T P - (T K) P[o, :];  P+ = Y T^T + ((T K) R - Y[:, o]) (T K)^T
+    Z = _product(TK, Pb[0:7])
+    if not Z.requires_grad:  # in place in the products' buffers
+        Y = Z.neg_()
+        Y[0:4] += _product(N, Pb[0:4])
+        Y[4:13] += Pb[4:13]
+        P_post = _product(_product(TK, Rb) - Y[:, 0:7], TK.transpose(0, 1))
+        P_post[:, 0:4] += _product(Y[:, 0:4], N.transpose(0, 1))
+        P_post[:, 4:13] += Y[:, 4:13]
+    else:  # blocks joined by cat, whose backward slices (an in-place slice's backward fills a zeroed copy)
+        Y = torch.cat((_product(N, Pb[0:4]) - Z[0:4], Pb[4:13] - Z[4:13]))
+        P_post = _product(_product(TK, Rb) - Y[:, 0:7], TK.transpose(0, 1))
+        P_post = P_post + torch.cat((_product(Y[:, 0:4], N.transpose(0, 1)), Y[:, 4:13]), dim=1)
     return FilterState(mean.transpose(0, 1), batch_first(_symmetrized(P_post))), nu, batch_first(S)
