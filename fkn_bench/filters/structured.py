@@ -1,36 +1,41 @@
 """The EKF step of :class:`~fkn_bench.filters.models.PoseTwistModel` on torch batches, written for
-the model's structure (the batched hot path of :class:`~fkn_bench.filters.ekf.ExtendedKalmanFilter`).
+the model's structure (the large-batch hot path of :class:`~fkn_bench.filters.ekf.ExtendedKalmanFilter`,
+from :data:`~fkn_bench.filters.ekf.STRUCTURED_MIN_BATCH` rows).
 
 The generic step (:func:`fkn_bench.filters.ekf.ekf_predict`, :func:`~fkn_bench.filters.ekf.joseph_update`)
-forms ``F P F^T`` and the Joseph products as dense ``(B, 13, 13)`` batched matrix products. For
-13 x 13 matrices a batched product costs about as much per matrix for its call overhead as for
-its arithmetic, so these functions instead work *batch-last*: a covariance is read as a
-``(13, 13, B)`` view (``P.permute(1, 2, 0)``; free when it is stored that way, as every covariance
-they return is) and each small product ``X (a, k, B) @ Y (k, c, B)`` is one broadcast multiply
-and one sum over ``k`` (:func:`_product`), elementwise work vectorised over the batch.
-Inputs and outputs keep the public shapes: means ``(B, 13)``, covariances ``(B, 13, 13)``
-(views of batch-last storage), so :meth:`KalmanFilter.run` and everything downstream see no
-difference but for the strides.
+forms ``F P F^T`` and the Joseph products as dense ``(B, 13, 13)`` batched matrix products; a
+batched product of 13 x 13 matrices costs about as much per matrix in call overhead as in
+arithmetic. These functions work *batch-last* instead: a covariance is read as a ``(13, 13, B)``
+view (``P.permute(1, 2, 0)``; free when it is stored that way, as every covariance they return
+is) and a small product ``X (a, k, B) @ Y (k, c, B)`` is ``k`` fused multiply-adds of ``(a, c, B)``
+blocks (:func:`_product`), elementwise work vectorised over the batch, with its own backward
+(:class:`_BatchLastProduct`). Inputs and outputs keep the public shapes: means ``(B, 13)``,
+covariances ``(B, 13, 13)`` (views of batch-last storage), so :meth:`KalmanFilter.run` and
+everything downstream see no difference but for the strides.
 
 Structure used (state ``[q(4), r(3), w(3), v(3)]``, FlexKalmanNet eqs. 6-11):
 
-* The transition Jacobian is ``F = A + E``: ``A`` the identity plus ``r += dt v``, ``E`` nonzero
-  only in the quaternion rows, on the columns ``u = [q, w]``: ``F[q, u] = G = [I + dt/2 Omega(w) |
-  dt/2 Theta(q)]`` (4 x 7). So ``M = F P`` changes only the ``q`` rows (``G P[u, :]``, 4 x 7 x 13)
-  and the ``r`` rows (``P[r] + dt P[v]``), and ``M F^T`` only the ``q`` columns (``M[:, u] G^T``,
-  13 x 7 x 4) and the ``r`` columns: 728 multiply-adds instead of two dense 13^3 products
-  (4394).
+* The transition Jacobian is ``F = I + Delta``: ``Delta`` nonzero on the quaternion rows, on the
+  columns ``u = [q, w]`` (``Ghat = [dt/2 Omega(w) | dt/2 Theta(q)]``, 4 x 7), and on the position
+  rows (``dt`` on the velocity columns). With ``D = (Delta P)[q r, :]`` and
+  ``N = D + (Delta P Delta^T)[q r, q r] / 2``, ``F P F^T = P + N + N^T`` (:func:`_predict_forward`):
+  4 x 7 x 13 plus 7 x 7 x 4 multiply-adds instead of two dense 13^3 products, and exactly
+  symmetric by construction when ``P`` is. The predict has a hand-written backward
+  (:class:`_PosePredict`: one autograd node per step).
 * ``H = [I7 0]``: ``S = P[o, o] + R`` with ``o = 0:7``, ``K = P[:, o] S^-1`` (13 x 7 x 7). The
   Joseph update (Bucy & Joseph 1968; Simon, Optimal State Estimation, 2006, eq. 5.19) followed by
   the normalisation's projection ``T`` (identity but for ``N = (I - u u^T)/|q|`` on the ``q``
   block), ``P+ = (T A) P (T A)^T + (T K) R (T K)^T`` with ``A = I - K H``, is formed as
-  ``Y = T P - (T K) P[o, :]`` and ``P+ = Y T^T + ((T K) R - Y[:, o]) (T K)^T``: two 13 x 7 x 13
-  products (the same sum of terms as the Joseph form, regrouped; no term dropped, so it
-  holds for any gain).
+  ``Y = (T A) P = T P - (T K) P[o, :]`` and ``P+ = Y T^T + ((T K) R - Y[:, o]) (T K)^T``
+  (``Y (T A)^T`` with ``(T A)^T = T^T - H^T (T K)^T``): the factored Joseph form with the
+  products on their nonzero blocks, two 13 x 7 x 13 products; then symmetrised.
 
-Every covariance returned is symmetrised (``(P + P^T) / 2``), as the generic step does. The
-quaternion sign alignment and the measured slice go through the model's own ``align`` and
-``measure`` hooks on the public layout, so the sign rule is the model's, unchanged.
+Covariances returned are exactly symmetric (the update's symmetrised as the generic step's; the
+predict's by construction, given an exactly symmetric ``P``: every covariance the filters
+produce and :class:`~fkn_bench.filters.parameters.NoiseParameters`' ``P0`` are; ``Q`` is
+symmetrised). The quaternion sign alignment and the measured slice go through the model's own
+``align`` and ``measure`` hooks on the public layout, so the sign rule is the model's, unchanged.
+Outputs equal the generic step's to rounding (``tests/filters/test_structured.py``).
 """
 
 from __future__ import annotations
