@@ -92,7 +92,10 @@ def _sum_of_outer(columns: Sequence[Tensor], rows: Sequence[Tensor], out: Tensor
     the matrices with these columns and rows, as ``k`` fused multiply-adds into one ``(a, c, B)``
     buffer, which stays in cache (a broadcast product and a sum would write a ``k`` times larger
     intermediate). Not differentiable: :func:`_product` is."""
-    out = torch.mul(columns[0], rows[0], out=out)
+    if out is None:  # contiguous, whatever the strides of the operands
+        column, row = columns[0], rows[0]
+        out = torch.empty(column.shape[0], row.shape[1], max(column.shape[2], row.shape[2]), dtype=column.dtype)
+    torch.mul(columns[0], rows[0], out=out)
     for column, row in zip(columns[1:], rows[1:]):
         out.addcmul_(column, row)
     return out
@@ -125,23 +128,24 @@ class _BatchLastProduct(torch.autograd.Function):
 
 
 def _g_basis(dt: float) -> np.ndarray:
-    """``C (29, 7)``: column 0 ... 27 of ``[1 | x_u] @ C.T`` hold ``G (4, 7)`` row-major, with
-    ``x_u = [q, w]`` and ``G = [I + dt/2 Omega(w) | dt/2 Theta(q)]``; returned transposed for
-    ``addmm``: ``G_flat (28, B) = bias + C x_u``."""
-    basis = np.zeros((4, 7, 7))  # [row i, column k of G, component j of x_u]
+    """``C (28, 13)`` with ``C x = Ghat`` flattened row-major (4 x 7) for states ``x (13, B)``:
+    ``Ghat = [dt/2 Omega(w) | dt/2 Theta(q)]``, the quaternion rows of ``F - I`` on the columns
+    ``u = [q, w]``; linear in ``x`` (FlexKalmanNet eqs. 8-11)."""
+    basis = np.zeros((4, 7, 13))  # [row i, column k of Ghat, state component j]
     theta, omega = qx.theta_matrix(np.eye(4)), qx.omega_matrix(np.eye(3))  # (4, 4, 3), (3, 4, 4)
     for j in range(4):  # d(Theta(q))/dq_j
         basis[:, 4:7, j] = theta[j]
     for j in range(3):  # d(Omega(w))/dw_j
-        basis[:, 0:4, 4 + j] = omega[j]
-    return (0.5 * dt) * basis.reshape(28, 7)
+        basis[:, 0:4, 7 + j] = omega[j]
+    return (0.5 * dt) * basis.reshape(28, 13)
 
 
 def _g_constants(like: Tensor, dt: float) -> tuple[Tensor, Tensor]:
-    """``(C (28, 7), bias (28, 1))``: ``G_flat = bias + C x_u`` (see :func:`_g_basis`)."""
+    """``(C (28, 13), I_u (4, 7, 1))``: ``Ghat = (C x).view(4, 7, B)`` (:func:`_g_basis`) and
+    ``G = F[q, u] = Ghat + I_u``."""
     C = constant(like, ("pose-G", dt), lambda: _g_basis(dt))
-    bias = constant(like, "pose-G-bias", lambda: np.concatenate((np.eye(4), np.zeros((4, 3))), axis=1).reshape(28, 1))
-    return C, bias
+    eye = constant(like, "pose-G-eye", lambda: np.concatenate((np.eye(4), np.zeros((4, 3))), axis=1)[:, :, None])
+    return C, eye
 
 
 def pose_predict(state: FilterState, process_noise: Tensor, dt: float) -> FilterState:
@@ -156,9 +160,9 @@ def pose_predict(state: FilterState, process_noise: Tensor, dt: float) -> Filter
     return FilterState(mean.transpose(0, 1), batch_first(P_next))
 
 
-def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float, keep: bool) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
-    """Batch-last prediction ``(x- (13, B), P- (13, 13, B), Ghat (4, 7, B), D[:, u] (7, 7, B))``,
-    the last two for the backward pass (``D[:, u]`` only when ``keep``).
+def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor, Tensor]:
+    """Batch-last prediction ``(x- (13, B), P- (13, 13, B), Ghat (4, 7, B))``, ``Ghat`` for the
+    backward pass.
 
     ``F = I + Delta`` with ``Delta`` nonzero on the ``q`` rows (``Ghat = [dt/2 Omega(w) | dt/2
     Theta(q)]`` on the columns ``u``) and the ``r`` rows (``dt`` on the ``v`` columns). With
@@ -171,15 +175,13 @@ def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float, keep: bool) 
     """
     batch = xb.shape[1]
     C, _ = _g_constants(xb, dt)
-    xu = torch.cat((xb[0:4], xb[7:10]))  # (7, B)
-    Ghat = (C @ xu).view(4, 7, batch)  # [dt/2 Omega(w) | dt/2 Theta(q)]
-    q_next = xb[0:4] + (Ghat[:, 0:4] * xb[0:4].unsqueeze(0)).sum(1)  # q + dt/2 Omega(w) q
+    Ghat = (C @ xb).view(4, 7, batch)  # [dt/2 Omega(w) | dt/2 Theta(q)]
+    q_next = xb[0:4] + (Ghat[:, 0:4] * xb[0:4]).sum(1)  # q + dt/2 Omega(w) q
     mean = torch.cat((q_next, torch.add(xb[4:7], xb[10:13], alpha=dt), xb[7:13]))  # (13, B)
     P_rows = _rows(Pb)
     D = torch.empty(7, 13, batch, dtype=Pb.dtype)
     _sum_of_outer(_columns(Ghat), [P_rows[i] for i in _U], out=D[0:4])  # Ghat P[u]
     torch.mul(Pb[10:13], dt, out=D[4:7])  # dt P[v]
-    Du = torch.cat((D[:, 0:4], D[:, 7:10]), dim=1) if keep else None
     D_columns = _columns(D)
     corner = _sum_of_outer([D_columns[i] for i in _U], _rows(Ghat.transpose(0, 1)))  # (Delta P Delta^T)[q r, q]: D[:, u] Ghat^T
     N = D  # D + (Delta P Delta^T)[q r, q r] / 2, in place (the q and r columns; D[:, u] and D[:, v] were read)
@@ -189,7 +191,7 @@ def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float, keep: bool) 
     P_next[0:7, 0:7] += N[:, 0:7] + N[:, 0:7].transpose(0, 1)
     P_next[0:7, 7:13] += N[:, 7:13]
     P_next[7:13, 0:7] += N[:, 7:13].transpose(0, 1)
-    return mean, P_next, Ghat, Du
+    return mean, P_next, Ghat
 
 
 class _PosePredict(torch.autograd.Function):
@@ -205,8 +207,8 @@ class _PosePredict(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor]:  # type: ignore[override]
-        mean, P_next, Ghat, Du = _predict_forward(xb, Pb, Qb, dt, keep=ctx.needs_input_grad[0])
-        ctx.save_for_backward(xb, Pb, Ghat, Du)
+        mean, P_next, Ghat = _predict_forward(xb, Pb, Qb, dt)
+        ctx.save_for_backward(xb, Pb, Ghat)
         ctx.dt = dt
         ctx.q_shape = Qb.shape
         return mean, P_next
@@ -214,36 +216,40 @@ class _PosePredict(torch.autograd.Function):
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx: Any, g_mean: Tensor, g_P: Tensor) -> tuple[Tensor | None, Tensor | None, Tensor | None, None]:  # type: ignore[override]
-        xb, Pb, Ghat, Du = ctx.saved_tensors
+        xb, Pb, Ghat = ctx.saved_tensors
         dt = ctx.dt
         batch = xb.shape[1]
-        G = Ghat + _g_constants(xb, dt)[1].view(4, 7, 1)  # F[q, u]
+        C, eye = _g_constants(xb, dt)
+        G = Ghat + eye  # F[q, u]
         Gbar = _symmetrized(g_P)
         dQ = None
         if ctx.needs_input_grad[2]:
             dQ = Gbar if ctx.q_shape[-1] == batch and batch != 1 else Gbar.sum(-1, keepdim=True)
-        dx = None
+        dx = dP = None
+        if not (ctx.needs_input_grad[0] or ctx.needs_input_grad[1]):
+            return dx, dP, dQ, None
+        # X = F^T Gbar, in place in Gbar's buffer (a fresh tensor; copied when it is dQ): rows
+        # q = G[:, q]^T Gbar[q], w += G[:, w]^T Gbar[q], v += dt Gbar[r] (r unchanged)
+        X = Gbar.clone() if dQ is Gbar else Gbar
+        Xu = _product(G.transpose(0, 1), X[0:4])  # (7, 13, B)
+        X[0:4] = Xu[0:4]
+        X[7:10] += Xu[4:7]
+        X[10:13].add_(X[4:7], alpha=dt)
         if ctx.needs_input_grad[0]:
+            # dL/dG = 2 (Gbar F P)[q, u] = 2 X[:, q]^T P[:, u]  (Gbar, P symmetric: Gbar F = X^T)
             g_q = g_mean[0:4]
-            Mu = torch.cat((Pb[:, 0:4], Pb[:, 7:10]), dim=1)  # (F P)[:, u] = P[:, u] + (Delta P)[:, u]
-            Mu[0:7] += Du
-            dG = _product(Gbar[0:4], Mu)  # Gbar[q, :] (F P)[:, u] (4, 7, B)
+            dG = _product(X[:, 0:4].transpose(0, 1), torch.cat((Pb[:, 0:4], Pb[:, 7:10]), dim=1))  # (4, 7, B)
             dG *= 2.0
-            dG[:, 0:4] += g_q.unsqueeze(1) * xb[0:4].unsqueeze(0)
-            C, _ = _g_constants(xb, dt)
-            du = C.transpose(0, 1) @ dG.reshape(28, batch)  # (7, B)
-            dq = (G[:, 0:4] * g_q.unsqueeze(1)).sum(0) + du[0:4]
+            dG[:, 0:4] += g_q.unsqueeze(1) * xb[0:4].unsqueeze(0)  # from the mean q- = G[:, q] q
+            dq = (G[:, 0:4] * g_q.unsqueeze(1)).sum(0)
             g_r = g_mean[4:7]
-            dx = torch.cat((dq, g_r, g_mean[7:10] + du[4:7], torch.add(g_mean[10:13], g_r, alpha=dt)))
-        dP = None
-        if ctx.needs_input_grad[1]:  # F^T Gbar F, in place in Gbar's buffer (a fresh tensor; copied when it is dQ)
-            X = Gbar.clone() if dQ is Gbar else Gbar
-            # F^T X: rows q = G[:, q]^T X[q], w += G[:, w]^T X[q], v += dt X[r] (r unchanged)
-            Xu = _product(G.transpose(0, 1), X[0:4])  # (7, 13, B)
-            X[0:4] = Xu[0:4]
-            X[7:10] += Xu[4:7]
-            X[10:13].add_(X[4:7], alpha=dt)
-            # (F^T X) F: columns q = X[:, q] G[:, q], w += X[:, q] G[:, w], v += dt X[:, r]
+            direct = torch.cat((dq, g_r, g_mean[7:10], torch.add(g_mean[10:13], g_r, alpha=dt)))  # f's linear part
+            dx = torch.addmm(direct, C.transpose(0, 1), dG.view(28, batch))  # + C^T dL/dGhat: Ghat = C x
+            # laid out as the (B, 13) means are, so that autograd sums it with their other
+            # gradients (the stacked outputs') without a strided add
+            dx = dx.transpose(0, 1).contiguous().transpose(0, 1)
+        if ctx.needs_input_grad[1]:
+            # dL/dP = X F: columns q = X[:, q] G[:, q], w += X[:, q] G[:, w], v += dt X[:, r]
             Yu = _product(X[:, 0:4], G)  # (13, 7, B)
             X[:, 0:4] = Yu[:, 0:4]
             X[:, 7:10] += Yu[:, 4:7]
