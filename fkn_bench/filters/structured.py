@@ -266,6 +266,22 @@ def _symmetrized(Pb: Tensor) -> Tensor:
     return out
 
 
+def _solve_spd(S: Tensor, rhs: Tensor) -> Tensor:
+    """``S^-1 rhs`` for batch-last symmetric positive definite ``S (m, m, B)`` and ``rhs (m, c, B)``
+    by Gauss-Jordan elimination without pivoting (stable for symmetric positive definite
+    matrices: Golub & Van Loan, Matrix Computations, 4th ed., sec. 4.2), vectorised over the
+    batch; not differentiable (the update under autograd uses ``inv_ex``)."""
+    m = S.shape[0]
+    M = torch.cat((S, rhs.expand(m, rhs.shape[1], S.shape[2])), dim=1)  # [S | rhs], reduced to [I | S^-1 rhs]
+    for k in range(m):
+        row = M[k, k + 1 :] / M[k, k]
+        column = M[:, k].clone()
+        column[k] = 0.0
+        M[:, k + 1 :].addcmul_(column.unsqueeze(1), row.unsqueeze(0), value=-1.0)
+        M[k, k + 1 :] = row
+    return M[:, m:]
+
+
 def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise: Tensor) -> tuple[FilterState, Tensor, Tensor]:
     """EKF measurement update of :class:`PoseTwistModel` for every row (module docstring):
     ``z (B, 7)`` sanitised measurements, ``R`` ``(7, 7)`` or ``(B or 1, 7, 7)``. The measured
@@ -280,8 +296,11 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
     Pb = batch_last(P)
     Rb = batch_last(measurement_noise)
     S = Pb[0:7, 0:7] + Rb  # a block of P plus R: exactly symmetric, as they are
-    S_inv = torch.linalg.inv_ex(batch_first(S))[0].permute(1, 2, 0).contiguous()  # batch-last, contiguous
-    K = _product(Pb[:, 0:7], S_inv)  # (13, 7, B): P H^T S^-1
+    if torch.is_grad_enabled() and (P.requires_grad or measurement_noise.requires_grad):
+        S_inv = torch.linalg.inv_ex(batch_first(S))[0].permute(1, 2, 0).contiguous()  # batch-last, contiguous
+        K = _product(Pb[:, 0:7], S_inv)  # (13, 7, B): P H^T S^-1
+    else:
+        K = _solve_spd(S, Pb[0:7]).transpose(0, 1)  # K^T = S^-1 H P (P symmetric)
     xb = x.transpose(0, 1) + (K * nu.transpose(0, 1).unsqueeze(0)).sum(1)  # (13, B)
     q = xb[0:4]
     norm = torch.sqrt((q * q).sum(0, keepdim=True))  # (1, B)
