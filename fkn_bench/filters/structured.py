@@ -94,7 +94,7 @@ def _sum_of_outer(columns: Sequence[Tensor], rows: Sequence[Tensor], out: Tensor
     intermediate). Not differentiable: :func:`_product` is."""
     if out is None:  # contiguous, whatever the strides of the operands
         column, row = columns[0], rows[0]
-        out = torch.empty(column.shape[0], row.shape[1], max(column.shape[2], row.shape[2]), dtype=column.dtype)
+        out = torch.empty(column.shape[0], row.shape[1], max(column.shape[2], row.shape[2]), dtype=column.dtype, device=column.device)
     torch.mul(columns[0], rows[0], out=out)
     for column, row in zip(columns[1:], rows[1:]):
         out.addcmul_(column, row)
@@ -179,7 +179,7 @@ def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Ten
     q_next = xb[0:4] + (Ghat[:, 0:4] * xb[0:4]).sum(1)  # q + dt/2 Omega(w) q
     mean = torch.cat((q_next, torch.add(xb[4:7], xb[10:13], alpha=dt), xb[7:13]))  # (13, B)
     P_rows = _rows(Pb)
-    D = torch.empty(7, 13, batch, dtype=Pb.dtype)
+    D = torch.empty(7, 13, batch, dtype=Pb.dtype, device=Pb.device)
     _sum_of_outer(_columns(Ghat), [P_rows[i] for i in _U], out=D[0:4])  # Ghat P[u]
     torch.mul(Pb[10:13], dt, out=D[4:7])  # dt P[v]
     D_columns = _columns(D)
@@ -288,11 +288,12 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
     quaternion's sign is aligned by ``model.align`` (as the generic update does); the posterior
     quaternion is renormalised and the covariance projected with ``N = (I - u u^T) / |q|``.
     Returns the posterior (means ``(B, 13)``, covariances ``(B, 13, 13)``, symmetrised), the
-    innovation ``nu (B, 7)`` and its covariance ``S (B, 7, 7)`` (exactly symmetric)."""
+    innovation ``nu (B, 7)`` and its covariance ``S (B, 7, 7)`` (exactly symmetric). The gain
+    comes from :func:`_solve_spd` without autograd, from ``inv_ex`` with it (equal to rounding);
+    without autograd the products are formed in place in their buffers."""
     x, P = state.mean, state.covariance
     z = model.align(z, x)  # type: ignore[attr-defined]
     nu = z - model.measure(x)  # type: ignore[attr-defined]
-    batch = x.shape[0]
     Pb = batch_last(P)
     Rb = batch_last(measurement_noise)
     S = Pb[0:7, 0:7] + Rb  # a block of P plus R: exactly symmetric, as they are
