@@ -156,7 +156,11 @@ def pose_predict(state: FilterState, process_noise: Tensor, dt: float) -> Filter
     seconds. Returns views of batch-last storage with the public shapes. Differentiable through a
     hand-written backward (:class:`_PosePredict`), which keeps the autograd graph at one node
     per step."""
-    mean, P_next = _PosePredict.apply(state.mean.transpose(0, 1), batch_last(state.covariance), batch_last(process_noise), float(dt))
+    inputs = (state.mean.transpose(0, 1), batch_last(state.covariance), batch_last(process_noise))
+    if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
+        mean, P_next = _PosePredict.apply(*inputs, float(dt))
+    else:  # nothing to differentiate: no autograd.Function call (its overhead is a tenth of a step)
+        mean, P_next, _ = _predict_forward(*inputs, float(dt))
     return FilterState(mean.transpose(0, 1), batch_first(P_next))
 
 
