@@ -186,7 +186,7 @@ as the generic step, so below about 100 rows the generic step's fewer calls win.
 the dense step forced, one process, alternating, 100 steps of ds1, ratio dense/structured time
 (forward; forward+backward): B = 16: 0.55; 0.63, B = 64: 0.83; 0.85, B = 96: 1.01; 1.03,
 B = 128: 0.99; 1.19, B = 256: 1.51; 1.48; again after the structured step lost its overheads
-(``/tmp``-free reproduction: time ``run()`` with ``STRUCTURED_MIN_BATCH`` set to 1 and to a huge
+(``run()`` timed with ``STRUCTURED_MIN_BATCH`` set to 1 and to a huge
 value, alternating): B = 32: 0.70; 0.72, B = 64: 0.86; 0.77, B = 96: 0.92; 0.94, B = 128: 1.14;
 1.05."""
 
