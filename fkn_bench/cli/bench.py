@@ -3,8 +3,10 @@
 * ``fkn-bench bench run``: run the pytest-benchmark speed suite (``tests/benchmarks`` of a source
   checkout), save its JSON (with machine info) and print the summary table;
 * ``fkn-bench bench report FILE.json``: the summary table of a saved pytest-benchmark JSON: per
-  benchmark the rounds, median and mean time, spread, and the throughput in steps/s from the
-  ``steps`` each benchmark records in ``extra_info``;
+  benchmark the rounds, median and mean time, spread, the throughput in steps/s from the
+  ``steps`` each benchmark records in ``extra_info``, and for a batched filter benchmark (one that
+  records its ``batch``) the fraction of the *small-bmm limit* at that batch measured in the same
+  run (:data:`MATMULS_PER_STEP`);
 * ``fkn-bench bench gate``: the CI speed-ratio gate (:mod:`fkn_bench.gates.speed`): each check's
   ratio against the reference timed beside it, its threshold and verdict;
 * ``fkn-bench bench train``: one epoch of FlexKalmanNet's batched trainer against one epoch of
@@ -35,7 +37,19 @@ from fkn_bench.cli import UsageError
 
 from fkn_bench.cli.options import add_command
 
-__all__ = ["add_parser", "summarize_benchmarks", "format_summary"]
+__all__ = ["add_parser", "summarize_benchmarks", "format_summary", "MATMULS_PER_STEP"]
+
+MATMULS_PER_STEP = 2
+"""Batched 13 x 13 float64 matrix products per filter step that the *small-bmm limit* assumes:
+the two of a dense ``F P F^T`` (one predict); a measurement update, the mean and everything else
+count as free. The speed suite times ``torch.bmm`` of ``(B, 13, 13)`` float64 batches on one
+thread at each batch size it runs a filter at (``test_small_bmm_limit``, ``extra_info``
+``small_bmm_limit: true``, ``batch: B`` and ``steps = B / MATMULS_PER_STEP`` per product), so
+that benchmark's steps/s *is* the limit ``B / (MATMULS_PER_STEP * t_bmm)``; the report divides each
+batched filter benchmark's steps/s (``extra_info`` ``batch``) by the limit at its batch from the same
+run. A structured step (:mod:`fkn_bench.filters.structured`) needs fewer products than two
+dense ones, so a fraction above 1 is possible: the limit is a yardstick of how far the code is
+from the machine's small-matrix speed, not a bound."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
@@ -91,7 +105,10 @@ def _load_benchmarks(path: str | Path) -> dict[str, Any]:
 def summarize_benchmarks(document: dict[str, Any]) -> list[dict[str, Any]]:
     """One row per benchmark of a pytest-benchmark JSON document: name, rounds, median, mean,
     min and standard deviation (s), ``steps`` per call (``extra_info``) and steps/s (from the
-    median: the least disturbed by a busy machine but for the minimum, and steadier than it)."""
+    median: the least disturbed by a busy machine but for the minimum, and steadier than it);
+    ``batch`` and ``of_bmm_limit``: a batched benchmark's batch size and its steps/s over the
+    small-bmm limit at that batch in the same document (:data:`MATMULS_PER_STEP`; None without
+    one)."""
     rows = []
     for bench in document["benchmarks"]:
         stats = bench.get("stats", {})
@@ -107,7 +124,13 @@ def summarize_benchmarks(document: dict[str, Any]) -> list[dict[str, Any]]:
             "steps": int(steps) if steps is not None else None,
             "steps_per_s": (int(steps) / median) if steps and median > 0 else None,
             "what": extra.get("what", ""),
+            "batch": int(extra["batch"]) if extra.get("batch") is not None else None,
+            "small_bmm_limit": bool(extra.get("small_bmm_limit", False)),
         })
+    limits = {row["batch"]: row["steps_per_s"] for row in rows if row["small_bmm_limit"] and row["steps_per_s"]}
+    for row in rows:
+        limit = limits.get(row["batch"]) if not row["small_bmm_limit"] else None
+        row["of_bmm_limit"] = row["steps_per_s"] / limit if limit and row["steps_per_s"] is not None else None
     return rows
 
 
@@ -145,19 +168,20 @@ def format_summary(document: dict[str, Any], *, source: str = "") -> str:
     from fkn_bench.harness.report import text_table
 
     rows = summarize_benchmarks(document)
-    header = ("benchmark", "rounds", "median", "mean", "stddev", "steps", "steps/s", "what")
+    header = ("benchmark", "rounds", "median", "mean", "stddev", "steps", "steps/s", "of limit", "what")
     body = []
     for row in rows:
         spread = f"{100 * row['stddev_s'] / row['mean_s']:.0f}%" if row["mean_s"] and math.isfinite(row["stddev_s"]) else "-"
         body.append((row["name"], str(row["rounds"]), _scaled(row["median_s"], _SECONDS), _scaled(row["mean_s"], _SECONDS),
                      spread, "-" if row["steps"] is None else str(row["steps"]), _scaled(row["steps_per_s"], _RATE),
-                     row["what"]))
+                     "-" if row["of_bmm_limit"] is None else f"{row['of_bmm_limit']:.2f}", row["what"]))
     title = f"fkn-bench speed suite{': ' + source if source else ''} (pytest-benchmark {document.get('version', '?')}"
     title += f", {document.get('datetime', '?')})"
     note = ("Times are wall-clock per call; steps/s = steps per call / median. Absolute times vary by "
             "tens of percent between runs on shared machines: compare ratios within one run "
-            "(fkn-bench bench gate).")
-    return "\n".join([title, _machine(document), "", text_table(header, body, right=range(1, 7)), "",
+            "(fkn-bench bench gate). 'of limit': a batched filter's steps/s over the small-bmm limit "
+            f"at its batch timed in this run ({MATMULS_PER_STEP} batched 13x13 float64 products per step).")
+    return "\n".join([title, _machine(document), "", text_table(header, body, right=range(1, 8)), "",
                       note])
 
 

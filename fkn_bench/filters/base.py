@@ -19,7 +19,9 @@ Conventions of :meth:`KalmanFilter.run`:
   arithmetic, neither forward nor backward.
 * Covariances are exactly symmetric: every variant's ``predict`` and ``update`` return their
   covariance symmetrised (``(P + P^T) / 2``, :func:`fkn_bench.linalg.symmetrize`), once each per
-  step, so ``run`` adds no symmetrisation of its own.
+  step, or symmetric by construction (the structured EKF predict,
+  :mod:`fkn_bench.filters.structured`), so ``run`` adds no symmetrisation of its own. Their
+  strides are the variant's (the structured EKF's are views of ``(k, k, B)`` storage).
 
 Everything is a differentiable torch operation; gradients flow into every tensor of ``noise``
 (and ``initial``). float64 by default: the dtype of ``measurements`` decides.

@@ -9,7 +9,9 @@ When the model measures a slice of the state (``H = [I 0]``), products with ``H`
 
 The step runs on torch tensors (batched, differentiable: :meth:`KalmanFilter.run`) and on numpy
 arrays (the online ``step()`` of the estimators, batch 1, and the adaptive filters) through the
-same code (:func:`fkn_bench.linalg.namespace`).
+same code (:func:`fkn_bench.linalg.namespace`). For :class:`PoseTwistModel` torch batches of at
+least :data:`STRUCTURED_MIN_BATCH` rows, :class:`ExtendedKalmanFilter` runs the same step written
+for the model's structure instead (:mod:`fkn_bench.filters.structured`: equal to rounding).
 
 Products such as ``F P F^T`` are symmetric only to rounding; ``predict`` and the update
 symmetrise the covariance they return (:func:`fkn_bench.linalg.symmetrize`, once each), so that
@@ -25,9 +27,10 @@ import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
+from fkn_bench.filters.structured import pose_predict, pose_update
 from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, solve_spd, symmetrize
 
-__all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update"]
+__all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update", "STRUCTURED_MIN_BATCH"]
 
 Array = Any
 
@@ -176,11 +179,28 @@ def ekf_predict(model: StateSpaceModel, state: FilterState, process_noise: Array
     return FilterState(mean, symmetrize(P))
 
 
+STRUCTURED_MIN_BATCH = 128
+"""Batch size from which the EKF of :class:`PoseTwistModel` runs the structured batch-last step
+(:mod:`fkn_bench.filters.structured`): it costs about twice as many (smaller) torch operations
+as the generic step, so below about 100 rows the generic step's fewer calls win. Measured with
+the dense step forced, one process, alternating, 100 steps of ds1, ratio dense/structured time
+(forward; forward+backward): B = 16: 0.55; 0.63, B = 64: 0.83; 0.85, B = 96: 1.01; 1.03,
+B = 128: 0.99; 1.19, B = 256: 1.51; 1.48; again after the structured step lost its overheads
+(``run()`` timed with ``STRUCTURED_MIN_BATCH`` set to 1 and to a huge
+value, alternating): B = 32: 0.70; 0.72, B = 64: 0.86; 0.77, B = 96: 0.92; 0.94, B = 128: 1.14;
+1.05."""
+
+
 class ExtendedKalmanFilter(KalmanFilter):
     """EKF over any :class:`~fkn_bench.filters.models.StateSpaceModel` (default: the paper's).
 
     Keyword-only arguments:
         model: the state-space model (default :class:`PoseTwistModel`).
+
+    With :class:`PoseTwistModel` itself (not a subclass, whose transition may differ) and torch
+    batches of at least :data:`STRUCTURED_MIN_BATCH` rows, ``predict`` and ``update`` run the
+    structured step (:func:`~fkn_bench.filters.structured.pose_predict`,
+    :func:`~fkn_bench.filters.structured.pose_update`); otherwise the generic one.
     """
 
     name = "ekf"
@@ -188,9 +208,19 @@ class ExtendedKalmanFilter(KalmanFilter):
     def __init__(self, *, model: StateSpaceModel | None = None) -> None:
         self.model = model if model is not None else PoseTwistModel()
         self.layout = self.model.layout
+        self._structured = type(self.model) is PoseTwistModel
+
+    def _structured_step(self, state: FilterState) -> bool:
+        """Whether this step runs :mod:`fkn_bench.filters.structured` (the pose-twist model's own
+        step, torch, at least :data:`STRUCTURED_MIN_BATCH` rows) rather than the generic one."""
+        return self._structured and not isinstance(state.mean, np.ndarray) and state.mean.shape[0] >= STRUCTURED_MIN_BATCH
 
     def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
+        if self._structured_step(state):
+            return pose_predict(state, process_noise, dt)
         return ekf_predict(self.model, state, process_noise, dt)
 
     def update(self, state: FilterState, z: Array, measurement_noise: Array) -> tuple[FilterState, Array, Array]:
+        if self._structured_step(state):
+            return pose_update(self.model, state, z, measurement_noise)
         return linear_measurement_update(self.model, state, z, measurement_noise)

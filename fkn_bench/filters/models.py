@@ -234,6 +234,18 @@ class PoseTwistModel(StateSpaceModel):
                 return out, _USABLE
             return np.zeros((1, 7), dtype=measurements.dtype), np.zeros(1, dtype=bool)
         xp = namespace(measurements)
+        if xp is not np and mask.dim() >= 1:  # a torch batch: the rule on the entries the mask keeps
+            kept = mask.reshape(-1).nonzero().squeeze(1)
+            if 2 * kept.numel() < mask.numel():  # (sparse masks, e.g. a measurement every 10 steps)
+                flat = measurements.reshape(-1, measurements.shape[-1])
+                z_kept, usable_kept = self._sanitize(flat.index_select(0, kept), mask.reshape(-1).index_select(0, kept))
+                z = flat.new_zeros(flat.shape).index_copy(0, kept, z_kept).view(measurements.shape)
+                return z, mask.new_zeros(mask.numel()).index_copy(0, kept, usable_kept).view(mask.shape)
+        return self._sanitize(measurements, mask)
+
+    def _sanitize(self, measurements: Array, mask: Array) -> Array:
+        """:meth:`sanitize`'s rule, elementwise on ``(..., 7)`` measurements and a ``(...)`` mask."""
+        xp = namespace(measurements)
         finite = all_last(xp.isfinite(measurements))
         z = xp.where(finite[..., None], measurements, 0.0)
         with np.errstate(over="ignore"):  # (numpy) an overflow is expected here, and handled:

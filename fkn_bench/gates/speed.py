@@ -448,11 +448,17 @@ MEASURED: dict[str, dict[str, float]] = {
     # `fkn-bench bench gate --calibrate 6` on the 2-core AMD EPYC CI machine, quiet (the default
     # test run gives the timed tests the CPU to themselves, tests/conftest.py); 6 measurements and
     # 3 doubled per check. Thresholds: 0.7 of the median, rounded to two significant digits.
-    "ekf-forward": {"median": 1.4064, "min": 1.3743, "max": 1.4241, "doubled_median": 0.6831, "doubled_max": 0.6964, "n": 6},
-    "ukf-forward": {"median": 0.5176, "min": 0.5096, "max": 0.535, "doubled_median": 0.2605, "doubled_max": 0.2632, "n": 6},
-    "mekf-forward": {"median": 0.6544, "min": 0.6489, "max": 0.6633, "doubled_median": 0.3309, "doubled_max": 0.3345, "n": 6},
-    "ekf-forward-backward": {"median": 0.5208, "min": 0.5186, "max": 0.5294, "doubled_median": 0.2863, "doubled_max": 0.3013, "n": 6},
-    "train-epoch": {"median": 10.1345, "min": 9.5234, "max": 12.8979, "doubled_median": 5.2792, "doubled_max": 5.4605, "n": 6},
+    # The filter checks and train-epoch re-measured after the structured EKF step (issue 17; it runs
+    # from 128 rows, so these 16-row workloads keep the generic step, and their ratios moved by
+    # less than their spread): `fkn-bench bench gate --check ekf-forward --check ukf-forward
+    # --check mekf-forward --check ekf-forward-backward --check train-epoch --calibrate 6` on the
+    # shared 2-core AMD machine (not quiet); the online-step entries are from before (their code
+    # and the numpy reference did not change).
+    "ekf-forward": {"median": 1.351, "min": 1.3306, "max": 1.4014, "doubled_median": 0.6866, "doubled_max": 0.6977, "n": 6},
+    "ukf-forward": {"median": 0.512, "min": 0.5091, "max": 0.5769, "doubled_median": 0.2615, "doubled_max": 0.2954, "n": 6},
+    "mekf-forward": {"median": 0.6368, "min": 0.622, "max": 0.6508, "doubled_median": 0.3334, "doubled_max": 0.3398, "n": 6},
+    "ekf-forward-backward": {"median": 0.5193, "min": 0.4986, "max": 0.5353, "doubled_median": 0.2529, "doubled_max": 0.2569, "n": 6},
+    "train-epoch": {"median": 10.4951, "min": 10.1283, "max": 10.9785, "doubled_median": 5.245, "doubled_max": 5.2867, "n": 6},
     "online-step:manual-ekf": {"median": 0.5542, "min": 0.536, "max": 0.5951, "doubled_median": 0.2808, "doubled_max": 0.2866, "n": 6},
     "online-step:manual-ukf": {"median": 0.2531, "min": 0.2399, "max": 0.2657, "doubled_median": 0.1229, "doubled_max": 0.1253, "n": 6},
     "online-step:manual-mekf": {"median": 0.3511, "min": 0.3298, "max": 0.3535, "doubled_median": 0.179, "doubled_max": 0.1822, "n": 6},
@@ -474,19 +480,19 @@ def builtin_checks() -> list[RatioCheck]:
     """The filter and training checks."""
     return [
         RatioCheck("ekf-forward", "batched torch EKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("ekf"), min_ratio=0.98,
+                   _filter_setup("ekf"), min_ratio=0.95,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run"),
         RatioCheck("ukf-forward", "batched torch UKF forward vs the per-step numpy EKF loop",
                    _filter_setup("ukf"), min_ratio=0.36,
                    hotspot="fkn_bench.filters.ukf:UnscentedKalmanFilter.run"),
         RatioCheck("mekf-forward", "batched torch multiplicative EKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("mekf"), min_ratio=0.46,
+                   _filter_setup("mekf"), min_ratio=0.45,
                    hotspot="fkn_bench.filters.mekf:MultiplicativeEKF.run"),
         RatioCheck("ekf-forward-backward", "batched EKF forward + gradient vs the per-step numpy EKF loop",
                    _filter_setup("ekf", backward=True), min_ratio=0.36,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run", combine=average_filter_results),
         RatioCheck("train-epoch", "FlexKalmanNet Trainer epoch vs the sequential reference trainer",
-                   _train_setup, min_ratio=7.1,
+                   _train_setup, min_ratio=7.3,
                    hotspot="fkn_bench.training.trainer:Trainer.run_epoch", repeats=3),
     ]
 

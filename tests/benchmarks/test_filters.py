@@ -1,5 +1,6 @@
 """Batched filter forward and forward + backward (EKF, UKF, MEKF; the EKF also at B = 1024, the
-filter core's throughput target), and the plain numpy reference."""
+filter core's throughput target), the plain numpy reference, and the small-bmm limit at each
+batch size (``fkn-bench bench report`` prints each batched filter's fraction of it)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import numpy as np
 import pytest
 import torch
 
+from fkn_bench.cli.bench import MATMULS_PER_STEP
 from fkn_bench.filters import make_filter
 from fkn_bench.gates.speed import episodes_for, forward_backward_workload, manual_noise, numpy_ekf_loop
 
@@ -33,7 +35,7 @@ def test_filter_forward(benchmark: Any, data: Any, variant: str) -> None:
             return filt.run(noise, z, m, dt=dt)
 
     benchmark.pedantic(run, rounds=5, warmup_rounds=1)
-    benchmark.extra_info.update(steps=BATCH * STEPS, what=f"{variant} run(), {BATCH} x {STEPS}, no grad")
+    benchmark.extra_info.update(steps=BATCH * STEPS, batch=BATCH, what=f"{variant} run(), {BATCH} x {STEPS}, no grad")
 
 
 @pytest.mark.parametrize("variant", ["ekf", "ukf", "mekf"])
@@ -41,7 +43,7 @@ def test_filter_forward_backward(benchmark: Any, data: Any, variant: str) -> Non
     z, m, dt = data
     run = forward_backward_workload(make_filter(variant), manual_noise(variant), z, m, dt)
     benchmark.pedantic(run, rounds=3, warmup_rounds=1)
-    benchmark.extra_info.update(steps=BATCH * STEPS, what=f"{variant} run() + gradient of sigma_Q, {BATCH} x {STEPS}")
+    benchmark.extra_info.update(steps=BATCH * STEPS, batch=BATCH, what=f"{variant} run() + gradient of sigma_Q, {BATCH} x {STEPS}")
 
 
 def test_numpy_reference_loop(benchmark: Any) -> None:
@@ -78,12 +80,26 @@ def test_ekf_forward_batch_1024(benchmark: Any, large_data: Any, outputs: str) -
             return filt.run(noise, z, m, dt=dt, store_covariances=store, store_innovations=store)
 
     benchmark.pedantic(run, rounds=3, warmup_rounds=1)
-    benchmark.extra_info.update(steps=LARGE_BATCH * LARGE_STEPS, what=f"ekf run(), {LARGE_BATCH} x {LARGE_STEPS}, {outputs}")
+    benchmark.extra_info.update(steps=LARGE_BATCH * LARGE_STEPS, batch=LARGE_BATCH,
+                                what=f"ekf run(), {LARGE_BATCH} x {LARGE_STEPS}, {outputs}")
 
 
 def test_ekf_forward_backward_batch_1024(benchmark: Any, large_data: Any) -> None:
     z, m, dt = large_data
     run = forward_backward_workload(make_filter("ekf"), manual_noise("ekf"), z, m, dt)
     benchmark.pedantic(run, rounds=2, warmup_rounds=1)
-    benchmark.extra_info.update(steps=LARGE_BATCH * LARGE_STEPS,
+    benchmark.extra_info.update(steps=LARGE_BATCH * LARGE_STEPS, batch=LARGE_BATCH,
                                 what=f"ekf run() + gradient of sigma_Q, {LARGE_BATCH} x {LARGE_STEPS}")
+
+
+@pytest.mark.parametrize("batch", [BATCH, LARGE_BATCH])
+def test_small_bmm_limit(benchmark: Any, batch: int) -> None:
+    """One ``torch.bmm`` of ``(B, 13, 13)`` float64 batches (one thread): ``steps`` per call is
+    ``B / MATMULS_PER_STEP``, so the reported steps/s is the small-bmm limit at ``B``
+    (:data:`fkn_bench.cli.bench.MATMULS_PER_STEP`)."""
+    generator = torch.Generator().manual_seed(0)
+    F, P = (torch.randn(batch, 13, 13, generator=generator, dtype=torch.float64) for _ in range(2))
+    out = torch.empty_like(P)
+    benchmark.pedantic(lambda: torch.bmm(F, P, out=out), rounds=7, iterations=max(1, 20480 // batch), warmup_rounds=1)
+    benchmark.extra_info.update(steps=batch // MATMULS_PER_STEP, batch=batch, small_bmm_limit=True,
+                                what=f"small-bmm limit: torch.bmm (B, 13, 13) float64, B = {batch}, {MATMULS_PER_STEP} per step")

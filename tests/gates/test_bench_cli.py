@@ -19,6 +19,11 @@ DOCUMENT = {
     "benchmarks": [
         {"name": "test_filter_forward[ekf]", "group": None, "extra_info": {"steps": 12800, "what": "ekf run()"},
          "stats": {"min": 0.09, "max": 0.2, "mean": 0.11, "stddev": 0.011, "rounds": 5, "median": 0.1}},
+        {"name": "test_ekf_forward_batch_1024", "group": None, "extra_info": {"steps": 204800, "batch": 1024},
+         "stats": {"min": 0.2, "max": 0.3, "mean": 0.25, "stddev": 0.01, "rounds": 3, "median": 0.256}},
+        {"name": "test_small_bmm_limit[1024]", "group": None,
+         "extra_info": {"steps": 512, "batch": 1024, "small_bmm_limit": True},
+         "stats": {"min": 2e-4, "max": 3e-4, "mean": 2.6e-4, "stddev": 1e-5, "rounds": 7, "median": 2.56e-4}},
         {"name": "test_without_steps", "group": None, "extra_info": {},
          "stats": {"min": 2e-6, "max": 3e-6, "mean": 2.5e-6, "stddev": 1e-7, "rounds": 100, "median": 2.5e-6}},
     ],
@@ -28,7 +33,15 @@ DOCUMENT = {
 def test_summary_rows_have_throughputs() -> None:
     rows = summarize_benchmarks(DOCUMENT)
     assert rows[0]["steps_per_s"] == pytest.approx(128000.0)
-    assert rows[1]["steps"] is None and rows[1]["steps_per_s"] is None
+    assert rows[-1]["steps"] is None and rows[-1]["steps_per_s"] is None
+
+
+def test_batched_rows_report_their_fraction_of_the_small_bmm_limit_at_their_batch() -> None:
+    rows = {row["name"]: row for row in summarize_benchmarks(DOCUMENT)}
+    limit = rows["test_small_bmm_limit[1024]"]
+    assert limit["steps_per_s"] == pytest.approx(2e6) and limit["of_bmm_limit"] is None
+    assert rows["test_ekf_forward_batch_1024"]["of_bmm_limit"] == pytest.approx(800e3 / 2e6)
+    assert rows["test_filter_forward[ekf]"]["of_bmm_limit"] is None  # no batch, no limit
 
 
 def test_report_prints_a_table_with_steps_per_second(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
@@ -39,6 +52,8 @@ def test_report_prints_a_table_with_steps_per_second(tmp_path: Path, capsys: pyt
     assert "Test CPU, 2 CPUs, CPython 3.11.7; commit 0123456789ab (dirty)" in out
     line = next(l for l in out.splitlines() if l.startswith("test_filter_forward[ekf]"))
     assert "100 ms" in line and "110 ms" in line and "12800" in line and "128 k" in line and "10%" in line
+    line = next(l for l in out.splitlines() if l.startswith("test_ekf_forward_batch_1024"))
+    assert "800 k" in line and "0.40" in line
     assert main(["bench", "report", str(path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["benchmarks"][0]["steps_per_s"] == pytest.approx(128000.0)
 
