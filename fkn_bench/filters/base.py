@@ -39,7 +39,7 @@ from torch import Tensor
 
 from fkn_bench.filters.models import StateSpaceModel
 from fkn_bench.filters.parameters import NoiseLayout, NoiseParameters
-from fkn_bench.linalg import namespace
+from fkn_bench.linalg import namespace, symmetrize
 
 __all__ = ["KalmanFilter", "FilterResult", "FilterState", "check_dt"]
 
@@ -242,7 +242,9 @@ class KalmanFilter(ABC):
         else:
             first = torch.full((batch,), -1, dtype=torch.long)
             init_steps = set()
-            state = FilterState(initial.mean.to(dtype), initial.covariance.to(dtype))
+            # symmetrised once: the structured EKF predict keeps a symmetric P symmetric, and makes
+            # no symmetrising pass of its own (a symmetric P is returned unchanged, to the bit)
+            state = FilterState(initial.mean.to(dtype), symmetrize(initial.covariance.to(dtype)))
             initialised = torch.ones(batch, dtype=torch.bool)
 
         m, k, n = self.innovation_dim, self.covariance_dim, self.model.state_dim
@@ -308,5 +310,5 @@ class KalmanFilter(ABC):
             prior_means=batch_first(prior_means),
             updated=updated_steps.transpose(0, 1),
             initialised=initialised_steps.transpose(0, 1),
-            final=state,
+            final=FilterState(state.mean, state.covariance.contiguous()),  # (the structured step's is a view)
         )
