@@ -27,7 +27,7 @@ BAD_INPUTS = [
     ("run --estimator manual-ekf --estimator-option foo=bar --seeds 1",
      "--estimator-option foo=bar: estimator 'manual-ekf' has no option 'foo'; valid options: description, inertia,"),
     ("run --estimator sage-husa --estimator-option alpha=3 --seeds 1",
-     "--estimator-option alpha=3: unknown SageHusaEstimator options ['alpha']; valid: ['adapt_q',"),
+     "--estimator-option alpha=3: unknown SageHusaEstimator options ['alpha']; valid: ['adapt', 'adapt_q',"),
     ("run --estimator flexkalmannet --estimator-option parameters= --seeds 1", "the learned-parameter file name is empty"),
     ("run --recording nope.mcap --estimator manual-ekf", "recording not found: nope.mcap"),
     ("run --recording afile --estimator manual-ekf", "afile: not an MCAP file"),

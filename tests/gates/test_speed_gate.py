@@ -64,30 +64,44 @@ def _workloads(cache: dict[str, speed.Workloads], check: speed.RatioCheck) -> sp
     return cache[check.name]
 
 
-@TIMED
-@pytest.mark.parametrize("check", _checks(), ids=lambda c: c.name)
-def test_real_implementation_passes_the_gate(check: speed.RatioCheck, workloads: dict) -> None:
+def _online(checks: list[speed.RatioCheck]) -> list[speed.RatioCheck]:
+    return [c for c in checks if c.name.startswith("online-step:")]
+
+
+def _builtin(checks: list[speed.RatioCheck]) -> list[speed.RatioCheck]:
+    return [c for c in checks if not c.name.startswith("online-step:")]
+
+
+def _passes(check: speed.RatioCheck, workloads: dict) -> tuple[bool, str]:
     built = _workloads(workloads, check)
     outcomes = [speed.evaluate(check, workloads=built) for _ in range(CONSECUTIVE_PASSES)]
-    print("\n" + speed.format_outcomes(outcomes))
-    assert all(o.passed for o in outcomes), (
-        f"{check.name} is slower than its reference allows ({check.description}):\n"
-        + speed.format_outcomes(outcomes)
-        + "\nEvery attempt of an evaluation was below the threshold: a real slowdown, not noise "
+    table = speed.format_outcomes(outcomes)
+    print("\n" + table)
+    return all(o.passed for o in outcomes), (
+        f"{check.name} is slower than its reference allows ({check.description}):\n{table}\n"
+        "Every attempt of an evaluation was below the threshold: a real slowdown, not noise "
         "(see fkn_bench/gates/speed.py; print the ratios with `fkn-bench bench gate`)."
     )
 
 
 @TIMED
-@pytest.mark.parametrize("check", _tripped(), ids=lambda c: c.name)
-def test_implementation_doing_its_work_twice_trips_the_gate(check: speed.RatioCheck, workloads: dict) -> None:
-    """The first hotspot is measured as the gate measures it (three attempts before failing,
-    which this test checks); the others in one attempt: a failure is what is expected, and one
-    attempt is the strictest form of that check (three attempts give a doubled hotspot three
-    chances to pass). The timed tests hold both cores, so two attempts saved per hotspot are
-    saved twice over in the test command's wall time."""
+@pytest.mark.parametrize("check", _builtin(_checks()), ids=lambda c: c.name)
+def test_real_implementation_passes_the_gate(check: speed.RatioCheck, workloads: dict) -> None:
+    passed, message = _passes(check, workloads)
+    assert passed, message
+
+
+@TIMED
+def test_every_estimators_online_step_passes_the_gate(workloads: dict) -> None:
+    """The online-step checks of every registered estimator, in one test: each timed test waits
+    for the other worker to finish its current test before it takes both cores, and one wait for
+    all of them (a few tenths of a second each) costs less than one each."""
+    failures = [message for passed, message in (_passes(c, workloads) for c in _online(_checks())) if not passed]
+    assert not failures, "\n\n".join(failures)
+
+
+def _trips(check: speed.RatioCheck, workloads: dict, attempts: int) -> None:
     built = _workloads(workloads, check)
-    attempts = 3 if check.name == _tripped()[0].name else 1
     with speed.doubled(check.hotspot, check.combine):
         outcome = speed.evaluate(check, workloads=built, attempts=attempts)
     print("\n" + speed.format_outcomes([outcome]))
@@ -95,6 +109,25 @@ def test_implementation_doing_its_work_twice_trips_the_gate(check: speed.RatioCh
         f"{check.name}: a 2x slower {check.hotspot} still passed the gate:\n" + speed.format_outcomes([outcome])
     )
     assert len(outcome.attempts) == attempts  # measured again each time before failing
+
+
+@TIMED
+@pytest.mark.parametrize("check", _builtin(_tripped()), ids=lambda c: c.name)
+def test_implementation_doing_its_work_twice_trips_the_gate(check: speed.RatioCheck, workloads: dict) -> None:
+    """The first hotspot is measured as the gate measures it (three attempts before failing,
+    which this test checks); the others in one attempt: a failure is what is expected, and one
+    attempt is the strictest form of that check (three attempts give a doubled hotspot three
+    chances to pass). The timed tests hold both cores, so two attempts saved per hotspot are
+    saved twice over in the test command's wall time."""
+    _trips(check, workloads, 3 if check.name == _tripped()[0].name else 1)
+
+
+@TIMED
+def test_every_gated_online_step_doing_its_work_twice_trips_the_gate(workloads: dict) -> None:
+    """Each estimator class with a gated online step, its ``step`` doubled, fails the gate (one
+    attempt each; in one test, as the passing checks are)."""
+    for check in _online(_tripped()):
+        _trips(check, workloads, 1)
 
 
 def test_doubled_restores_the_original() -> None:
