@@ -205,6 +205,8 @@ def test_cli_usage_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     assert "grid_points" in capsys.readouterr().err
     assert main(["sweep", "--space", "quick", "--estimator", "manual-ekf", "--out", str(tmp_path / "o")]) == 2
     assert "manual-ekf is not trainable, so a sweep searches its options" in capsys.readouterr().err
+    assert main(["sweep", "--space", "quick", "--write-artifact", "--out", str(tmp_path / "o")]) == 2
+    assert "train flexkalmannet with the sweep's best.toml instead" in capsys.readouterr().err
     assert main(["sweep", "--space", "quick", "--workers", "0", "--out", str(tmp_path / "o")]) == 2
     assert "workers" in capsys.readouterr().err
     space.write_text("[fixed]\nepochs = 0\n[params.lr]\nvalues = [0.01]\n")
