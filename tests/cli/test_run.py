@@ -106,7 +106,7 @@ def _only_for_tiny(scenario=None, **_):
 def test_all_skips_only_the_unavailable_pairs(capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
     estimator_registry.register_estimator("partly-trained", _only_for_tiny)
     two = tmp_path / "two.toml"  # tiny and another as short, for which partly-trained does not build
-    two.write_text('[scenario.tiny]\nbase = "ds1"\nn_steps = 2000\n[scenario.other]\nbase = "ds1"\nn_steps = 2000\n')
+    two.write_text("[scenario.tiny]\nbase = \"ds1\"\nn_steps = 400\n[scenario.other]\nbase = \"ds1\"\nn_steps = 400\n")
     document = _run_json(capsys, "--all", "--scenario", "tiny", "--scenario", "other", "--scenario-file", str(two),
                          "--seeds", "1", "--no-progress", "--cut", "10")
     pairs = [(e["estimator"], e["scenario"]) for e in document["results"]]
