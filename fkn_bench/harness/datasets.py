@@ -266,6 +266,17 @@ def read_dataset(path: str | Path) -> StoredDataset:
     return _read(str(path))
 
 
+@lru_cache(maxsize=8)
+def _digest(files: tuple[tuple[str, int, int], ...]) -> str:
+    """SHA-256 (16 hex digits) of the files' contents; cached by their paths, times and sizes, so
+    that the key of a 100 MB dataset is not hashed again for every cell of a grid."""
+    digest = hashlib.sha256()
+    for name, _, _ in files:
+        with open(name, "rb") as fh:
+            digest.update(hashlib.file_digest(fh, "sha256").digest())
+    return digest.hexdigest()[:16]
+
+
 @dataclass(frozen=True)
 class DatasetSource:
     """Episodes read from an fkn-bench Minari dataset (:func:`write_dataset`), for the harness.
@@ -295,12 +306,9 @@ class DatasetSource:
         return self.stored().episodes.seeds
 
     def key(self) -> str:
-        digest = hashlib.sha256()
-        for file in sorted(_data_directory(Path(self.path)).rglob("*")):
-            if file.is_file():
-                with open(file, "rb") as fh:
-                    digest.update(hashlib.file_digest(fh, "sha256").digest())
-        return f"dataset:{digest.hexdigest()[:16]}:{self.split}"
+        files = tuple((str(f), f.stat().st_mtime_ns, f.stat().st_size)
+                      for f in sorted(_data_directory(Path(self.path)).rglob("*")) if f.is_file())
+        return f"dataset:{_digest(files)}:{self.split}"
 
     def describe(self) -> dict[str, Any]:
         stored = self.stored()

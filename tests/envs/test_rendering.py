@@ -4,7 +4,6 @@ frames: tests/envs/test_astrobee_tumble.py)."""
 
 from __future__ import annotations
 
-import warnings
 from pathlib import Path
 
 import gymnasium as gym
