@@ -51,7 +51,9 @@ def render_frames(estimator_name: str, scenario: str, seed: int, steps: int, eve
                   *, keep: str = "all") -> tuple[list[np.ndarray], float]:
     """Frames (``uint8 (H, W, 3)``) of ``estimator_name`` run online for ``steps`` steps of
     episode ``seed`` of ``scenario``, one every ``every`` steps and the last (``keep="last"``:
-    the last only), and the frame rate (``render_fps / every``)."""
+    the last only), and the frame rate (``render_fps / every``). A step whose estimate is not
+    usable (non-finite: an estimator that reports nothing before its first measurement) is shown
+    as the identity attitude at the origin."""
     import gymnasium as gym
 
     from fkn_bench.estimators import make_estimator
@@ -64,8 +66,10 @@ def render_frames(estimator_name: str, scenario: str, seed: int, steps: int, eve
         estimator.reset(dt=env.unwrapped.scenario.dt)
         frames: list[np.ndarray] = []
         for k in range(steps):
-            estimate = estimator.step(observation)
-            observation, *_ = env.step(np.asarray(estimate.mean, dtype=np.float64))
+            mean = np.asarray(estimator.step(observation).mean, dtype=np.float64)
+            if not (np.isfinite(mean).all() and np.any(mean[:4])):  # no usable estimate yet: shown as identity
+                mean = np.r_[1.0, np.zeros(12)]
+            observation, *_ = env.step(mean)
             if keep == "all" and (k % every == 0 or k == steps - 1):
                 frames.append(env.render())
         if keep == "last":
