@@ -448,7 +448,8 @@ class RecursiveEstimator(Estimator):
         updated = False
         if z is not None:
             if initialised:
-                state, updated = self._online_update(state, z), True
+                updated_state = self._online_update(state, z)
+                state, updated = updated_state, updated_state is not state  # (the same object: gated out)
             else:
                 state, initialised = self._online_initial(state, z), True
         mean, covariance = self._online_report(state)
@@ -491,8 +492,12 @@ class RecursiveEstimator(Estimator):
         return self.filter.initial_state(z, self._online_noise[2])  # type: ignore[attr-defined]
 
     def _online_update(self, state: Any, z: ArrayF) -> Any:
-        """The state updated with a usable measurement."""
-        return self.filter.update(state, z, self._online_noise[1])[0]  # type: ignore[attr-defined]
+        """The state updated with a usable measurement; ``state`` itself (the same object) when
+        the filter's chi-square gate rejects the update (:meth:`KalmanFilter.set_gate`)."""
+        posterior, nu, S = self.filter.update(state, z, self._online_noise[1])  # type: ignore[attr-defined]
+        if self.filter.gate is not None and not bool(self.filter.gate_accepts(nu, S)[0]):  # type: ignore[attr-defined]
+            return state
+        return posterior
 
     def _online_report(self, state: Any) -> tuple[ArrayF, ArrayF]:
         """The mean ``(13,)`` and the native covariance (read-only: the steps are pure)."""

@@ -93,6 +93,9 @@ class KalmanEstimator(RecursiveEstimator):
             :data:`fkn_bench.filters.MEKF_MANUAL_LAYOUT`).
         q_cov, r_cov, p0_cov: full covariance matrices instead (symmetric positive definite);
             give either the standard deviations or the matrix of an entry, not both.
+        gate: chi-square innovation gate probability, e.g. 0.999 (None: no gate): an update
+            whose normalised innovation squared exceeds that quantile is skipped
+            (:meth:`~fkn_bench.filters.KalmanFilter.set_gate`), in ``estimate`` and ``step`` alike.
         name, description: registry name and one-line description.
     """
 
@@ -108,6 +111,7 @@ class KalmanEstimator(RecursiveEstimator):
         q_cov: Sequence[Sequence[float]] | None = None,
         r_cov: Sequence[Sequence[float]] | None = None,
         p0_cov: Sequence[Sequence[float]] | None = None,
+        gate: float | None = None,
         name: str = "kalman",
         description: str = "",
     ) -> None:
@@ -118,6 +122,7 @@ class KalmanEstimator(RecursiveEstimator):
         self.variant_name, self.model_name = variant, model
         self.inertia = None if inertia is None else tuple(float(v) for v in inertia)
         self.filter = make_filter(variant, model=make_model(model, inertia=self.inertia))
+        self.filter.set_gate(gate)
         layout = self.filter.layout
         matrices = []
         self._given: dict[str, str] = {}
@@ -216,10 +221,13 @@ class KalmanEstimator(RecursiveEstimator):
                 config[f"{entry}_cov"] = matrix.tolist()
             else:
                 config[f"{entry}_std"] = np.sqrt(np.diag(matrix)).tolist()
+        if self.filter.gate is not None:
+            config["gate"] = self.filter.gate
         config.update(name=self.name, description=self.description)
         return config
 
-    CONFIG_KEYS = frozenset({"variant", "model", "inertia", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "name", "description"})
+    CONFIG_KEYS = frozenset({"variant", "model", "inertia", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "gate",
+                             "name", "description"})
     """Keys of :meth:`to_config` (subclasses add theirs)."""
 
     @classmethod

@@ -153,6 +153,37 @@ class KalmanFilter(ABC):
     name: str
     model: StateSpaceModel
     layout: NoiseLayout
+    gate: float | None = None
+    """Chi-square innovation gate (:meth:`set_gate`): None uses every usable measurement."""
+    _gate_threshold: float = math.inf
+
+    def set_gate(self, level: float | None) -> None:
+        """Gate measurement updates at chi-square probability ``level`` (e.g. 0.999), or not at
+        all (None): an update whose normalised innovation squared ``nu^T S^-1 nu`` exceeds the
+        ``level`` quantile of the chi-square distribution with ``m`` degrees of freedom (``m`` the
+        innovation dimension, 6 for a pose) is skipped, as an unusable measurement is (the
+        documented rule), so that a gross outlier does not pull the state (Bar-Shalom, Li &
+        Kirubarajan, *Estimation with Applications to Tracking and Navigation*, 2001, sec. 2.5.3
+        and 5.4: the validation gate). A consistent filter rejects a fraction ``1 - level`` of
+        good measurements."""
+        if level is None:
+            self.gate, self._gate_threshold = None, math.inf
+            return
+        level = float(level)
+        if not 0.0 < level < 1.0:
+            raise ValueError(f"gate must be a probability in (0, 1), e.g. 0.999 (got {level!r})")
+        from scipy.stats import chi2
+
+        self.gate, self._gate_threshold = level, float(chi2.ppf(level, self.innovation_dim))
+
+    def gate_accepts(self, innovation: Tensor, innovation_covariance: Tensor) -> Tensor:
+        """``(B,)`` True where the update passes the gate (everywhere without one; numpy or
+        torch, not differentiated; a non-finite NIS fails)."""
+        xp = namespace(innovation)
+        if self.gate is None:
+            return torch.ones(innovation.shape[:-1], dtype=torch.bool) if xp is torch else xp.ones(innovation.shape[:-1], dtype=bool)
+        solved = xp.linalg.solve(innovation_covariance, innovation[..., None])[..., 0]
+        return (innovation * solved).sum(-1) <= self._gate_threshold
 
     @property
     def covariance_dim(self) -> int:
@@ -282,6 +313,11 @@ class KalmanFilter(ABC):
             nu, S = no_innovation, unit_covariance
             if do_update:
                 posterior, nu_t, S_t = self.update(state, z_all[:, t], step_noise.measurement)
+                if self.gate is not None:  # rows whose innovation fails the gate keep their prior
+                    with torch.no_grad():
+                        passed = self.gate_accepts(nu_t.detach(), S_t.detach())
+                    if not bool(passed[update_rows].all()):
+                        update_rows, every_row = update_rows & passed, False
                 if every_row:
                     state, nu, S = posterior, nu_t, S_t
                 else:

@@ -327,3 +327,30 @@ def test_full_covariance_configuration(tmp_path: Path, hostile) -> None:
 def test_noise_that_would_overflow_the_filter_is_refused_by_name(options: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         KalmanEstimator(**options)
+
+
+def test_the_chi_square_gate_skips_gross_outliers_alike_in_estimate_and_step() -> None:
+    """``gate=0.999`` (issue 21, item 3): a 3 m position jump at one measurement is skipped (no
+    update, no pull on the state), the good measurements are used, ``step`` skips the same one;
+    without a gate the jump goes in. A gate outside (0, 1) is refused, naming it."""
+    episodes = generate_episodes("ds1", [0], split="test").window(0, 300)
+    z, valid = episodes.measurements.copy(), episodes.valid.copy()
+    jump = int(np.flatnonzero(valid[0])[20])
+    z[0, jump, 4:7] += 3.0
+    gated = make_estimator("manual-ekf", gate=0.999)
+    plain = make_estimator("manual-ekf").estimate(z, valid, 0.1)
+    batch = gated.estimate(z, valid, 0.1)
+    assert plain.innovation_mask[0, jump] and not batch.innovation_mask[0, jump]
+    assert batch.innovation_mask[0].sum() >= valid[0].sum() - 2  # (the first initialises; at most one good one gated)
+    after = slice(jump, jump + 10)
+    assert np.abs(batch.means[0, after, 4:7] - episodes.truth[0, after, 4:7]).max() < 0.15
+    assert np.abs(plain.means[0, after, 4:7] - episodes.truth[0, after, 4:7]).max() > 0.25  # pulled by the jump
+    gated.reset(dt=0.1)
+    for t in range(z.shape[1]):
+        estimate = gated.step(z[0, t] if valid[0, t] else np.full(7, np.nan))
+        assert estimate.updated == batch.innovation_mask[0, t], t
+        np.testing.assert_allclose(estimate.mean, batch.means[0, t], rtol=0, atol=1e-10)
+    assert gated.to_config()["gate"] == 0.999 and KalmanEstimator.from_config(gated.to_config()).filter.gate == 0.999
+    for bad in (0.0, 1.0, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="gate must be a probability in"):
+            make_estimator("manual-ekf", gate=bad)
