@@ -335,6 +335,8 @@ class AdaptiveKalmanFilter:
         nu = S = None
         update_rows = usable & state.initialised
         init_rows = usable & ~state.initialised
+        if self.gate is not None and update_rows.any():
+            update_rows = self._gated(update_rows, x, P, z, noise)
         if update_rows.any():
             every = bool(update_rows.all())
             rows = slice(None) if every else np.flatnonzero(update_rows)
@@ -363,6 +365,44 @@ class AdaptiveKalmanFilter:
             since = np.where(init_rows, 0.0, since)
         new = AdaptiveState(x, P, state.initialised | usable, since, noise)
         return new, StepOutput(prior, nu, S, update_rows)
+
+    gate: float | None = None
+    """Chi-square gate level (:meth:`set_gate`); None: no gate."""
+    _gate_threshold: float = math.inf
+
+    def set_gate(self, level: float | None) -> None:
+        """Skip an update whose NIS ``nu^T S^-1 nu``, with ``S = H P- H^T + R`` from the rule's
+        current ``R``, exceeds the chi-square ``level`` quantile (``m`` degrees of freedom), before
+        the rule sees it: a gross outlier neither moves the state nor feeds the noise estimates
+        (the gate of :meth:`fkn_bench.filters.KalmanFilter.set_gate`)."""
+        if level is None:
+            self.gate, self._gate_threshold = None, math.inf
+            return
+        level = float(level)
+        if not 0.0 < level < 1.0:
+            raise ValueError(f"gate must be a probability in (0, 1), e.g. 0.999 (got {level!r})")
+        from scipy.stats import chi2
+
+        self.gate, self._gate_threshold = level, float(chi2.ppf(level, self.model.measurement_dim))
+
+    def _gated(self, update_rows: ArrayB, x: ArrayF, P: ArrayF, z: ArrayF, noise: Noise) -> ArrayB:
+        """``update_rows`` without the rows whose innovation fails the gate."""
+        rows = np.flatnonzero(update_rows)
+        x_rows, P_rows = x[rows], P[rows]
+        nu = self.model.align(z[rows], x_rows) - self.model.measure(x_rows)
+        R = self.rule.measurement_noise({key: value[rows] for key, value in noise.items()})
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            S = kalman_update(self.model, x_rows, P_rows, nu, R).S
+            try:
+                nis = (nu * np.linalg.solve(S, nu[..., None])[..., 0]).sum(-1)
+            except np.linalg.LinAlgError:  # a singular S somewhere: row by row
+                nis = np.array([_row_nis(n, s) for n, s in zip(nu, S)])
+        passed = nis <= self._gate_threshold  # (NaN fails)
+        if passed.all():
+            return update_rows
+        kept = update_rows.copy()
+        kept[rows[~passed]] = False
+        return kept
 
     def _guarded_update(self, ctx: UpdateContext, noise: Noise) -> tuple[KalmanUpdate, Noise, ArrayB]:
         """The rule's update of ``ctx``'s rows, and ``ok (b,)``: rows whose update failed (the
@@ -440,6 +480,14 @@ class AdaptiveKalmanFilter:
         return AdaptiveResult(*(None if a is None else np.swapaxes(a, 0, 1) for a in buffers), final=state)
 
 
+def _row_nis(nu: ArrayF, S: ArrayF) -> float:
+    """One row's NIS, or inf where ``S`` is singular."""
+    try:
+        return float(nu @ np.linalg.solve(S, nu))
+    except np.linalg.LinAlgError:
+        return math.inf
+
+
 def _finite_update(result: KalmanUpdate, noise: Noise) -> ArrayB:
     """``(b,)`` True where an update's mean, covariance, innovation covariance and noise are finite."""
     ok = np.isfinite(result.x).all(1) & np.isfinite(result.P).all((1, 2)) & np.isfinite(result.S).all((1, 2))
@@ -461,7 +509,9 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
     (starting noise and ``P0``; default the paper's manual tuning), ``q_scale`` and ``r_scale``
     (factors in ``(0, 1e6]`` on the starting standard deviations of ``Q`` and ``R``: the initial
     noise as one number each, which a sweep searches), ``adapt`` (``"q"``, ``"r"`` or ``"qr"``:
-    what a rule with ``adapt_q``/``adapt_r`` adapts, as one choice), ``name`` and ``description``.
+    what a rule with ``adapt_q``/``adapt_r`` adapts, as one choice), ``gate`` (a chi-square
+    innovation gate probability, e.g. 0.999: :meth:`AdaptiveKalmanFilter.set_gate`), ``name`` and
+    ``description``.
 
     ``estimate`` runs every sequence of the batch at once; ``reset``/``step`` run the same
     recursion on one sequence (with the observation-time rules of
@@ -481,6 +531,7 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         q_scale: float = 1.0,
         r_scale: float = 1.0,
         adapt: str | None = None,
+        gate: float | None = None,
         name: str | None = None,
         description: str | None = None,
         **knobs: Any,
@@ -488,7 +539,7 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         valid = self.rule_class.knobs
         unknown = sorted(set(knobs) - set(valid))
         if unknown:
-            options = valid + ("q_std", "r_std", "p0_std", "q_scale", "r_scale", "adapt", "name", "description")
+            options = valid + ("q_std", "r_std", "p0_std", "q_scale", "r_scale", "adapt", "gate", "name", "description")
             raise ValueError(f"unknown {type(self).__name__} options {unknown}; valid: {sorted(options)}")
         if adapt is not None:  # one categorical for the two booleans (a sweep never tries "neither")
             if "adapt_q" not in valid:
@@ -512,6 +563,9 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
             if value is not None
         }
         self._scales = {key: float(value) for key, value in scales.items() if value != 1.0}
+        self.filter.set_gate(gate)
+        if gate is not None:
+            self._scales["gate"] = float(gate)  # (reported by to_config with the scales)
         if name is not None:
             self.name = name
         if description is not None:
@@ -534,10 +588,14 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         return self.filter.step(state, _NO_MEASUREMENT, _NOT_USABLE, dt)[0]
 
     def _online_update(self, state: AdaptiveState, z: ArrayF) -> AdaptiveState:
-        # also initialises: AdaptiveKalmanFilter.step initialises a row without a first update
-        return self.filter.step(state, z, _USABLE, 0.0, predict=False)[0]
+        new, output = self.filter.step(state, z, _USABLE, 0.0, predict=False)
+        if not output.updated[0]:  # gated out (or a failed update, skipped): the state as it was
+            return state
+        return new
 
-    _online_initial = _online_update
+    def _online_initial(self, state: AdaptiveState, z: ArrayF) -> AdaptiveState:
+        # AdaptiveKalmanFilter.step initialises a row without a first update
+        return self.filter.step(state, z, _USABLE, 0.0, predict=False)[0]
 
     def _online_report(self, state: AdaptiveState) -> tuple[ArrayF, ArrayF]:
         return state.x[0], state.P[0]

@@ -209,3 +209,27 @@ def test_a_failed_update_is_skipped_for_its_row_only(hostile) -> None:
     masked = mask.copy()
     masked[1, step] = False  # the same as that measurement missing
     np.testing.assert_allclose(both.means[1], AdaptiveKalmanFilter(_FailsOnLargeInnovations()).run(z, masked, dt=DT).means[1], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ADAPTIVE)
+def test_the_chi_square_gate_keeps_an_outlier_out_of_the_state_and_the_noise_estimates(name: str) -> None:
+    """``gate=0.999``: a 3 m position jump is skipped before the rule sees it (the state is not
+    pulled, the adapted R is the one without the jump), in ``estimate`` and ``step`` alike."""
+    episodes = generate_episodes("ds1", [0], split="test").window(0, 300)
+    z, valid = episodes.measurements.copy(), episodes.valid.copy()
+    jump = int(np.flatnonzero(valid[0])[20])
+    z[0, jump, 4:7] += 3.0
+    clean = make_estimator(name, gate=0.999).estimate(episodes.measurements.copy(), valid, DT)
+    gated_estimator = make_estimator(name, gate=0.999)
+    gated = gated_estimator.estimate(z, valid, DT)
+    plain = make_estimator(name).estimate(z, valid, DT)
+    assert plain.innovation_mask[0, jump] and not gated.innovation_mask[0, jump] and clean.innovation_mask[0, jump]
+    after = slice(jump, jump + 5)
+    assert np.abs(gated.means[0, after, 4:7] - episodes.truth[0, after, 4:7]).max() < 0.15
+    np.testing.assert_array_equal(gated.extras["r_diag"][0, jump], gated.extras["r_diag"][0, jump - 1])
+    gated_estimator.reset(dt=DT)
+    for t in range(z.shape[1]):
+        estimate = gated_estimator.step(z[0, t] if valid[0, t] else np.full(7, np.nan))
+        assert estimate.updated == gated.innovation_mask[0, t], t
+        np.testing.assert_allclose(estimate.mean, gated.means[0, t], rtol=0, atol=1e-9)
+    assert gated_estimator.to_config()["gate"] == 0.999
