@@ -45,7 +45,7 @@ import numpy as np
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
-from fkn_bench.filters.base import FilterState, KalmanFilter
+from fkn_bench.filters.base import FilterState, KalmanFilter, gate_threshold
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
 from fkn_bench.linalg import symmetrize
@@ -375,15 +375,7 @@ class AdaptiveKalmanFilter:
         current ``R``, exceeds the chi-square ``level`` quantile (``m`` degrees of freedom), before
         the rule sees it: a gross outlier neither moves the state nor feeds the noise estimates
         (the gate of :meth:`fkn_bench.filters.KalmanFilter.set_gate`)."""
-        if level is None:
-            self.gate, self._gate_threshold = None, math.inf
-            return
-        level = float(level)
-        if not 0.0 < level < 1.0:
-            raise ValueError(f"gate must be a probability in (0, 1), e.g. 0.999 (got {level!r})")
-        from scipy.stats import chi2
-
-        self.gate, self._gate_threshold = level, float(chi2.ppf(level, self.model.measurement_dim))
+        self.gate, self._gate_threshold = gate_threshold(level, self.model.measurement_dim)
 
     def _gated(self, update_rows: ArrayB, x: ArrayF, P: ArrayF, z: ArrayF, noise: Noise) -> ArrayB:
         """``update_rows`` without the rows whose innovation fails the gate."""

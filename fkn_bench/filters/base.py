@@ -41,7 +41,7 @@ from fkn_bench.filters.models import StateSpaceModel
 from fkn_bench.filters.parameters import NoiseLayout, NoiseParameters
 from fkn_bench.linalg import namespace, symmetrize
 
-__all__ = ["KalmanFilter", "FilterResult", "FilterState", "check_dt"]
+__all__ = ["KalmanFilter", "FilterResult", "FilterState", "check_dt", "gate_threshold"]
 
 
 class FilterState(NamedTuple):
@@ -85,6 +85,23 @@ class FilterResult:
 def _select(condition: Tensor, a: Tensor, b: Tensor) -> Tensor:
     """``where(condition, a, b)`` with ``condition (B,)`` broadcast over trailing axes."""
     return torch.where(condition.view(-1, *([1] * (a.dim() - 1))), a, b)
+
+
+def gate_threshold(level: float | None, dof: int) -> tuple[float | None, float]:
+    """``(level, threshold)`` of a chi-square innovation gate: the ``level`` quantile of the
+    chi-square distribution with ``dof`` degrees of freedom (``(None, inf)`` for no gate);
+    ValueError naming ``gate`` unless ``level`` lies in (0, 1)."""
+    if level is None:
+        return None, math.inf
+    try:
+        value = float(level)
+    except (TypeError, ValueError):
+        raise ValueError(f"gate must be a probability in (0, 1), e.g. 0.999 (got {level!r})") from None
+    if not 0.0 < value < 1.0:
+        raise ValueError(f"gate must be a probability in (0, 1), e.g. 0.999 (got {level!r})")
+    from scipy.stats import chi2
+
+    return value, float(chi2.ppf(value, dof))
 
 
 def check_dt(dt: Any) -> float:
@@ -166,15 +183,7 @@ class KalmanFilter(ABC):
         Kirubarajan, *Estimation with Applications to Tracking and Navigation*, 2001, sec. 2.5.3
         and 5.4: the validation gate). A consistent filter rejects a fraction ``1 - level`` of
         good measurements."""
-        if level is None:
-            self.gate, self._gate_threshold = None, math.inf
-            return
-        level = float(level)
-        if not 0.0 < level < 1.0:
-            raise ValueError(f"gate must be a probability in (0, 1), e.g. 0.999 (got {level!r})")
-        from scipy.stats import chi2
-
-        self.gate, self._gate_threshold = level, float(chi2.ppf(level, self.innovation_dim))
+        self.gate, self._gate_threshold = gate_threshold(level, self.innovation_dim)
 
     def gate_accepts(self, innovation: Tensor, innovation_covariance: Tensor) -> Tensor:
         """``(B,)`` True where the update passes the gate (everywhere without one; numpy or
