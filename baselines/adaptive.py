@@ -384,7 +384,7 @@ class AdaptiveKalmanFilter:
         nu = self.model.align(z[rows], x_rows) - self.model.measure(x_rows)
         R = self.rule.measurement_noise({key: value[rows] for key, value in noise.items()})
         with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            S = kalman_update(self.model, x_rows, P_rows, nu, R).S
+            S = projected_covariance(self.model, P_rows) + R  # H P- H^T + R: the gain's S, without the update
             try:
                 nis = (nu * np.linalg.solve(S, nu[..., None])[..., 0]).sum(-1)
             except np.linalg.LinAlgError:  # a singular S somewhere: row by row
@@ -554,10 +554,10 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
             for key, value in (("q_std", q_std), ("r_std", r_std), ("p0_std", p0_std))
             if value is not None
         }
-        self._scales = {key: float(value) for key, value in scales.items() if value != 1.0}
+        self._options = {key: float(value) for key, value in scales.items() if value != 1.0}  # for to_config
         self.filter.set_gate(gate)
         if gate is not None:
-            self._scales["gate"] = float(gate)  # (reported by to_config with the scales)
+            self._options["gate"] = float(gate)
         if name is not None:
             self.name = name
         if description is not None:
@@ -593,4 +593,4 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         return state.x[0], state.P[0]
 
     def to_config(self) -> dict[str, Any]:
-        return {**self.rule.config(), **self._stds, **self._scales, "name": self.name, "description": self.description}
+        return {**self.rule.config(), **self._stds, **self._options, "name": self.name, "description": self.description}
