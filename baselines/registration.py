@@ -27,7 +27,7 @@ def _tuned_adaptive(cls: type, description: str, scenario: Scenario | None = Non
     """The tuned settings (``<name>``): the committed sweep result of the scenario's model family
     (:func:`~fkn_bench.training.artifacts.committed_artifact`, written by ``fkn-bench sweep
     --write-artifact``) or ``parameters=PATH``, ``options`` over them."""
-    path = parameters if parameters is not None else committed_artifact(cls.name, scenario)
+    path = parameters if parameters is not None else committed_artifact(cls.name, scenario, swept=True)
     document = read_artifact(path)
     if document["estimator"] != cls.name:
         raise ArtifactError(f"{path} holds {document['estimator']!r} settings, not {cls.name}'s")

@@ -53,7 +53,7 @@ EstimatorFactory = Callable[..., Estimator]
 
 # modules whose import registers the built-in estimators (imported lazily: they pull in torch)
 _BUILTIN_MODULES: tuple[str, ...] = ("fkn_bench.estimators.builtin", "fkn_bench.flexkalmannet.registration", "fkn_bench.baselines.registration",
-                                      "fkn_bench.kalmannet.registration")
+                                      "fkn_bench.kalmannet.registration", "fkn_bench.estimators.gated")
 
 
 class UnknownEstimatorError(KeyError):

@@ -4,9 +4,11 @@
   constant parameters the trained network yields on its training data. Runs from a learned-
   parameter artefact (the committed ``baselines/params/flexkalmannet-<family>.json`` by default,
   chosen by the scenario's ``model_family``) or from a checkpoint.
-* :class:`AdaptiveFlexKalmanNetEstimator` (``flexkalmannet`` with ``mode="time_varying"``): the
-  network re-evaluated along the sequence, each step's parameters the mean of its outputs over
-  the last ``history`` measurements; needs a checkpoint (the weights).
+* :class:`AdaptiveFlexKalmanNetEstimator` (``flexkalmannet-tv``, or ``flexkalmannet`` with
+  ``mode="time_varying"`` and a checkpoint): the network re-evaluated along the sequence, each
+  step's parameters the mean of its outputs over the last ``history`` measurements. Runs from the
+  committed weights ``baselines/params/flexkalmannet-tv-<family>.json`` (and ``.weights.pt``) of a
+  network trained in that mode, or from a checkpoint.
 """
 
 from __future__ import annotations
@@ -22,10 +24,17 @@ from fkn_bench.estimators.kalman import filter_result_to_estimates
 from fkn_bench.flexkalmannet.checkpoint import model_from_checkpoint
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
-from fkn_bench.training.artifacts import TrainedKalmanEstimator, artifact_factory, deployed_estimator_config
+from fkn_bench.training.artifacts import (
+    TrainedKalmanEstimator,
+    artifact_factory,
+    artifact_label,
+    deployed_estimator_config,
+    resolve_artifact_label,
+    trained_network,
+)
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["FlexKalmanNetEstimator", "AdaptiveFlexKalmanNetEstimator", "flexkalmannet_factory"]
+__all__ = ["FlexKalmanNetEstimator", "AdaptiveFlexKalmanNetEstimator", "flexkalmannet_factory", "flexkalmannet_tv_factory"]
 
 
 class FlexKalmanNetEstimator(TrainedKalmanEstimator):
@@ -40,36 +49,53 @@ class FlexKalmanNetEstimator(TrainedKalmanEstimator):
     }
 
     @classmethod
-    def from_checkpoint(cls, path: str | Path) -> FlexKalmanNetEstimator:
+    def from_checkpoint(cls, path: str | Path, *, gate: float | None = None) -> FlexKalmanNetEstimator:
+        """The deployed constant parameters of a training checkpoint (``gate``: a chi-square
+        innovation gate level, None: none)."""
         model, config, scenario, document = model_from_checkpoint(path)
         metadata = {"checkpoint": str(path), "scenario": scenario.name, "best_epoch": document.get("best_epoch")}
-        return cls(metadata=metadata, **deployed_estimator_config(model, config))
+        gated = {} if gate is None else {"gate": gate}
+        return cls(metadata=metadata, **deployed_estimator_config(model, config), **gated)
 
 
 class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
-    """FlexKalmanNet's time-varying mode: per-step parameters from the recent measurements."""
+    """FlexKalmanNet's time-varying mode: per-step parameters from the recent measurements.
+
+    Keyword-only arguments:
+        checkpoint: a FlexKalmanNet training checkpoint (or committed weights file) holding the
+            network; a committed file is named by its installation-independent label
+            (:func:`~fkn_bench.training.artifacts.artifact_label`) in :meth:`to_config`.
+        history: valid measurements averaged per step (default: the checkpoint's).
+        gate: chi-square innovation gate level (None: none); see
+            :meth:`~fkn_bench.filters.KalmanFilter.set_gate`.
+        name, description: registry name and one-line description.
+    """
 
     name = "flexkalmannet"
     description = "FlexKalmanNet, time-varying mode: the network's parameters averaged over recent measurements"
 
-    def __init__(self, *, checkpoint: str | Path, history: int | None = None) -> None:
-        self.checkpoint = str(checkpoint)
-        self.model, self.config, self.scenario, _ = model_from_checkpoint(checkpoint)
+    def __init__(self, *, checkpoint: str | Path, history: int | None = None, gate: float | None = None,
+                 name: str | None = None, description: str | None = None) -> None:
+        self.checkpoint = artifact_label(resolve_artifact_label(checkpoint))
+        self.model, self.config, self.scenario, _ = model_from_checkpoint(resolve_artifact_label(checkpoint))
         self.model.mode = "time_varying"
         if history is not None:
             if history < 1:
                 raise ValueError(f"history must be >= 1 (got {history})")
             self.model.history = int(history)
         self.filter = self.config.build_filter()
+        self.filter.set_gate(gate)
+        if name is not None:
+            self.name = name
+        if description is not None:
+            self.description = description
         self._recent: deque[torch.Tensor] = deque(maxlen=self.model.history)
 
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)
         with torch.no_grad(), torch_threads():
             zt, mt = torch.from_numpy(z), torch.from_numpy(m)
-            usable = mt & torch.isfinite(zt).all(-1)
-            raw = self.model.time_varying_raw(torch.where(usable[..., None], zt, torch.zeros_like(zt)), usable)
-            noise = self.model.parameter_set.to_noise(raw)
+            noise = self.model.parameter_set.to_noise(self.model.sequence_raw(zt, mt))
             result = self.filter.run(noise, zt, mt, dt=step)
         return restart_diverged(filter_result_to_estimates(result, self.filter), lambda zs, ms: self.estimate(zs, ms, step), z, m)
 
@@ -88,7 +114,9 @@ class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
         self._online_noise = tuple(m[0].to(torch.float64).numpy() for m in (noise.process, noise.measurement, noise.initial))
 
     def to_config(self) -> dict[str, Any]:
-        return {"checkpoint": self.checkpoint, "history": self.model.history}
+        gate = {} if self.filter.gate is None else {"gate": self.filter.gate}
+        return {"checkpoint": self.checkpoint, "history": self.model.history, **gate, "name": self.name,
+                "description": self.description}
 
 
 def flexkalmannet_factory(
@@ -98,6 +126,7 @@ def flexkalmannet_factory(
     parameters: str | Path | None = None,
     mode: str = "constant",
     history: int | None = None,
+    gate: float | None = None,
 ) -> Estimator:
     """Registry factory of ``flexkalmannet``.
 
@@ -106,17 +135,39 @@ def flexkalmannet_factory(
             :func:`~fkn_bench.training.artifacts.artifact_family`).
         checkpoint: use this trained checkpoint instead of the committed parameters.
         parameters: use this learned-parameter JSON (e.g. written by ``fkn-bench train``).
-        mode: ``constant`` (paper) or ``time_varying`` (needs ``checkpoint``).
+        mode: ``constant`` (paper) or ``time_varying`` (needs ``checkpoint``; the committed
+            time-varying network is ``flexkalmannet-tv``).
         history: time-varying mode: measurements averaged per step.
+        gate: chi-square innovation gate level (None: none).
     """
     if checkpoint is not None and parameters is not None:
         raise ValueError("give either checkpoint=PATH or parameters=PATH, not both")
     if mode == "time_varying":
         if checkpoint is None:
-            raise ValueError("flexkalmannet mode 'time_varying' needs checkpoint=PATH (the network weights)")
-        return AdaptiveFlexKalmanNetEstimator(checkpoint=checkpoint, history=history)
+            raise ValueError("flexkalmannet mode 'time_varying' needs checkpoint=PATH (the network weights); "
+                             "the committed time-varying FlexKalmanNet is the estimator flexkalmannet-tv")
+        return AdaptiveFlexKalmanNetEstimator(checkpoint=checkpoint, history=history, gate=gate)
     if mode != "constant":
         raise ValueError(f"mode must be 'constant' or 'time_varying' (got {mode!r})")
     if checkpoint is not None:
-        return FlexKalmanNetEstimator.from_checkpoint(checkpoint)
-    return artifact_factory("flexkalmannet", FlexKalmanNetEstimator)(scenario, parameters=parameters)
+        return FlexKalmanNetEstimator.from_checkpoint(checkpoint, gate=gate)
+    return artifact_factory("flexkalmannet", FlexKalmanNetEstimator)(scenario, parameters=parameters, gate=gate)
+
+
+def flexkalmannet_tv_factory(
+    scenario: Scenario | None = None,
+    *,
+    checkpoint: str | Path | None = None,
+    parameters: str | Path | None = None,
+    history: int | None = None,
+    gate: float | None = None,
+) -> AdaptiveFlexKalmanNetEstimator:
+    """Registry factory of ``flexkalmannet-tv``: FlexKalmanNet trained and run in the time-varying
+    mode, from ``checkpoint=PATH``, the ``parameters=PATH`` of a ``fkn-bench train --estimator
+    flexkalmannet-tv`` run, or by default the committed weights of the scenario's model family
+    (``baselines/params/flexkalmannet-tv-<family>.json`` and ``.weights.pt``)."""
+    weights = trained_network("flexkalmannet-tv", "time-varying FlexKalmanNet", scenario, checkpoint, parameters)
+    return AdaptiveFlexKalmanNetEstimator(
+        checkpoint=weights, history=history, gate=gate, name="flexkalmannet-tv",
+        description="FlexKalmanNet, time-varying: per-step noise from the network's outputs on recent measurements",
+    )

@@ -198,3 +198,17 @@ class FlexKalmanNet(NoiseModel):
 
     def deployed_raw(self) -> Tensor:
         return self._outputs(self.reference).mean(0)
+
+    @property
+    def deploys_network(self) -> bool:
+        """The time-varying mode deploys the network (per-step parameters), the constant mode its
+        mean output."""
+        return self.mode == "time_varying"
+
+    def sequence_raw(self, measurements: Tensor, mask: Tensor) -> Tensor:
+        """Per-step parameters in the time-varying mode (missing or non-finite measurements carry
+        no weight), else the constant deployed ones."""
+        if self.mode != "time_varying":
+            return self.deployed_raw()
+        usable = mask & torch.isfinite(measurements).all(-1)
+        return self.time_varying_raw(torch.where(usable[..., None], measurements, torch.zeros_like(measurements)), usable)

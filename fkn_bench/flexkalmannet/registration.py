@@ -1,10 +1,10 @@
-"""Registers ``flexkalmannet`` with the estimator registry (imported lazily by the registry)."""
+"""Registers ``flexkalmannet``, ``flexkalmannet-rigid-body`` and ``flexkalmannet-tv`` with the estimator registry (imported lazily by the registry)."""
 
 from __future__ import annotations
 
 from fkn_bench.estimators.registry import register_estimator
-from fkn_bench.flexkalmannet.checkpoint import RIGID_BODY_TRAINABLE, TRAINABLE
-from fkn_bench.flexkalmannet.estimator import FlexKalmanNetEstimator, flexkalmannet_factory
+from fkn_bench.flexkalmannet.checkpoint import RIGID_BODY_TRAINABLE, TIME_VARYING_TRAINABLE, TRAINABLE
+from fkn_bench.flexkalmannet.estimator import FlexKalmanNetEstimator, flexkalmannet_factory, flexkalmannet_tv_factory
 from fkn_bench.training.artifacts import artifact_factory
 
 __all__: list[str] = []
@@ -20,4 +20,10 @@ register_estimator(
     artifact_factory("flexkalmannet-rigid-body", FlexKalmanNetEstimator),
     description="FlexKalmanNet through the torque-free rigid-body model with estimated inertia ratios",
     trainable=RIGID_BODY_TRAINABLE,
+)
+register_estimator(
+    "flexkalmannet-tv",
+    flexkalmannet_tv_factory,
+    description="FlexKalmanNet, time-varying: per-step noise from the network's outputs on recent measurements",
+    trainable=TIME_VARYING_TRAINABLE,
 )

@@ -38,7 +38,7 @@ from fkn_bench.kalmannet.recursive import RecursiveKalmanNet, RecursiveKalmanNet
 from fkn_bench.linalg import symmetrize
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
-from fkn_bench.training.artifacts import artifact_label, committed_artifact, resolve_artifact_label, weights_of_artifact
+from fkn_bench.training.artifacts import artifact_label, resolve_artifact_label, trained_network
 from fkn_bench.types import ArrayB, ArrayF
 
 __all__ = ["KalmanNetEstimator", "kalmannet_factory", "RecursiveKalmanNetEstimator", "recursive_kalmannet_factory"]
@@ -134,20 +134,6 @@ class KalmanNetEstimator(RecursiveEstimator):
         return {"checkpoint": self.checkpoint, "name": self.name, "description": self.description}
 
 
-def _trained_network(
-    estimator: str, label: str, scenario: Scenario | None, checkpoint: str | Path | None, parameters: str | Path | None
-) -> Path:
-    """The weights a factory of ``estimator`` loads: ``checkpoint=PATH``, the ``parameters=PATH``
-    of a training run, or the committed artefact of the scenario's model family
-    (:func:`~fkn_bench.training.artifacts.artifact_family`: a recording or a user scenario gets
-    the ``default`` family's when one is committed)."""
-    if checkpoint is not None and parameters is not None:
-        raise ValueError("give either checkpoint= or parameters=, not both")
-    if checkpoint is not None:
-        return Path(checkpoint)
-    return weights_of_artifact(parameters or committed_artifact(estimator, scenario, label), estimator)
-
-
 def kalmannet_factory(
     scenario: Scenario | None = None,
     *,
@@ -158,7 +144,7 @@ def kalmannet_factory(
     ``parameters=PATH`` (``parameters.json``) of a ``fkn-bench train --estimator kalmannet`` run,
     or by default the committed weights of the scenario's model family
     (``baselines/params/kalmannet-<family>.json`` and ``.weights.pt``)."""
-    return KalmanNetEstimator(checkpoint=_trained_network("kalmannet", "KalmanNet", scenario, checkpoint, parameters))
+    return KalmanNetEstimator(checkpoint=trained_network("kalmannet", "KalmanNet", scenario, checkpoint, parameters))
 
 
 class RecursiveKalmanNetEstimator(KalmanNetEstimator):
@@ -224,5 +210,5 @@ def recursive_kalmannet_factory(
 ) -> RecursiveKalmanNetEstimator:
     """Registry factory of ``recursive-kalmannet``, as :func:`kalmannet_factory`."""
     return RecursiveKalmanNetEstimator(
-        checkpoint=_trained_network("recursive-kalmannet", "Recursive KalmanNet", scenario, checkpoint, parameters)
+        checkpoint=trained_network("recursive-kalmannet", "Recursive KalmanNet", scenario, checkpoint, parameters)
     )

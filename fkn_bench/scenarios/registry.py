@@ -243,13 +243,12 @@ DS1_NOISE_STEP = _DS1.replace(
     kick_length=20,
     kick_sigma=0.01,
     kick_decay=5.0,
+    model_family="ds1-noise-step",
     tags=(),
 )
-"""Issue 21's scenario where noise adaptation should pay. Defined, not yet registered: a
-registered scenario needs committed gate results and leaderboards (tests/gates,
-tests/cli/test_leaderboard.py), which its registration must come with
-(``register_scenario(DS1_NOISE_STEP)`` before :data:`BUILTIN_SCENARIOS`); until then
-``get_scenario(DS1_NOISE_STEP)`` and ``generate_episodes(DS1_NOISE_STEP, ...)`` use it."""
+"""Issue 21's scenario where noise adaptation should pay: its own model family, so that the
+learned and tuned estimators run there with parameters trained on its training split."""
+register_scenario(DS1_NOISE_STEP)
 
 BUILTIN_SCENARIOS: frozenset[str] = frozenset(_REGISTRY)
 """Names of the built-in scenarios, which a scenario file redefines only with ``override = true``."""

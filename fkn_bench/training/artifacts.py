@@ -49,6 +49,7 @@ __all__ = [
     "artifact_factory",
     "artifact_family",
     "committed_artifact",
+    "trained_network",
     "DEFAULT_FAMILY",
 ]
 
@@ -232,12 +233,14 @@ class TrainedKalmanEstimator(KalmanEstimator):
         self.metadata = dict(metadata or {})
 
     @classmethod
-    def from_artifact(cls, path: str | Path, *, name: str | None = None) -> TrainedKalmanEstimator:
+    def from_artifact(cls, path: str | Path, *, name: str | None = None, gate: float | None = None) -> TrainedKalmanEstimator:
         """The estimator of an artefact (``name``: the estimator it must hold, e.g. the registry
-        name being built). Complete or rejected: an artefact of another estimator, one whose
-        ``estimator_config`` lacks the variant or any of ``Q``, ``R``, ``P0`` (as ``*_std`` or
-        ``*_cov``), or one whose values do not build a filter (e.g. a standard deviation out of
-        range) raises :class:`ArtifactError` naming the file and the key."""
+        name being built; ``gate``: a chi-square innovation gate level over the artefact's, see
+        :class:`~fkn_bench.estimators.KalmanEstimator`). Complete or rejected: an artefact of
+        another estimator, one whose ``estimator_config`` lacks the variant or any of ``Q``,
+        ``R``, ``P0`` (as ``*_std`` or ``*_cov``), or one whose values do not build a filter (e.g.
+        a standard deviation out of range) raises :class:`ArtifactError` naming the file and the
+        key."""
         document = read_artifact(path)
         if name is not None and document["estimator"] != name:
             raise ArtifactError(f"{path} holds {document['estimator']!r} parameters, not {name}'s")
@@ -253,8 +256,9 @@ class TrainedKalmanEstimator(KalmanEstimator):
                                 "completed with defaults")
         metadata = {k: document.get(k) for k in ("family", "scenario", "training", "provenance")}
         metadata["artifact"] = artifact_label(path)
+        gated = {} if gate is None else {"gate": gate}
         try:
-            return cls(metadata=metadata, **{**config, "name": name or document["estimator"]})
+            return cls(metadata=metadata, **{**config, **gated, "name": name or document["estimator"]})
         except (TypeError, ValueError) as exc:
             raise ArtifactError(f"{path}: 'estimator_config' does not build a filter: {exc}") from None
 
@@ -284,30 +288,51 @@ def artifact_family(name: str, scenario: Scenario | None) -> str:
     return scenario.model_family if scenario is not None else "ds1"
 
 
-def committed_artifact(name: str, scenario: Scenario | None, label: str | None = None) -> Path:
+def committed_artifact(name: str, scenario: Scenario | None, label: str | None = None, *, swept: bool = False) -> Path:
     """The committed artefact of estimator ``name`` for ``scenario`` (:func:`artifact_family`);
     raises :class:`ArtifactError` with the command that trains and installs it (``label``: how the
-    message names the estimator, default ``name``)."""
+    message names the estimator, default ``name``; ``swept``: settings found by ``fkn-bench
+    sweep --space <name>``, not trained)."""
     from fkn_bench.scenarios import scenario_names
 
     family = artifact_family(name, scenario)
     path = artifact_path(name, family)
     if not path.is_file():
-        data = f"--scenario {family}" if family in scenario_names() else f"--scenario S1 --scenario S2 ... --family {family}"
+        named = family in scenario_names()
+        if swept:
+            data = f"--scenario {family}" if named else "--scenario S"
+            raise ArtifactError(f"no tuned {label or name} settings for model family '{family}' ({path}): sweep them "
+                                f"with `fkn-bench sweep --space {name} {data} --write-artifact`")
+        data = f"--scenario {family}" if named else f"--scenario S1 --scenario S2 ... --family {family}"
         raise ArtifactError(f"no trained {label or name} for model family '{family}' ({path}): train one with "
                             f"`fkn-bench train --estimator {name} {data} --write-artifact`")
     return path
 
 
+def trained_network(
+    estimator: str, label: str, scenario: Scenario | None, checkpoint: str | Path | None, parameters: str | Path | None
+) -> Path:
+    """The network weights a registry factory of ``estimator`` loads (``label``: how messages name
+    it): ``checkpoint=PATH``, the ``parameters=PATH`` of a training run, or the committed artefact
+    of the scenario's model family (:func:`artifact_family`: a recording or a user scenario gets
+    the ``default`` family's when one is committed)."""
+    if checkpoint is not None and parameters is not None:
+        raise ValueError("give either checkpoint= or parameters=, not both")
+    if checkpoint is not None:
+        return Path(checkpoint)
+    return weights_of_artifact(parameters or committed_artifact(estimator, scenario, label), estimator)
+
+
 def artifact_factory(name: str, cls: type[TrainedKalmanEstimator] = TrainedKalmanEstimator) -> Callable[..., Any]:
     """Registry factory of the trained estimator ``name``: the committed artefact of the
     scenario's model family (see :func:`artifact_family`), or ``parameters=PATH`` (a
-    ``parameters.json`` written by ``fkn-bench train``)."""
+    ``parameters.json`` written by ``fkn-bench train``); ``gate``: a chi-square innovation gate
+    level (:class:`~fkn_bench.estimators.KalmanEstimator`)."""
 
-    def factory(scenario: Scenario | None = None, *, parameters: str | Path | None = None) -> TrainedKalmanEstimator:
-        if parameters is not None:
-            return cls.from_artifact(parameters, name=name)
-        return cls.from_artifact(committed_artifact(name, scenario), name=name)
+    def factory(scenario: Scenario | None = None, *, parameters: str | Path | None = None,
+                gate: float | None = None) -> TrainedKalmanEstimator:
+        path = parameters if parameters is not None else committed_artifact(name, scenario)
+        return cls.from_artifact(path, name=name, gate=gate)
 
     factory.__name__ = f"{name.replace('-', '_')}_factory"
     return factory

@@ -21,7 +21,10 @@ per-epoch history, an ``on_epoch`` callback, and with ``out=DIR`` these files:
 A trainable whose module is a :class:`~fkn_bench.training.trainer.SequenceModel` (KalmanNet: a
 network inside the filter loop, no noise parameters) gets the same files but ``parameters.png``;
 its ``parameters.json`` holds the module's description, its ``estimator_config`` names the
-checkpoint (the weights), and ``history.csv`` the gradient steps taken, clipped and skipped.
+checkpoint (the weights), and ``history.csv`` the gradient steps taken, clipped and skipped. A
+:class:`~fkn_bench.training.trainer.NoiseModel` that deploys its network (FlexKalmanNet's
+time-varying mode, ``flexkalmannet-tv``) also names the checkpoint, and is scored on the test
+split with its per-step parameters.
 """
 
 from __future__ import annotations
@@ -166,7 +169,7 @@ def split_metrics(model: NoiseModel | SequenceModel, settings: TrainConfig, scen
         if isinstance(model, SequenceModel):
             means = model.run_means(z, mask, dt=scenario.dt)
         else:
-            noise = model.parameter_set.to_noise(model.deployed_raw())
+            noise = model.parameter_set.to_noise(model.sequence_raw(z, mask))
             means = settings.build_filter(scenario).run(noise, z, mask, dt=scenario.dt, store_covariances=False,
                                                         store_innovations=False).means
         truth = torch.as_tensor(episode.truth)
@@ -263,8 +266,8 @@ def fit(
     outcome = TrainingOutcome(
         estimator, model, config, scenario, history, trainer.best_epoch, trainer.best_loss, directory, {},
         time.perf_counter() - began,
-        {"checkpoint": None if checkpoint is None else str(checkpoint)} if isinstance(model, SequenceModel)
-        else deployed_estimator_config(model, settings), tuple(scenarios), family,
+        {"checkpoint": None if checkpoint is None else str(checkpoint)}
+        if isinstance(model, SequenceModel) or model.deploys_network else deployed_estimator_config(model, settings), tuple(scenarios), family,
     )
     if directory is None:
         return outcome

@@ -67,6 +67,18 @@ class NoiseModel(nn.Module, ABC):
     def deployed_raw(self) -> Tensor:
         """The constant unconstrained parameters ``(size,)`` used after training."""
 
+    @property
+    def deploys_network(self) -> bool:
+        """True when the trained module itself is deployed (parameters computed along each
+        sequence, e.g. FlexKalmanNet's time-varying mode): its artefact then names the weights
+        rather than constant parameters. False by default."""
+        return False
+
+    def sequence_raw(self, measurements: Tensor, mask: Tensor) -> Tensor:
+        """The unconstrained parameters the deployed estimator uses on whole sequences
+        ``(B, T, 7)``: :meth:`deployed_raw` unless :attr:`deploys_network`."""
+        return self.deployed_raw()
+
 
 class SequenceModel(nn.Module, ABC):
     """A trained module that brings its own differentiable recursion over a batch of sequences

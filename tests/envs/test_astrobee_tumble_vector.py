@@ -10,7 +10,6 @@ from gymnasium.vector import AutoresetMode
 import fkn_bench  # noqa: F401  (registers the environment)
 from fkn_bench.envs.astrobee_tumble_vector import AstrobeeTumbleVectorEnv
 from fkn_bench.geometry import quaternion as quat
-from fkn_bench.scenarios import DS1_NOISE_STEP
 
 ENV_ID = "AstrobeeTumble-v0"
 
@@ -78,7 +77,7 @@ def test_make_vec_gives_the_vector_class() -> None:
 @pytest.mark.parametrize(
     ("scenario", "overrides"),
     [("ds1-flips", {"dropout": 0.3}), ("tumble-fast", {"measurement_every": 3}),
-     (DS1_NOISE_STEP, {"kick_rate": 0.05})],  # (not registered yet: issue 21)
+     ("ds1-noise-step", {"kick_rate": 0.05})],
     ids=["ds1-flips", "tumble-fast", "ds1-noise-step"],
 )
 def test_vector_equals_single_envs_through_autoreset(scenario: str, overrides: dict) -> None:

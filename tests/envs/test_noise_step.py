@@ -9,7 +9,7 @@ import pytest
 from fkn_bench.envs.dynamics import ForcedRotation, PerturbedRotation
 from fkn_bench.envs.episodes import generate_episodes, rate_offsets
 from fkn_bench.geometry import quaternion as quat
-from fkn_bench.scenarios import DS1_NOISE_STEP, ConfigError, get_scenario, list_scenarios
+from fkn_bench.scenarios import DS1_NOISE_STEP, ConfigError, get_scenario
 
 
 def test_noise_factor_is_five_in_the_middle_third_of_each_split() -> None:
@@ -66,4 +66,4 @@ def test_torque_bursts_need_forced_dynamics_and_leave_other_hashes_alone() -> No
     with pytest.raises(ConfigError, match="dynamics"):
         get_scenario("tumble-fast").replace(kick_rate=0.01, kick_length=5, kick_sigma=0.01)
     assert get_scenario("ds1").config_hash() == "54c803d2a4670c32"  # as before the new fields
-    assert DS1_NOISE_STEP.config_hash() not in {s.config_hash() for s in list_scenarios()}
+    assert get_scenario("ds1-noise-step") == DS1_NOISE_STEP and DS1_NOISE_STEP.model_family == "ds1-noise-step"

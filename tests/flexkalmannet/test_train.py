@@ -134,3 +134,38 @@ def test_cli_trains_and_reports_json(tmp_path: Path, capsys: pytest.CaptureFixtu
     assert "not trainable" in capsys.readouterr().err
     assert main(["train", "--estimator", "flexkalmannet", "--set", "hiddn=3", "--no-progress", "--out", str(tmp_path / "x")]) == 2
     assert "hiddn" in capsys.readouterr().err
+
+
+def test_time_varying_training_deploys_the_network(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``flexkalmannet-tv``: its artefact names the weights (installed beside it with their
+    SHA-256), its test score is that of the per-step parameters, and the registered factory runs
+    the installed network as the checkpoint does."""
+    from fkn_bench.training import fit
+    from fkn_bench.training import artifacts
+
+    outcome = fit("flexkalmannet-tv", SHORT, {**TINY.to_dict(), "mode": "time_varying", "history": 4}, out=tmp_path / "run",
+                  progress=False, plots=False)
+    artifact = read_artifact(outcome.artifact)
+    assert artifact["estimator"] == "flexkalmannet-tv" and set(artifact["estimator_config"]) == {"checkpoint"}
+    assert outcome.config.mode == "time_varying" and outcome.config.history == 4
+    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path / "committed")
+    installed = artifacts.install_artifact(outcome.artifact, "flexkalmannet-tv", "ds1")
+    assert (installed.parent / "flexkalmannet-tv-ds1.weights.pt").is_file()
+    committed = make_estimator("flexkalmannet-tv", scenario=SHORT)
+    direct = AdaptiveFlexKalmanNetEstimator(checkpoint=outcome.checkpoint)
+    assert committed.name == "flexkalmannet-tv" and committed.model.history == 4
+    episodes = generate_episodes(SHORT, 1, split="test")
+    means = committed.estimate(episodes.measurements, episodes.valid, SHORT.dt).means
+    np.testing.assert_array_equal(means, direct.estimate(episodes.measurements, episodes.valid, SHORT.dt).means)
+    # the training run's test score is the per-step parameters' (the same filter run)
+    import torch
+
+    from fkn_bench.training.objectives import state_mse
+
+    cut = TINY.loss_cut
+    test = generate_episodes(SHORT, [SHORT.dataset_seed], split="test")
+    mse = float(state_mse(torch.as_tensor(direct.estimate(test.measurements, test.valid, SHORT.dt).means),
+                          torch.as_tensor(test.truth), cut))
+    # (to float32 rounding: the network runs in float32 on another thread count in training)
+    assert artifact["training"]["test_rmse"] == pytest.approx(mse ** 0.5, rel=1e-4)
+    assert committed.to_config()["checkpoint"] == "fkn_bench.baselines/params/flexkalmannet-tv-ds1.weights.pt"

@@ -18,7 +18,9 @@ KalmanNet also on the two scenarios that exercise its recursion's own handling o
 KalmanNet shares. The EKFs with committed parameter files (FlexKalmanNet's, the tuned ones) are
 gated once per file (ds1, ds2, tumble-fast), the oracle EKF on four scenarios of distinct noise:
 the EKF itself is gated on every scenario by ``manual-ekf``, and the adaptive filters, UKF and
-MEKF by their own entries. (The gate's cost is the batched filters'
+MEKF by their own entries. The files of the ds1-noise-step family (the tuned adaptive settings,
+FlexKalmanNet's constant and time-varying networks, the tuned EKFs, KalmanNet) are gated there
+once each, and every ``-gated`` variant once on ds1-flips, where its gate acts. (The gate's cost is the batched filters'
 per-step overhead: about 1.5 s per pair on the rigid-body model, nearly the same for one seed or
 two; gating all 70 of their pairs took 175 s of the test command's 300.)
 """
@@ -61,7 +63,14 @@ GATED_ON = {
     **{name: ("ds1", "ds2", "tumble-fast") for name in ("flexkalmannet", "nll-tuned-ekf", "direct-tuned-ekf")},
     # the EKF with each scenario's true noise: the noise differs between ds1 and its noisier variant
     "oracle-ekf": ("ds1", "ds2", "ds1-noise5x", "tumble-fast"),
+    # the time-varying FlexKalmanNet: its one committed network, on its family's scenario
+    "flexkalmannet-tv": ("ds1-noise-step",),
+    # the -gated variants: their base's code with the gate, where the gate acts (the gate's code is
+    # the Kalman filters' or the adaptive filters' own: each variant once)
+    **{f"{name}-gated": ("ds1-flips",) for name in ("manual-ekf", "flexkalmannet", "sage-husa", "akhlaghi", "vbakf")},
 }
+for _name in ("flexkalmannet", "nll-tuned-ekf", "direct-tuned-ekf", "sage-husa", "akhlaghi", "vbakf", "kalmannet"):
+    GATED_ON[_name] += ("ds1-noise-step",)  # the committed files of the ds1-noise-step family, once each
 """The estimators on the rigid-body model, and Recursive KalmanNet, are gated on part of the named
 scenarios (module docstring)."""
 

@@ -28,3 +28,9 @@ def test_a_sweep_of_the_papers_settings_installs_the_tuned_settings(tmp_path: Pa
     assert document["training"]["best_value"] == 0.0123 and document["scenario"]["name"] == "ds2"
     built = make_estimator("sage-husa", scenario=get_scenario("ds2")).to_config()
     assert (built["forgetting"], built["warmup"]) == (0.97, 20)
+
+
+def test_a_family_without_tuned_settings_names_the_sweep_that_makes_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path)  # no committed settings at all
+    with pytest.raises(artifacts.ArtifactError, match="fkn-bench sweep --space akhlaghi --scenario ds2 --write-artifact"):
+        make_estimator("akhlaghi", scenario=get_scenario("ds2"))
