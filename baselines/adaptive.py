@@ -35,6 +35,7 @@ two to 1e-12).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
@@ -45,7 +46,7 @@ import numpy as np
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
-from fkn_bench.filters.base import FilterState, KalmanFilter, gate_threshold
+from fkn_bench.filters.base import GATE_REINITIALISE_AFTER, FilterState, KalmanFilter, gate_threshold
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
 from fkn_bench.linalg import symmetrize
@@ -217,6 +218,8 @@ class AdaptiveState:
         initialised: ``(B,)`` True once a sequence initialised from a measurement.
         since: ``(B,)`` predictions since the last update or initialisation.
         noise: the rule's adapted quantities (:data:`Noise`).
+        rejections: ``(B,)`` consecutive usable measurements not used (gated out or a failed
+            update) while a gate is set (None: none yet); see :meth:`AdaptiveKalmanFilter.set_gate`.
     """
 
     x: ArrayF
@@ -224,6 +227,7 @@ class AdaptiveState:
     initialised: ArrayB
     since: ArrayF
     noise: Mapping[str, ArrayF]
+    rejections: ArrayF | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -330,7 +334,7 @@ class AdaptiveKalmanFilter:
             since = since + 1.0
         prior = x
         if not usable.any():
-            return AdaptiveState(x, P, state.initialised, since, noise), StepOutput(prior, None, None, usable)
+            return AdaptiveState(x, P, state.initialised, since, noise, state.rejections), StepOutput(prior, None, None, usable)
         batch, m = x.shape[0], model.measurement_dim
         nu = S = None
         update_rows = usable & state.initialised
@@ -358,12 +362,20 @@ class AdaptiveKalmanFilter:
                 x[rows], P[rows], nu[rows], S[rows] = result.x, result.P, nu_rows, result.S
                 noise = _put(noise, rows, noise_rows)
                 since = np.where(update_rows, 0.0, since)
+        rejections = state.rejections
+        if self.gate is not None:  # a lost track (set_gate) re-initialises like a first measurement
+            missed = usable & state.initialised & ~update_rows
+            rejections = np.where(missed, (0 if rejections is None else rejections) + 1,
+                                  np.where(update_rows, 0, 0 if rejections is None else rejections))
+            lost = rejections >= GATE_REINITIALISE_AFTER
+            if lost.any():
+                init_rows, rejections = init_rows | lost, np.where(lost, 0, rejections)
         if init_rows.any():
             x, P = x.copy(), P.copy()
             x[init_rows] = model.initial_state(z[init_rows])
             P[init_rows] = self.P0
             since = np.where(init_rows, 0.0, since)
-        new = AdaptiveState(x, P, state.initialised | usable, since, noise)
+        new = AdaptiveState(x, P, state.initialised | usable, since, noise, rejections)
         return new, StepOutput(prior, nu, S, update_rows)
 
     gate: float | None = None
@@ -374,7 +386,10 @@ class AdaptiveKalmanFilter:
         """Skip an update whose NIS ``nu^T S^-1 nu``, with ``S = H P- H^T + R`` from the rule's
         current ``R``, exceeds the chi-square ``level`` quantile (``m`` degrees of freedom), before
         the rule sees it: a gross outlier neither moves the state nor feeds the noise estimates
-        (the gate of :meth:`fkn_bench.filters.KalmanFilter.set_gate`)."""
+        (the gate of :meth:`fkn_bench.filters.KalmanFilter.set_gate`). The
+        :data:`~fkn_bench.filters.base.GATE_REINITIALISE_AFTER`-th usable measurement in a row
+        that is not used (gated out, or a failed update) re-initialises the row's state from it
+        (mean from the measurement, ``P0``; the adapted noise is kept): a lost track."""
         self.gate, self._gate_threshold = gate_threshold(level, self.model.measurement_dim)
 
     def _gated(self, update_rows: ArrayB, x: ArrayF, P: ArrayF, z: ArrayF, noise: Noise) -> ArrayB:
@@ -586,8 +601,10 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         return new
 
     def _online_initial(self, state: AdaptiveState, z: ArrayF) -> AdaptiveState:
-        # AdaptiveKalmanFilter.step initialises a row without a first update
-        return self.filter.step(state, z, _USABLE, 0.0, predict=False)[0]
+        # AdaptiveKalmanFilter.step initialises a row that is not initialised, without an update
+        # (a lost track's re-initialisation too: the row marked uninitialised first)
+        fresh = dataclasses.replace(state, initialised=np.zeros(1, dtype=bool), rejections=None)
+        return self.filter.step(fresh, z, _USABLE, 0.0, predict=False)[0]
 
     def _online_report(self, state: AdaptiveState) -> tuple[ArrayF, ArrayF]:
         return state.x[0], state.P[0]

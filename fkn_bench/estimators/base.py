@@ -42,7 +42,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from fkn_bench.filters.base import check_dt
+from fkn_bench.filters.base import GATE_REINITIALISE_AFTER, check_dt
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 from fkn_bench.io import read_json, write_json_atomic
 from fkn_bench.types import ArrayB, ArrayF
@@ -419,6 +419,7 @@ class RecursiveEstimator(Estimator):
         self._dt = step
         self._online = None
         self.restarts = 0
+        self._gate_rejections = 0
 
     def step(self, observation: Any) -> Estimate:
         if self._dt is None:
@@ -449,7 +450,10 @@ class RecursiveEstimator(Estimator):
         if z is not None:
             if initialised:
                 updated_state = self._online_update(state, z)
-                state, updated = updated_state, updated_state is not state  # (the same object: gated out)
+                updated = updated_state is not state  # (the same object: gated out, or a failed update)
+                state = self._online_gate_bookkeeping(state, z) if not updated else updated_state
+                if updated:
+                    self._gate_rejections = 0
             else:
                 state, initialised = self._online_initial(state, z), True
         mean, covariance = self._online_report(state)
@@ -466,6 +470,20 @@ class RecursiveEstimator(Estimator):
         w, x, y, z = mean[0:4].tolist()
         mean[0:4] /= math.sqrt(w * w + x * x + y * y + z * z)
         return Estimate(time=now, mean=mean, native_covariance=covariance, initialised=initialised, updated=updated)
+
+    _gate_rejections: int = 0
+
+    def _online_gate_bookkeeping(self, state: Any, z: ArrayF) -> Any:
+        """After a usable measurement that was not used: with a chi-square gate on the filter,
+        the :data:`~fkn_bench.filters.base.GATE_REINITIALISE_AFTER`-th in a row re-initialises
+        the state from it (a lost track, as the batch run does); else ``state`` as it is."""
+        if getattr(getattr(self, "filter", None), "gate", None) is None:
+            return state
+        self._gate_rejections += 1
+        if self._gate_rejections < GATE_REINITIALISE_AFTER:
+            return state
+        self._gate_rejections = 0
+        return self._online_initial(state, z)
 
     def _online_sanitize(self, z: ArrayF) -> ArrayF | None:
         """The measurement ``(1, 7)`` cleaned by the model's rule, or None when unusable."""

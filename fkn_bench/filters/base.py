@@ -41,7 +41,7 @@ from fkn_bench.filters.models import StateSpaceModel
 from fkn_bench.filters.parameters import NoiseLayout, NoiseParameters
 from fkn_bench.linalg import namespace, symmetrize
 
-__all__ = ["KalmanFilter", "FilterResult", "FilterState", "check_dt", "gate_threshold"]
+__all__ = ["KalmanFilter", "FilterResult", "FilterState", "check_dt", "gate_threshold", "GATE_REINITIALISE_AFTER"]
 
 
 class FilterState(NamedTuple):
@@ -85,6 +85,16 @@ class FilterResult:
 def _select(condition: Tensor, a: Tensor, b: Tensor) -> Tensor:
     """``where(condition, a, b)`` with ``condition (B,)`` broadcast over trailing axes."""
     return torch.where(condition.view(-1, *([1] * (a.dim() - 1))), a, b)
+
+
+GATE_REINITIALISE_AFTER = 3
+"""Consecutive usable measurements of a sequence failing the chi-square gate after which it has
+lost its track and re-initialises from the last of them, as from its first measurement (the
+step reports it initialised, not updated). Without it a gated filter that is off (initialised
+from an outlier, or after a manoeuvre its noise does not cover) rejects every later measurement
+and coasts for good: on ds1-flips (test split, 20 seeds) seed 8 initialised from an outlier and
+used 52 of its 159 measurements, 13-state RMSE 0.49 against 0.02 for the others. Three in a row
+from 1% independent outliers happen once in 10^6 measurements."""
 
 
 def gate_threshold(level: float | None, dof: int) -> tuple[float | None, float]:
@@ -182,7 +192,8 @@ class KalmanFilter(ABC):
         documented rule), so that a gross outlier does not pull the state (Bar-Shalom, Li &
         Kirubarajan, *Estimation with Applications to Tracking and Navigation*, 2001, sec. 2.5.3
         and 5.4: the validation gate). A consistent filter rejects a fraction ``1 - level`` of
-        good measurements."""
+        good measurements. :data:`GATE_REINITIALISE_AFTER` consecutive rejections re-initialise
+        the sequence from the last one (a lost track)."""
         self.gate, self._gate_threshold = gate_threshold(level, self.innovation_dim)
 
     def gate_accepts(self, innovation: Tensor, innovation_covariance: Tensor) -> Tensor:
@@ -300,6 +311,7 @@ class KalmanFilter(ABC):
         initialised_steps = torch.zeros(steps, batch, dtype=torch.bool)
         no_innovation = torch.zeros(batch, m, dtype=dtype)
         unit_covariance = torch.eye(m, dtype=dtype).expand(batch, m, m)
+        rejections = torch.zeros(batch, dtype=torch.long)  # consecutive gated-out measurements per row
         per_step = noise.steps() if time_varying else None
         for t in range(steps):
             step_noise = per_step[t] if per_step is not None else noise
@@ -320,13 +332,20 @@ class KalmanFilter(ABC):
                 do_update = any_usable[t]
                 every_row = all_usable[t]
             nu, S = no_innovation, unit_covariance
+            lost = None
             if do_update:
                 posterior, nu_t, S_t = self.update(state, z_all[:, t], step_noise.measurement)
                 if self.gate is not None:  # rows whose innovation fails the gate keep their prior
                     with torch.no_grad():
                         passed = self.gate_accepts(nu_t.detach(), S_t.detach())
-                    if not bool(passed[update_rows].all()):
+                    failed = update_rows & ~passed
+                    if bool(failed.any()):
                         update_rows, every_row = update_rows & passed, False
+                        rejections = torch.where(failed, rejections + 1, rejections)
+                        lost = rejections >= GATE_REINITIALISE_AFTER
+                        rejections = torch.where(lost, 0, rejections)
+                        lost = lost if bool(lost.any()) else None
+                    rejections = torch.where(update_rows, 0, rejections)
                 if every_row:
                     state, nu, S = posterior, nu_t, S_t
                 else:
@@ -338,6 +357,9 @@ class KalmanFilter(ABC):
                 # no symmetrisation here: predict and update return symmetrised covariances
             else:
                 update_rows = torch.zeros_like(update_rows)
+            if lost is not None:  # a lost track: re-initialised from this measurement
+                fresh = self.initial_state(z_all[:, t], step_noise.initial)
+                state = FilterState(_select(lost, fresh.mean, state.mean), _select(lost, fresh.covariance, state.covariance))
             means.put(t, state.mean)
             if covariances is not None:
                 covariances.put(t, state.covariance)

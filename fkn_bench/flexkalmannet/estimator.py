@@ -20,7 +20,7 @@ from typing import Any
 import torch
 
 from fkn_bench.estimators.base import Estimates, Estimator, RecursiveEstimator, check_batch_inputs, restart_diverged
-from fkn_bench.estimators.kalman import filter_result_to_estimates
+from fkn_bench.estimators.kalman import MAX_STD, MIN_STD, filter_result_to_estimates
 from fkn_bench.flexkalmannet.checkpoint import model_from_checkpoint
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
@@ -91,11 +91,25 @@ class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
             self.description = description
         self._recent: deque[torch.Tensor] = deque(maxlen=self.model.history)
 
+    def trusted(self, outputs: torch.Tensor) -> torch.Tensor:
+        """``(N,)`` True where a measurement's network outputs ``(N, size)`` give finite noise
+        whose variances lie in ``[MIN_STD^2, MAX_STD^2]`` (the range a constant-parameter
+        :class:`~fkn_bench.estimators.KalmanEstimator` accepts). The rule: a measurement whose
+        outputs fail (e.g. a usable but absurd pose far outside the training data, which the
+        float32 network maps to an overflowing standard deviation) does not count in any step's
+        mean, as if it were missing; the filter still uses it as a measurement."""
+        noise = self.model.parameter_set.to_noise(outputs)
+        variances = torch.cat([torch.diagonal(m, dim1=-2, dim2=-1).reshape(len(outputs), -1)
+                               for m in (noise.process, noise.measurement, noise.initial)], dim=-1)
+        in_range = (variances >= MIN_STD**2) & (variances <= MAX_STD**2)  # (NaN fails)
+        return torch.isfinite(outputs).all(-1) & in_range.all(-1)
+
     def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
         z, m, step = check_batch_inputs(measurements, mask, dt)
         with torch.no_grad(), torch_threads():
             zt, mt = torch.from_numpy(z), torch.from_numpy(m)
-            noise = self.model.parameter_set.to_noise(self.model.sequence_raw(zt, mt))
+            usable_z, usable = self.filter.model.sanitize(zt, mt)  # what the filter would use (unit quaternions)
+            noise = self.model.parameter_set.to_noise(self.model.sequence_raw(usable_z, usable, screen=self.trusted))
             result = self.filter.run(noise, zt, mt, dt=step)
         return restart_diverged(filter_result_to_estimates(result, self.filter), lambda zs, ms: self.estimate(zs, ms, step), z, m)
 
@@ -108,7 +122,9 @@ class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
         step's included."""
         with torch.no_grad(), torch_threads():
             if z is not None:
-                self._recent.append(self.model._outputs(torch.from_numpy(z))[0])
+                outputs = self.model._outputs(torch.from_numpy(z))
+                if bool(self.trusted(outputs)[0]):
+                    self._recent.append(outputs[0])
             raw = torch.stack(tuple(self._recent)).mean(0) if self._recent else self.model.deployed_raw()
             noise = self.model.parameter_set.to_noise(raw[None])
         self._online_noise = tuple(m[0].to(torch.float64).numpy() for m in (noise.process, noise.measurement, noise.initial))

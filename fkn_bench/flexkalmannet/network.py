@@ -27,6 +27,7 @@ small scale, so training starts from the manual filter.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Literal
 
 import torch
@@ -36,7 +37,7 @@ from fkn_bench.filters import ParameterSet
 from fkn_bench.training.data import Sequences
 from fkn_bench.training.trainer import NoiseModel
 
-__all__ = ["ACTIVATIONS", "FlexKalmanNetwork", "FlexKalmanNet", "Mode"]
+__all__ = ["ACTIVATIONS", "FlexKalmanNetwork", "FlexKalmanNet", "Mode", "Screen"]
 
 ACTIVATIONS: dict[str, type[nn.Module]] = {
     "leaky_relu": nn.LeakyReLU,
@@ -47,6 +48,9 @@ ACTIVATIONS: dict[str, type[nn.Module]] = {
 }
 
 Mode = Literal["constant", "time_varying"]
+
+Screen = Callable[[Tensor], Tensor]
+"""``outputs (N, size) -> (N,)`` bool: which measurements' network outputs may count."""
 
 _OUTPUT_WEIGHT_SCALE = 1e-3
 
@@ -172,14 +176,21 @@ class FlexKalmanNet(NoiseModel):
             raise ValueError("a training window has no valid measurement")
         return (outputs * weights[..., None]).sum(1) / count
 
-    def time_varying_raw(self, measurements: Tensor, mask: Tensor) -> Tensor:
+    def time_varying_raw(self, measurements: Tensor, mask: Tensor, *, screen: Screen | None = None) -> Tensor:
         """Per-step parameters ``(B, T, size)``: the mean over the last ``history`` valid
         measurements up to each step (the deployed parameters before the first one).
 
         The network runs on the valid measurements only (one in ten on ds1): the other steps'
         outputs carry zero weight, and evaluating them made a time-varying epoch ~40x a
-        constant one."""
+        constant one. ``screen`` (deployment): ``outputs (N, size) -> (N,)`` True where a
+        measurement's output may count; the others are left out as if missing."""
         valid = self._outputs(measurements[mask])  # (N, size), row-major order of the mask
+        if screen is not None:
+            trusted = screen(valid)
+            if not bool(trusted.all()):
+                kept = mask.clone()
+                kept[mask] = trusted
+                mask, valid = kept, valid[trusted]
         outputs = valid.new_zeros(mask.shape + valid.shape[-1:])
         outputs = outputs.masked_scatter(mask[..., None].expand_as(outputs), valid)
         weights = mask.to(outputs.dtype)
@@ -205,10 +216,11 @@ class FlexKalmanNet(NoiseModel):
         mean output."""
         return self.mode == "time_varying"
 
-    def sequence_raw(self, measurements: Tensor, mask: Tensor) -> Tensor:
+    def sequence_raw(self, measurements: Tensor, mask: Tensor, *, screen: Screen | None = None) -> Tensor:
         """Per-step parameters in the time-varying mode (missing or non-finite measurements carry
-        no weight), else the constant deployed ones."""
+        no weight; ``screen`` as in :meth:`time_varying_raw`), else the constant deployed ones."""
         if self.mode != "time_varying":
             return self.deployed_raw()
         usable = mask & torch.isfinite(measurements).all(-1)
-        return self.time_varying_raw(torch.where(usable[..., None], measurements, torch.zeros_like(measurements)), usable)
+        z = torch.where(usable[..., None], measurements, torch.zeros_like(measurements))
+        return self.time_varying_raw(z, usable, screen=screen)
