@@ -62,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 CROSS_ESTIMATORS = ("flexkalmannet", "flexkalmannet-rigid-body", "nll-tuned-ekf", "direct-tuned-ekf")
-CROSS_FAMILIES = ("ds1", "ds2", "tumble", "default")
+CROSS_FAMILIES = ("ds1", "ds2", "tumble", "default", "ds1-noise-step")
 
 
 def _cross(args: argparse.Namespace) -> int:

@@ -32,7 +32,8 @@ import numpy as np
 
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["HostileInput", "hostile_measurements", "check_input_rules", "garbage_measurements", "check_survives_garbage"]
+__all__ = ["HostileInput", "hostile_measurements", "check_input_rules", "garbage_measurements", "check_survives_garbage",
+           "build_for_checks"]
 
 
 @dataclass(frozen=True)
@@ -170,3 +171,24 @@ def check_survives_garbage(estimator: object, measurements: ArrayF, mask: ArrayB
             bad = ~np.isfinite(array)
             assert not bad.any(), f"{name} has {int(bad.sum())} non-finite entries"
     return result
+
+
+def build_for_checks(name: str, scenario: object = None) -> object:
+    """Registered estimator ``name`` built for ``scenario`` (a
+    :class:`~fkn_bench.scenarios.Scenario`, default ds1) or, where it does not build there, for
+    the first named scenario it builds for (an estimator whose only trained parameters are another
+    family's, e.g. ``flexkalmannet-tv``'s of ds1-noise-step): the checks above hold for any input,
+    so the estimator's parameters may come from anywhere. Raises the first scenario's error when
+    it builds for none."""
+    from fkn_bench.estimators import make_estimator
+    from fkn_bench.scenarios import get_scenario, scenario_names
+
+    try:
+        return make_estimator(name, scenario=scenario if scenario is not None else get_scenario("ds1"))
+    except Exception as first:  # noqa: BLE001 - e.g. no trained parameters for ds1's family
+        for other in scenario_names():
+            try:
+                return make_estimator(name, scenario=get_scenario(other))
+            except Exception:  # noqa: BLE001
+                continue
+        raise first

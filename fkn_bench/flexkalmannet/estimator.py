@@ -77,8 +77,14 @@ class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
     def __init__(self, *, checkpoint: str | Path, history: int | None = None, gate: float | None = None,
                  name: str | None = None, description: str | None = None) -> None:
         self.checkpoint = artifact_label(resolve_artifact_label(checkpoint))
-        self.model, self.config, self.scenario, _ = model_from_checkpoint(resolve_artifact_label(checkpoint))
+        self.model, self.config, self.scenario, document = model_from_checkpoint(resolve_artifact_label(checkpoint))
+        # evaluated in float64 (float32 weights are exact in it): results then depend neither on
+        # the batch size nor on the CPU's float32 kernels, so online and batch agree to rounding
+        self.model.to(torch.float64)
         self.model.mode = "time_varying"
+        recorded = document.get("scenario")  # what the harness reports as the training set
+        names = [r.get("name") for r in (recorded if isinstance(recorded, list) else [recorded]) if isinstance(r, dict)]
+        self.metadata: dict[str, Any] = {"scenario": {"name": "+".join(str(n) for n in names)}} if names else {}
         if history is not None:
             if history < 1:
                 raise ValueError(f"history must be >= 1 (got {history})")

@@ -11,9 +11,15 @@ import pytest
 
 from fkn_bench.estimators import estimator_names, make_estimator
 from fkn_bench.envs import generate_episodes
-from fkn_bench.estimators.conformance import check_input_rules, check_survives_garbage, garbage_measurements, hostile_measurements
+from fkn_bench.estimators.conformance import (
+    build_for_checks,
+    check_input_rules,
+    check_survives_garbage,
+    garbage_measurements,
+    hostile_measurements,
+)
 from fkn_bench.estimators.base import Estimator
-from fkn_bench.scenarios import Scenario, get_scenario, scenario_names
+from fkn_bench.scenarios import Scenario, get_scenario
 
 
 @pytest.fixture(scope="module")
@@ -22,18 +28,12 @@ def hostile():  # noqa: ANN201
 
 
 def built(name: str, scenario: Scenario) -> Estimator:
-    """``name`` built for ``scenario``, or, where it does not build there (an estimator whose
-    only trained parameters are another family's, e.g. flexkalmannet-tv's of ds1-noise-step), for
-    the first named scenario it builds for; skips the test where it builds for none."""
+    """:func:`build_for_checks`, skipping the test where the estimator builds for no named
+    scenario (e.g. a third-party estimator without trained parameters)."""
     try:
-        return make_estimator(name, scenario=scenario)
-    except Exception as first:  # noqa: BLE001 - e.g. a third-party estimator without ds1 parameters
-        for other in scenario_names():
-            try:
-                return make_estimator(name, scenario=get_scenario(other))
-            except Exception:  # noqa: BLE001
-                continue
-        pytest.skip(f"{name} builds for no named scenario: {first}")
+        return build_for_checks(name, scenario)
+    except Exception as exc:  # noqa: BLE001
+        pytest.skip(f"{name} builds for no named scenario: {exc}")
 
 
 @pytest.mark.parametrize("name", estimator_names())

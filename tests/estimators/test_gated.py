@@ -28,6 +28,9 @@ def test_each_variant_is_its_base_with_the_gate(base: str, tmp_path) -> None:
         {k: v for k, v in plain_config.items() if k not in ("name", "description")}
     assert load_estimator(gated.save(tmp_path / "gated.json")).to_config() == config
     assert make_estimator(f"{base}-gated", scenario=FLIPS, gate=0.99).to_config()["gate"] == 0.99
+    with pytest.raises(ValueError, match=f"{base}-gated is for scenarios with gross outliers, and ds1 has none"):
+        make_estimator(f"{base}-gated", scenario=get_scenario("ds1"))
+    assert make_estimator(f"{base}-gated").name == f"{base}-gated"  # no scenario: the caller's choice
 
 
 def test_the_gate_rejects_the_outliers_of_ds1_flips() -> None:
