@@ -464,6 +464,7 @@ class RecursiveEstimator(Estimator):
             if z is not None:
                 state, initialised = self._online_initial(state, z), True
             self.restarts += 1
+            self._gate_rejections = 0
             mean, covariance = self._online_report(state)
         self._online = OnlineState(now, state, initialised)
         mean = mean.copy()

@@ -104,6 +104,8 @@ class AdaptiveFlexKalmanNetEstimator(RecursiveEstimator):
         outputs fail (e.g. a usable but absurd pose far outside the training data, which the
         float32 network maps to an overflowing standard deviation) does not count in any step's
         mean, as if it were missing; the filter still uses it as a measurement."""
+        if len(outputs) == 0:
+            return torch.zeros(0, dtype=torch.bool)
         noise = self.model.parameter_set.to_noise(outputs)
         variances = torch.cat([torch.diagonal(m, dim1=-2, dim2=-1).reshape(len(outputs), -1)
                                for m in (noise.process, noise.measurement, noise.initial)], dim=-1)
