@@ -152,7 +152,8 @@ def _deployed(model: NoiseModel | SequenceModel) -> dict[str, Any]:
     :class:`SequenceModel`'s own description."""
     if isinstance(model, SequenceModel):
         return model.describe()
-    return model.parameter_set.to_dict(model.deployed_raw().detach())
+    with torch.no_grad():
+        return model.parameter_set.to_dict(model.deployed_raw())
 
 
 def split_metrics(model: NoiseModel | SequenceModel, settings: TrainConfig, scenario: Scenario) -> dict[str, Any]:
