@@ -117,7 +117,11 @@ than the noisy third (53 measurements) follows the step."""
 
 
 def _time_varying_config(options: Mapping[str, Any]) -> FlexKalmanNetConfig:
-    return FlexKalmanNetConfig.from_options({"mode": "time_varying", "history": TIME_VARYING_HISTORY, **options})
+    config = FlexKalmanNetConfig.from_options({"mode": "time_varying", "history": TIME_VARYING_HISTORY, **options})
+    if config.mode != "time_varying":
+        raise ValueError(f"flexkalmannet-tv trains the time-varying mode (got mode={config.mode!r}); "
+                         "constant parameters are flexkalmannet's")
+    return config
 
 
 TIME_VARYING_TRAINABLE = Trainable(config=_time_varying_config, build=build_model)

@@ -169,3 +169,11 @@ def test_time_varying_training_deploys_the_network(tmp_path: Path, monkeypatch: 
     # (to float32 rounding: the network runs in float32 on another thread count in training)
     assert artifact["training"]["test_rmse"] == pytest.approx(mse ** 0.5, rel=1e-4)
     assert committed.to_config()["checkpoint"] == "fkn_bench.baselines/params/flexkalmannet-tv-ds1.weights.pt"
+
+
+def test_time_varying_estimator_refuses_the_constant_mode() -> None:
+    from fkn_bench.training.pipeline import trainable
+
+    with pytest.raises(ValueError, match="flexkalmannet-tv trains the time-varying mode"):
+        trainable("flexkalmannet-tv").config({"mode": "constant"})
+    assert trainable("flexkalmannet-tv").config({}).history == 5
