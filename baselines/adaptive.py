@@ -46,7 +46,7 @@ import numpy as np
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
-from fkn_bench.filters.base import GATE_REINITIALISE_AFTER, FilterState, KalmanFilter, gate_threshold
+from fkn_bench.filters.base import FilterState, KalmanFilter, count_rejections, gate_threshold
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
 from fkn_bench.linalg import symmetrize
@@ -364,12 +364,9 @@ class AdaptiveKalmanFilter:
                 since = np.where(update_rows, 0.0, since)
         rejections = state.rejections
         if self.gate is not None:  # a lost track (set_gate) re-initialises like a first measurement
-            missed = usable & state.initialised & ~update_rows
-            rejections = np.where(missed, (0 if rejections is None else rejections) + 1,
-                                  np.where(update_rows, 0, 0 if rejections is None else rejections))
-            lost = rejections >= GATE_REINITIALISE_AFTER
-            if lost.any():
-                init_rows, rejections = init_rows | lost, np.where(lost, 0, rejections)
+            counts = np.zeros(batch, dtype=np.int64) if rejections is None else rejections
+            rejections, lost = count_rejections(counts, usable & state.initialised, update_rows)
+            init_rows = init_rows | lost
         if init_rows.any():
             x, P = x.copy(), P.copy()
             x[init_rows] = model.initial_state(z[init_rows])
