@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -159,28 +160,63 @@ def _check_noise_shapes(noise: NoiseParameters, batch: int, steps: int, k: int, 
 
 
 class _StepOutputs:
-    """One per-step output series, returned time-major ``(T, ...)``.
+    """One per-step output series, returned time-major ``(T, ...)``, in the memory layout of the
+    steps' values.
 
     Without autograd the steps are written into one preallocated buffer: a list of per-step
     tensors kept alive would fragment the heap and make every step's temporaries fresh memory
     (page faults dominated large batches). With autograd the steps are collected and stacked
     once: writing slices of one buffer would make the backward pass copy the whole buffer's
-    gradient at every step (quadratic in T).
+    gradient at every step (quadratic in T). Either way a series of matrices is laid out as the
+    second step's value is (the structured EKF step returns batch-last views, ``(B, 13, 13)`` over
+    ``(13, 13, B)`` storage), so storing a step is a straight copy, not a transposing one
+    (which cost more than the step itself at B = 1024); the shape returned is the same.
     """
 
     def __init__(self, steps: int, shape: tuple[int, ...], dtype: torch.dtype, tracked: bool) -> None:
-        self._tracked = tracked
+        self._steps, self._shape, self._dtype, self._tracked = steps, shape, dtype, tracked
         self._items: list[Tensor] = []
-        self._buffer = None if tracked else torch.empty(steps, *shape, dtype=dtype)
+        self._buffer: Tensor | None = None
+
+    @staticmethod
+    def _order(value: Tensor) -> list[int]:
+        """``value``'s axes, outermost in memory first, for a per-step matrix (a covariance);
+        the axes in order for a vector (a mean or an innovation: small, and read downstream
+        along the state axis, which a batch-last layout would make a strided read)."""
+        if value.dim() < 3:
+            return list(range(value.dim()))
+        return sorted(range(value.dim()), key=lambda axis: -value.stride(axis))
+
+    @staticmethod
+    def _restore(order: Sequence[int]) -> list[int]:
+        """The permutation of a time-major series laid out ``(T, *order)`` back to ``(T, ...)``."""
+        return [0, *(1 + list(order).index(axis) for axis in range(len(order)))]
+
+    def _allocate(self, like: Tensor) -> None:
+        order = self._order(like)
+        storage = torch.empty(self._steps, *(self._shape[a] for a in order), dtype=self._dtype, device=like.device)
+        self._buffer = storage.permute(self._restore(order))
+        for t, item in enumerate(self._items):
+            self._buffer[t] = item
+        self._items = []
 
     def put(self, t: int, value: Tensor) -> None:
-        if self._buffer is None:
-            self._items.append(value)
+        # the layout is the second step's (the first is an initialisation's, laid out its own way)
+        if not self._tracked and self._buffer is None and t >= 1:
+            self._allocate(value)
+        if self._buffer is None:  # (a copy without autograd, as the buffer's would be)
+            self._items.append(value if self._tracked else value.clone())
         else:
             self._buffer[t] = value
 
     def result(self) -> Tensor:
-        return torch.stack(self._items) if self._buffer is None else self._buffer
+        if not self._tracked and self._buffer is None and self._items:
+            self._allocate(self._items[-1])
+        if self._buffer is not None:
+            return self._buffer
+        order = self._order(self._items[-1])
+        stacked = torch.stack([item.permute(order) for item in self._items])
+        return stacked.permute(self._restore(order))
 
 
 class KalmanFilter(ABC):

@@ -11,7 +11,9 @@ The step runs on torch tensors (batched, differentiable: :meth:`KalmanFilter.run
 arrays (the online ``step()`` of the estimators, batch 1, and the adaptive filters) through the
 same code (:func:`fkn_bench.linalg.namespace`). For :class:`PoseTwistModel` torch batches of at
 least :data:`STRUCTURED_MIN_BATCH` rows, :class:`ExtendedKalmanFilter` runs the same step written
-for the model's structure instead (:mod:`fkn_bench.filters.structured`: equal to rounding).
+for the model's structure instead (:mod:`fkn_bench.filters.structured`: equal to rounding); its
+prediction runs so at any batch size where its compiled CPU kernels do
+(:mod:`fkn_bench.filters.kernels`).
 
 Products such as ``F P F^T`` are symmetric only to rounding; ``predict`` and the update
 symmetrise the covariance they return (:func:`fkn_bench.linalg.symmetrize`, once each), so that
@@ -25,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from fkn_bench.filters import kernels
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
 from fkn_bench.filters.structured import pose_predict, pose_update
@@ -200,7 +203,9 @@ class ExtendedKalmanFilter(KalmanFilter):
     With :class:`PoseTwistModel` itself (not a subclass, whose transition may differ) and torch
     batches of at least :data:`STRUCTURED_MIN_BATCH` rows, ``predict`` and ``update`` run the
     structured step (:func:`~fkn_bench.filters.structured.pose_predict`,
-    :func:`~fkn_bench.filters.structured.pose_update`); otherwise the generic one.
+    :func:`~fkn_bench.filters.structured.pose_update`); otherwise the generic one, but for the
+    prediction of a CPU float batch of any size, which runs the structured step's compiled
+    kernels (:mod:`fkn_bench.filters.kernels`).
     """
 
     name = "ekf"
@@ -215,8 +220,18 @@ class ExtendedKalmanFilter(KalmanFilter):
         step, torch, at least :data:`STRUCTURED_MIN_BATCH` rows) rather than the generic one."""
         return self._structured and not isinstance(state.mean, np.ndarray) and state.mean.shape[0] >= STRUCTURED_MIN_BATCH
 
+    def _structured_predict(self, state: FilterState, process_noise: Array) -> bool:
+        """Whether this prediction runs :func:`~fkn_bench.filters.structured.pose_predict`: from
+        :data:`STRUCTURED_MIN_BATCH` rows, and at any batch where its compiled kernels run
+        (:func:`fkn_bench.filters.kernels.supports`: one call per step, which beats the generic
+        step's batched products at every batch size)."""
+        return self._structured_step(state) or (
+            self._structured and not isinstance(state.mean, np.ndarray)
+            and kernels.supports(state.mean, state.covariance, process_noise)
+        )
+
     def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
-        if self._structured_step(state):
+        if self._structured_predict(state, process_noise):
             return pose_predict(state, process_noise, dt)
         return ekf_predict(self.model, state, process_noise, dt)
 

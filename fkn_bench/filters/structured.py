@@ -47,6 +47,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from fkn_bench.filters import kernels
 from fkn_bench.filters.base import FilterState
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import constant
@@ -157,11 +158,19 @@ def pose_predict(state: FilterState, process_noise: Tensor, dt: float) -> Filter
     hand-written backward (:class:`_PosePredict`), which keeps the autograd graph at one node
     per step."""
     inputs = (state.mean.transpose(0, 1), batch_last(state.covariance), batch_last(process_noise))
-    if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
+    if torch.is_grad_enabled() and (inputs[0].requires_grad or inputs[1].requires_grad or inputs[2].requires_grad):
         mean, P_next = _PosePredict.apply(*inputs, float(dt))
     else:  # nothing to differentiate: no autograd.Function call (its overhead is a tenth of a step)
-        mean, P_next, _ = _predict_forward(*inputs, float(dt))
+        mean, P_next, _ = _forward(*inputs, float(dt))
     return FilterState(mean.transpose(0, 1), batch_first(P_next))
+
+
+def _forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor, Tensor]:
+    """:func:`_predict_forward` by the compiled kernel where it runs (:func:`kernels.supports`:
+    CPU, float32/float64), else by the torch operations."""
+    if kernels.supports(xb, Pb, Qb):
+        return kernels.predict(xb, Pb, Qb, dt)
+    return _predict_forward(xb, Pb, Qb, dt)
 
 
 def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor, Tensor]:
@@ -191,7 +200,8 @@ def _predict_forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Ten
     N = D  # D + (Delta P Delta^T)[q r, q r] / 2, in place (the q and r columns; D[:, u] and D[:, v] were read)
     N[:, 0:4].add_(corner, alpha=0.5)
     N[:, 4:7].add_(D[:, 10:13], alpha=0.5 * dt)
-    P_next = Pb + _symmetrized(Qb)
+    P_next = torch.empty(13, 13, batch, dtype=Pb.dtype, device=Pb.device)  # batch-last, whatever P's layout
+    torch.add(Pb, _symmetrized(Qb), out=P_next)
     P_next[0:7, 0:7] += N[:, 0:7] + N[:, 0:7].transpose(0, 1)
     P_next[0:7, 7:13] += N[:, 7:13]
     P_next[7:13, 0:7] += N[:, 7:13].transpose(0, 1)
@@ -211,7 +221,7 @@ class _PosePredict(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor]:  # type: ignore[override]
-        mean, P_next, Ghat = _predict_forward(xb, Pb, Qb, dt)
+        mean, P_next, Ghat = _forward(xb, Pb, Qb, dt)
         ctx.save_for_backward(xb, Pb, Ghat)
         ctx.dt = dt
         ctx.q_shape = Qb.shape
@@ -223,6 +233,10 @@ class _PosePredict(torch.autograd.Function):
         xb, Pb, Ghat = ctx.saved_tensors
         dt = ctx.dt
         batch = xb.shape[1]
+        if kernels.supports(xb, Pb, Ghat, g_mean, g_P):  # the same arithmetic, compiled
+            dx, dP, dQ = kernels.predict_backward(xb, Pb, Ghat, g_mean, g_P, dt, ctx.q_shape[-1])
+            return (dx if ctx.needs_input_grad[0] else None, dP if ctx.needs_input_grad[1] else None,
+                    dQ if ctx.needs_input_grad[2] else None, None)
         C, eye = _g_constants(xb, dt)
         G = Ghat + eye  # F[q, u]
         Gbar = _symmetrized(g_P)

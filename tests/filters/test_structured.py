@@ -2,7 +2,9 @@
 the generic dense step (:func:`~fkn_bench.filters.ekf.ekf_predict`,
 :func:`~fkn_bench.filters.ekf.linear_measurement_update`): values to rounding, gradients against
 the dense step's autograd, the hand-written backward passes by finite differences, and a whole
-``run()`` (the structured step forced at a small batch) against the generic one."""
+``run()`` (the structured step forced at a small batch) against the generic one. Every test runs
+twice: with the prediction's compiled CPU kernels (:mod:`fkn_bench.filters.kernels`) and with the
+torch operations that run where they do not (a GPU)."""
 
 from __future__ import annotations
 
@@ -12,11 +14,17 @@ import pytest
 import torch
 
 from fkn_bench.filters import FilterState, NoiseParameters, PoseTwistModel, make_filter
-from fkn_bench.filters import ekf
+from fkn_bench.filters import ekf, kernels
 from fkn_bench.filters.ekf import ekf_predict, linear_measurement_update
 from fkn_bench.filters.structured import _BatchLastProduct, _PosePredict, pose_predict, pose_update
 
 MODEL = PoseTwistModel()
+
+
+@pytest.fixture(autouse=True, params=["kernels", "torch-ops"])
+def prediction_path(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch) -> str:
+    monkeypatch.setattr(kernels, "ENABLED", request.param == "kernels")
+    return str(request.param)
 
 
 def random_state(batch: int, seed: int) -> FilterState:
@@ -93,7 +101,7 @@ def test_hand_written_backward_passes_match_finite_differences() -> None:
     assert torch.autograd.gradcheck(predict, (x, P, Q), fast_mode=True)  # random directions: a few calls
 
 
-def test_run_with_the_structured_step_equals_the_generic_run(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_run_with_the_structured_step_equals_the_generic_run(monkeypatch: pytest.MonkeyPatch, prediction_path: str) -> None:
     """A whole batch, with sequences initialising at different steps, rows without a measurement
     at some steps and a quaternion sign flip: every output and the gradient."""
     batch, steps = 4, 14
@@ -109,6 +117,7 @@ def test_run_with_the_structured_step_equals_the_generic_run(monkeypatch: pytest
 
     def run(structured: bool):
         monkeypatch.setattr(ekf, "STRUCTURED_MIN_BATCH", 1 if structured else 10**9)
+        monkeypatch.setattr(kernels, "ENABLED", structured and prediction_path == "kernels")  # generic: no kernel predict
         log_q = torch.full((13,), -4.0, dtype=torch.float64, requires_grad=True)
         noise = dataclasses.replace(base, process=torch.diag_embed(torch.exp(2 * log_q)))
         result = filt.run(noise, z, mask, dt=0.1)

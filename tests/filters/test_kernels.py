@@ -1,0 +1,82 @@
+"""The compiled CPU kernels of the pose-twist prediction (:mod:`fkn_bench.filters.kernels`) against
+the torch operations they replace (:func:`fkn_bench.filters.structured._predict_forward` and
+:class:`~fkn_bench.filters.structured._PosePredict`'s backward): forward values and every gradient
+to rounding, with ``Q`` shared and per row, from inputs of any strides, in float64 and float32;
+and where they do not run."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from fkn_bench.filters import kernels
+from fkn_bench.filters.structured import _PosePredict, _predict_forward
+
+
+def batch_last_inputs(batch: int, q_batch: int, seed: int, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, ...]:
+    """``x (13, B)``, symmetric ``P (13, 13, B)``, symmetric ``Q (13, 13, q_batch)``."""
+    g = torch.Generator().manual_seed(seed)
+    x = torch.randn(13, batch, generator=g, dtype=torch.float64)
+    x[:4] /= x[:4].norm(dim=0, keepdim=True)
+    A = 0.3 * torch.randn(batch, 13, 13, generator=g, dtype=torch.float64)
+    P = (A @ A.transpose(1, 2) + 0.05 * torch.eye(13, dtype=torch.float64)).permute(1, 2, 0)
+    L = 0.1 * torch.randn(q_batch, 13, 13, generator=g, dtype=torch.float64)
+    Q = (L @ L.transpose(1, 2)).permute(1, 2, 0)
+    return tuple(t.to(dtype) for t in (x, 0.5 * (P + P.transpose(0, 1)), 0.5 * (Q + Q.transpose(0, 1))))
+
+
+def predict_with_gradients(enabled: bool, x: torch.Tensor, P: torch.Tensor, Q: torch.Tensor, seed: int) -> list[torch.Tensor]:
+    """``x-``, ``P-`` and the gradients of a random linear function of them with respect to
+    ``x``, ``P`` and ``Q``, by the kernels (``enabled``) or the torch operations."""
+    previous, kernels.ENABLED = kernels.ENABLED, enabled
+    try:
+        inputs = [t.clone().requires_grad_(True) for t in (x, P, Q)]
+        mean, P_next = _PosePredict.apply(*inputs, 0.1)
+        g = torch.Generator().manual_seed(seed)
+        g_mean, g_P = (torch.randn(t.shape, generator=g, dtype=torch.float64).to(t.dtype) for t in (mean, P_next))
+        gradients = torch.autograd.grad((mean, P_next), inputs, (g_mean, g_P))
+    finally:
+        kernels.ENABLED = previous
+    return [mean.detach(), P_next.detach(), *gradients]
+
+
+@pytest.mark.parametrize("batch,q_batch", [(1, 1), (5, 1), (5, 5), (70, 70)])
+def test_kernels_equal_the_torch_operations(batch: int, q_batch: int) -> None:
+    x, P, Q = batch_last_inputs(batch, q_batch, seed=batch + q_batch)
+    assert kernels.supports(x, P, Q)
+    compiled, reference = (predict_with_gradients(enabled, x, P, Q, seed=3) for enabled in (True, False))
+    for name, a, b in zip(("x-", "P-", "dx", "dP", "dQ"), compiled, reference):
+        assert a.shape == b.shape, name
+        torch.testing.assert_close(a, b, rtol=1e-13, atol=1e-14, msg=name)
+    assert torch.equal(compiled[1], compiled[1].transpose(0, 1))  # P- exactly symmetric, as the torch operations'
+
+
+def test_kernels_read_inputs_of_any_strides() -> None:
+    """Batch-first storage seen batch-last (the first prediction after a batch-first ``P0``), a
+    strided mean, an expanded ``Q``: the kernels copy what is not contiguous."""
+    x, P, Q = batch_last_inputs(6, 1, seed=11)
+    x_strided = x.T.contiguous().T
+    P_batch_first = P.permute(2, 0, 1).contiguous().permute(1, 2, 0)
+    Q_expanded = Q.expand(13, 13, 6)
+    compiled = kernels.predict(x_strided, P_batch_first, Q_expanded, 0.1)
+    reference = _predict_forward(x, P, Q_expanded.contiguous(), 0.1)
+    for a, b in zip(compiled, reference):
+        torch.testing.assert_close(a, b, rtol=1e-13, atol=1e-14)
+
+
+def test_float32_kernels_equal_the_float32_torch_operations() -> None:
+    x, P, Q = batch_last_inputs(8, 8, seed=5, dtype=torch.float32)
+    compiled, reference = (predict_with_gradients(enabled, x, P, Q, seed=6) for enabled in (True, False))
+    for a, b in zip(compiled, reference):
+        assert a.dtype == torch.float32
+        torch.testing.assert_close(a, b, rtol=2e-5, atol=1e-5)
+
+
+def test_where_the_kernels_do_not_run(monkeypatch: pytest.MonkeyPatch) -> None:
+    x, P, Q = batch_last_inputs(3, 1, seed=7)
+    assert kernels.supports(x, P, Q)
+    assert not kernels.supports(x.to(torch.float16), P.to(torch.float16), Q.to(torch.float16))
+    assert not kernels.supports(x.float(), P, Q)  # mixed dtypes
+    assert not kernels.supports(x.to("meta"), P, Q)  # not on the CPU
+    monkeypatch.setattr(kernels, "ENABLED", False)
+    assert not kernels.supports(x, P, Q)
