@@ -11,9 +11,8 @@ The step runs on torch tensors (batched, differentiable: :meth:`KalmanFilter.run
 arrays (the online ``step()`` of the estimators, batch 1, and the adaptive filters) through the
 same code (:func:`fkn_bench.linalg.namespace`). For :class:`PoseTwistModel` torch batches of at
 least :data:`STRUCTURED_MIN_BATCH` rows, :class:`ExtendedKalmanFilter` runs the same step written
-for the model's structure instead (:mod:`fkn_bench.filters.structured`: equal to rounding); its
-prediction runs so at any batch size where its compiled CPU kernels do
-(:mod:`fkn_bench.filters.kernels`).
+for the model's structure instead (:mod:`fkn_bench.filters.structured`: equal to rounding), and
+so does any CPU float batch, as compiled kernels (:mod:`fkn_bench.filters.kernels`).
 
 Products such as ``F P F^T`` are symmetric only to rounding; ``predict`` and the update
 symmetrise the covariance they return (:func:`fkn_bench.linalg.symmetrize`, once each), so that
@@ -203,9 +202,9 @@ class ExtendedKalmanFilter(KalmanFilter):
     With :class:`PoseTwistModel` itself (not a subclass, whose transition may differ) and torch
     batches of at least :data:`STRUCTURED_MIN_BATCH` rows, ``predict`` and ``update`` run the
     structured step (:func:`~fkn_bench.filters.structured.pose_predict`,
-    :func:`~fkn_bench.filters.structured.pose_update`); otherwise the generic one, but for the
-    prediction of a CPU float batch of any size, which runs the structured step's compiled
-    kernels (:mod:`fkn_bench.filters.kernels`).
+    :func:`~fkn_bench.filters.structured.pose_update`), and so do CPU float batches of any size,
+    as the structured step's compiled kernels (:mod:`fkn_bench.filters.kernels`); otherwise the
+    generic step.
     """
 
     name = "ekf"
@@ -220,22 +219,22 @@ class ExtendedKalmanFilter(KalmanFilter):
         step, torch, at least :data:`STRUCTURED_MIN_BATCH` rows) rather than the generic one."""
         return self._structured and not isinstance(state.mean, np.ndarray) and state.mean.shape[0] >= STRUCTURED_MIN_BATCH
 
-    def _structured_predict(self, state: FilterState, process_noise: Array) -> bool:
-        """Whether this prediction runs :func:`~fkn_bench.filters.structured.pose_predict`: from
-        :data:`STRUCTURED_MIN_BATCH` rows, and at any batch where its compiled kernels run
-        (:func:`fkn_bench.filters.kernels.supports`: one call per step, which beats the generic
-        step's batched products at every batch size)."""
+    def _structured_for(self, state: FilterState, noise: Array) -> bool:
+        """Whether this step runs the structured step (:mod:`fkn_bench.filters.structured`):
+        from :data:`STRUCTURED_MIN_BATCH` rows, and at any batch size where its compiled kernels
+        run (:func:`fkn_bench.filters.kernels.supports`: one call per step, which beats the
+        generic step's batched products at every batch size)."""
         return self._structured_step(state) or (
             self._structured and not isinstance(state.mean, np.ndarray)
-            and kernels.supports(state.mean, state.covariance, process_noise)
+            and kernels.supports(state.mean, state.covariance, noise)
         )
 
     def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
-        if self._structured_predict(state, process_noise):
+        if self._structured_for(state, process_noise):
             return pose_predict(state, process_noise, dt)
         return ekf_predict(self.model, state, process_noise, dt)
 
     def update(self, state: FilterState, z: Array, measurement_noise: Array) -> tuple[FilterState, Array, Array]:
-        if self._structured_step(state):
+        if self._structured_for(state, measurement_noise):
             return pose_update(self.model, state, z, measurement_noise)
         return linear_measurement_update(self.model, state, z, measurement_noise)

@@ -23,6 +23,7 @@ the tests compare the two.
 from __future__ import annotations
 
 import functools
+import math
 import os
 from typing import Any
 
@@ -30,7 +31,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["ENABLED", "supports", "predict", "predict_backward"]
+__all__ = ["ENABLED", "supports", "predict", "predict_backward", "update", "update_backward"]
 
 ENABLED: bool = os.environ.get("FKN_BENCH_KERNELS", "1") != "0"
 """Whether :func:`supports` may say yes (environment ``FKN_BENCH_KERNELS=0`` turns the kernels
@@ -241,17 +242,313 @@ def _predict_backward_kernel(x, P, Ghat, g_mean, g_P, dt, source, coefficient, d
                 X[a, 10 + k, b] += X[a, 4 + k, b] * dt
 
 
+def _update_forward_kernel(x, P, nu, S, R, mean, P_out, Si_out, K_out, A, TK, Pl, Y, M, Pp, N):  # type: ignore[no-untyped-def]
+    """The measurement update of :func:`fkn_bench.filters.structured.pose_update` (the torch
+    operations' factored Joseph form, row by row): ``x (13, B)``, ``P (13, 13, B)``, the innovation
+    ``nu (7, B)``, ``S = P[o, o] + R (7, 7, B)``, ``R (B or 1, 7, 7)`` -> ``mean (13, B)`` (the
+    quaternion renormalised), ``P_out (13, 13, B)`` (exactly symmetric), and for the backward
+    pass ``Si_out = S^-1 (7, 7, B)``, ``K_out (13, 7, B)``; the rest is per-row scratch. ``S`` is
+    inverted by Gauss-Jordan elimination without pivoting (symmetric positive definite: Golub &
+    Van Loan, Matrix Computations, 4th ed., sec. 4.2), as the torch operations' solve."""
+    B = x.shape[1]
+    per_row_r = R.shape[0] != 1
+    for b in range(B):
+        rb = b if per_row_r else 0
+        for a in range(13):  # this row's covariance, contiguous (the batch-last array is strided by B)
+            for c in range(13):
+                Pl[a, c] = P[a, c, b]
+        for i in range(7):  # [S | I] -> [I | S^-1], Gauss-Jordan without pivoting (S SPD)
+            for j in range(7):
+                A[i, j] = S[i, j, b]
+                A[i, 7 + j] = 1.0 if i == j else 0.0
+        for k in range(7):
+            pivot = A[k, k]
+            for c in range(k + 1, 14):
+                A[k, c] = A[k, c] / pivot
+            for r in range(7):
+                if r != k:
+                    f = A[r, k]
+                    for c in range(k + 1, 14):
+                        A[r, c] -= f * A[k, c]
+        for i in range(7):
+            for j in range(7):
+                Si_out[i, j, b] = A[i, 7 + j]
+        for a in range(13):  # K = P[:, o] S^-1; x+ = x + K nu
+            s = x[a, b]
+            for j in range(7):
+                k_aj = 0.0
+                for k in range(7):
+                    k_aj += Pl[a, k] * A[k, 7 + j]
+                TK[a, j] = k_aj
+                K_out[a, j, b] = k_aj
+                s += k_aj * nu[j, b]
+            mean[a, b] = s
+        norm = math.sqrt(mean[0, b] * mean[0, b] + mean[1, b] * mean[1, b] + mean[2, b] * mean[2, b] + mean[3, b] * mean[3, b])
+        for i in range(4):
+            mean[i, b] = mean[i, b] / norm
+        for i in range(4):  # N = (I - u u^T) / |q|
+            for k in range(4):
+                N[i, k] = ((1.0 if i == k else 0.0) - mean[i, b] * mean[k, b]) / norm
+        for a in range(4):  # TK = T K (TK holds K): rows q = N K[q]
+            for j in range(7):
+                s = 0.0
+                for k in range(4):
+                    s += N[a, k] * TK[k, j]
+                M[a, j] = s
+        for a in range(4):
+            for j in range(7):
+                TK[a, j] = M[a, j]
+        for a in range(13):  # Y = T P - (T K) P[o, :]
+            for c in range(13):
+                z = 0.0
+                for k in range(7):
+                    z += TK[a, k] * Pl[k, c]
+                if a < 4:
+                    tp = 0.0
+                    for k in range(4):
+                        tp += N[a, k] * Pl[k, c]
+                else:
+                    tp = Pl[a, c]
+                Y[a, c] = tp - z
+        for a in range(13):  # M = (T K) R - Y[:, o]
+            for j in range(7):
+                s = 0.0
+                for k in range(7):
+                    s += TK[a, k] * R[rb, k, j]
+                M[a, j] = s - Y[a, j]
+        for a in range(13):  # P+ = M (T K)^T + Y T^T
+            for c in range(13):
+                s = 0.0
+                for j in range(7):
+                    s += M[a, j] * TK[c, j]
+                if c < 4:
+                    for k in range(4):
+                        s += Y[a, k] * N[c, k]
+                else:
+                    s += Y[a, c]
+                Pp[a, c] = s
+        for a in range(13):
+            for c in range(13):
+                P_out[a, c, b] = (Pp[a, c] + Pp[c, a]) * 0.5
+
+
+def _update_backward_kernel(x, P, nu, R, Si, K, g_mean, g_P, dx, dP, dnu, dS, dR, TK, Y, M, N, G, dM, dTK, dY, dN, dK, q, dq, dSi, Pl, Kl, Sil, dPl):  # type: ignore[no-untyped-def]
+    """The backward pass of :func:`_update_forward_kernel`, row by row: from the saved ``Si``,
+    ``K`` and the inputs, the forward's intermediates are recomputed, then (reverse mode, with
+    ``G = sym(g_P)``): ``P+ = M (TK)^T + Y T^T``, ``M = (TK) R - Y[:, o]``, ``Y = T P - (TK) P[o, :]``,
+    ``TK = T K``, ``T``'s block ``N = I/n - q q^T/n^3`` and the mean's ``u = q/n``, ``x+ = x + K nu``,
+    ``K = P[:, o] S^-1`` (``d S^-1 = -S^-1 dS S^-1``). Outputs ``dx (B, 13)``, ``dP (13, 13, B)``,
+    ``dnu (7, B)``, ``dS (7, 7, B)`` and ``dR`` (summed over the batch when ``R`` is shared)."""
+    B = x.shape[1]
+    per_row_r = R.shape[0] != 1
+    for i in range(7):
+        for j in range(7):
+            for rb in range(dR.shape[0]):
+                dR[rb, i, j] = 0.0
+    for b in range(B):
+        rb = b if per_row_r else 0
+        for a in range(13):  # this row's matrices, contiguous (the batch-last arrays are strided by B)
+            for c in range(13):
+                Pl[a, c] = P[a, c, b]
+            for j in range(7):
+                Kl[a, j] = K[a, j, b]
+        for i in range(7):
+            for j in range(7):
+                Sil[i, j] = Si[i, j, b]
+        # the forward's intermediates, recomputed from x, P, nu, K
+        for i in range(4):
+            s = x[i, b]
+            for j in range(7):
+                s += Kl[i, j] * nu[j, b]
+            q[i] = s
+        norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
+        for i in range(4):
+            for k in range(4):
+                N[i, k] = ((1.0 if i == k else 0.0) - (q[i] / norm) * (q[k] / norm)) / norm
+        for a in range(13):
+            for j in range(7):
+                if a < 4:
+                    s = 0.0
+                    for k in range(4):
+                        s += N[a, k] * Kl[k, j]
+                    TK[a, j] = s
+                else:
+                    TK[a, j] = Kl[a, j]
+        for a in range(13):
+            for c in range(13):
+                z = 0.0
+                for k in range(7):
+                    z += TK[a, k] * Pl[k, c]
+                if a < 4:
+                    tp = 0.0
+                    for k in range(4):
+                        tp += N[a, k] * Pl[k, c]
+                else:
+                    tp = Pl[a, c]
+                Y[a, c] = tp - z
+        for a in range(13):
+            for j in range(7):
+                s = 0.0
+                for k in range(7):
+                    s += TK[a, k] * R[rb, k, j]
+                M[a, j] = s - Y[a, j]
+        # backward: P+ = sym(M (TK)^T + Y T^T)
+        for a in range(13):
+            for c in range(13):
+                G[a, c] = (g_P[a, c, b] + g_P[c, a, b]) * 0.5
+        for a in range(13):
+            for j in range(7):
+                s = 0.0
+                t = 0.0
+                for c in range(13):
+                    s += G[a, c] * TK[c, j]
+                    t += G[a, c] * M[c, j]
+                dM[a, j] = s
+                dTK[a, j] = t
+        for a in range(13):
+            for c in range(13):
+                if c < 4:
+                    s = 0.0
+                    for e in range(4):
+                        s += G[a, e] * N[e, c]
+                    dY[a, c] = s
+                else:
+                    dY[a, c] = G[a, c]
+        for e in range(4):
+            for k in range(4):
+                s = 0.0
+                for a in range(13):
+                    s += G[a, e] * Y[a, k]
+                dN[e, k] = s
+        # M = TK R - Y[:, o]
+        for a in range(13):
+            for k in range(7):
+                s = 0.0
+                for j in range(7):
+                    s += dM[a, j] * R[rb, k, j]
+                dTK[a, k] += s
+        for k in range(7):
+            for j in range(7):
+                s = 0.0
+                for a in range(13):
+                    s += TK[a, k] * dM[a, j]
+                dR[rb, k, j] += s
+        for a in range(13):
+            for j in range(7):
+                dY[a, j] -= dM[a, j]
+        # Y = T P - TK P[o, :]
+        for k in range(13):
+            for c in range(13):
+                s = 0.0
+                if k < 4:
+                    for i in range(4):
+                        s += N[i, k] * dY[i, c]
+                else:
+                    s = dY[k, c]
+                if k < 7:
+                    for a in range(13):
+                        s -= TK[a, k] * dY[a, c]
+                dPl[k, c] = s
+        for i in range(4):
+            for k in range(4):
+                s = 0.0
+                for c in range(13):
+                    s += dY[i, c] * Pl[k, c]
+                dN[i, k] += s
+        for a in range(13):
+            for k in range(7):
+                s = 0.0
+                for c in range(13):
+                    s += dY[a, c] * Pl[k, c]
+                dTK[a, k] -= s
+        # TK = [N K[q]; K[4:]]
+        for a in range(13):
+            for j in range(7):
+                if a < 4:
+                    s = 0.0
+                    for i in range(4):
+                        s += N[i, a] * dTK[i, j]
+                    dK[a, j] = s
+                else:
+                    dK[a, j] = dTK[a, j]
+        for i in range(4):
+            for k in range(4):
+                s = 0.0
+                for j in range(7):
+                    s += dTK[i, j] * Kl[k, j]
+                dN[i, k] += s
+        # N(q) = I/n - q q^T/n^3 and the mean's u = q/n
+        n3 = norm * norm * norm
+        trace = dN[0, 0] + dN[1, 1] + dN[2, 2] + dN[3, 3]
+        qdq = 0.0
+        for i in range(4):
+            for k in range(4):
+                qdq += q[i] * dN[i, k] * q[k]
+        for m in range(4):
+            s = -trace * q[m] / n3
+            t = 0.0
+            for k in range(4):
+                t += (dN[m, k] + dN[k, m]) * q[k]
+            s -= t / n3
+            s += 3.0 * qdq * q[m] / (n3 * norm * norm)
+            for k in range(4):
+                s += N[m, k] * g_mean[k, b]
+            dq[m] = s
+        # x+ = x + K nu
+        for a in range(13):
+            d = dq[a] if a < 4 else g_mean[a, b]
+            dx[b, a] = d
+            for j in range(7):
+                dK[a, j] += d * nu[j, b]
+        for j in range(7):
+            s = 0.0
+            for a in range(4):
+                s += Kl[a, j] * dq[a]
+            for a in range(4, 13):
+                s += Kl[a, j] * g_mean[a, b]
+            dnu[j, b] = s
+        # K = P[:, o] S^-1: dP[:, o] += dK S^-T, dS = -S^-T (P[:, o]^T dK) S^-T
+        for a in range(13):
+            for k in range(7):
+                s = 0.0
+                for j in range(7):
+                    s += dK[a, j] * Sil[k, j]
+                dPl[a, k] += s
+        for k in range(7):
+            for j in range(7):
+                s = 0.0
+                for a in range(13):
+                    s += Pl[a, k] * dK[a, j]
+                dSi[k, j] = s
+        for i in range(7):
+            for j in range(7):
+                s = 0.0
+                for k in range(7):
+                    t = 0.0
+                    for l in range(7):
+                        t += dSi[k, l] * Sil[j, l]
+                    s += Sil[k, i] * t
+                dS[i, j, b] = -s
+        for a in range(13):
+            for c in range(13):
+                dP[a, c, b] = dPl[a, c]
+
+
+_KERNELS = (_predict_forward_kernel, _predict_backward_kernel, _update_forward_kernel, _update_backward_kernel)
+
+
 @functools.cache
 def _kernels() -> dict[str, Any]:
     """The compiled kernels (compiled once per process and dtype on first call; numba's on-disk
     cache makes that a load after the first process)."""
     numba = _numba()
+    names = ("predict_forward", "predict_backward", "update_forward", "update_backward")
     try:
         jit = numba.njit(cache=True, nogil=True, boundscheck=False)
-        return {"predict_forward": jit(_predict_forward_kernel), "predict_backward": jit(_predict_backward_kernel)}
+        return {name: jit(kernel) for name, kernel in zip(names, _KERNELS)}
     except RuntimeError:  # pragma: no cover - no writable cache directory: compile in every process
         jit = numba.njit(cache=False, nogil=True, boundscheck=False)
-        return {"predict_forward": jit(_predict_forward_kernel), "predict_backward": jit(_predict_backward_kernel)}
+        return {name: jit(kernel) for name, kernel in zip(names, _KERNELS)}
 
 
 
@@ -300,3 +597,39 @@ def predict_backward(
         summed = g_P.sum(-1, keepdim=True)
         return torch.from_numpy(dx).transpose(0, 1), torch.from_numpy(dP), (summed + summed.transpose(0, 1)) * 0.5
     return torch.from_numpy(dx).transpose(0, 1), torch.from_numpy(dP), torch.from_numpy(dQ).permute(1, 2, 0)
+
+
+def update(xb: Tensor, Pb: Tensor, nub: Tensor, S: Tensor, R: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """The pose-twist measurement update, batch-last: ``xb (13, B)``, ``Pb (13, 13, B)``, the
+    innovation ``nub (7, B)``, ``S = P[o, o] + R`` ``(7, 7, B)``, ``R (B or 1, 7, 7)``
+    (batch-first) -> ``(x+ (13, B), P+ (13, 13, B), S^-1 (7, 7, B), K (13, 7, B))``, the last
+    two for :func:`update_backward`. No autograd (the caller's
+    :class:`~fkn_bench.filters.structured._PoseUpdate` is)."""
+    batch, dtype = xb.shape[1], _NUMPY_DTYPES[xb.dtype]
+    mean, P_out = np.empty((13, batch), dtype), np.empty((13, 13, batch), dtype)
+    S_inv, K = np.empty((7, 7, batch), dtype), np.empty((13, 7, batch), dtype)
+    e = np.empty
+    _kernels()["update_forward"](
+        _array(xb), _array(Pb), _array(nub), _array(S), _array(R), mean, P_out, S_inv, K,
+        e((7, 14), dtype), e((13, 7), dtype), e((13, 13), dtype), e((13, 13), dtype), e((13, 7), dtype), e((13, 13), dtype), e((4, 4), dtype),
+    )
+    return torch.from_numpy(mean), torch.from_numpy(P_out), torch.from_numpy(S_inv), torch.from_numpy(K)
+
+
+def update_backward(
+    xb: Tensor, Pb: Tensor, nub: Tensor, R: Tensor, S_inv: Tensor, K: Tensor, g_mean: Tensor, g_P: Tensor
+) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
+    """``(dL/dx (13, B), dL/dP (13, 13, B), dL/dnu (7, B), dL/dS (7, 7, B), dL/dR (B or 1, 7, 7))``
+    of :func:`update` given the output gradients ``g_mean (13, B)``, ``g_P (13, 13, B)``."""
+    batch, dtype = xb.shape[1], _NUMPY_DTYPES[xb.dtype]
+    dx, dP, dnu = np.empty((batch, 13), dtype), np.empty((13, 13, batch), dtype), np.empty((7, batch), dtype)
+    dS, dR = np.empty((7, 7, batch), dtype), np.empty(tuple(R.shape), dtype)
+    e = np.empty
+    _kernels()["update_backward"](
+        _array(xb), _array(Pb), _array(nub), _array(R), _array(S_inv), _array(K), _array(g_mean), _array(g_P),
+        dx, dP, dnu, dS, dR,
+        e((13, 7), dtype), e((13, 13), dtype), e((13, 7), dtype), e((4, 4), dtype), e((13, 13), dtype), e((13, 7), dtype),
+        e((13, 7), dtype), e((13, 13), dtype), e((4, 4), dtype), e((13, 7), dtype), e(4, dtype), e(4, dtype), e((7, 7), dtype),
+        e((13, 13), dtype), e((13, 7), dtype), e((7, 7), dtype), e((13, 13), dtype),
+    )
+    return torch.from_numpy(dx).transpose(0, 1), torch.from_numpy(dP), torch.from_numpy(dnu), torch.from_numpy(dS), torch.from_numpy(dR)

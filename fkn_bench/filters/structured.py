@@ -276,6 +276,25 @@ class _PosePredict(torch.autograd.Function):
         return dx, dP, dQ, None
 
 
+class _PoseUpdate(torch.autograd.Function):
+    """``(x (13, B), P (13, 13, B), nu (7, B), S (7, 7, B), R (B or 1, 7, 7)) -> (x+, P+)``
+    batch-last, by the compiled kernels (:func:`fkn_bench.filters.kernels.update` and its
+    backward, :func:`~fkn_bench.filters.kernels.update_backward`): one autograd node per
+    update, where the torch operations make about forty."""
+
+    @staticmethod
+    def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, nub: Tensor, S: Tensor, R: Tensor) -> tuple[Tensor, Tensor]:  # type: ignore[override]
+        mean, P_post, S_inv, K = kernels.update(xb, Pb, nub, S, R)
+        ctx.save_for_backward(xb, Pb, nub, R, S_inv, K)
+        return mean, P_post
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx: Any, g_mean: Tensor, g_P: Tensor) -> tuple[Tensor | None, ...]:  # type: ignore[override]
+        gradients = kernels.update_backward(*ctx.saved_tensors, g_mean, g_P)
+        return tuple(g if needed else None for g, needed in zip(gradients, ctx.needs_input_grad))
+
+
 def _symmetrized(Pb: Tensor) -> Tensor:
     """``(P + P^T) / 2`` of a batch-last ``(k, k, B)`` batch (exactly symmetric; the transposed
     operand is read along the contiguous batch axis, so this costs one vectorised add)."""
@@ -306,15 +325,25 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
     quaternion's sign is aligned by ``model.align`` (as the generic update does); the posterior
     quaternion is renormalised and the covariance projected with ``N = (I - u u^T) / |q|``.
     Returns the posterior (means ``(B, 13)``, covariances ``(B, 13, 13)``, symmetrised), the
-    innovation ``nu (B, 7)`` and its covariance ``S (B, 7, 7)`` (exactly symmetric). The gain
-    comes from :func:`_solve_spd` without autograd, from ``inv_ex`` with it (equal to rounding);
-    without autograd the products are formed in place in their buffers."""
+    innovation ``nu (B, 7)`` and its covariance ``S (B, 7, 7)`` (exactly symmetric). On CPU float
+    tensors the update runs as compiled kernels (:func:`fkn_bench.filters.kernels.update`,
+    :class:`_PoseUpdate`); elsewhere as torch operations: the gain from :func:`_solve_spd`
+    without autograd, from ``inv_ex`` with it (equal to rounding); without autograd the products
+    are formed in place in their buffers."""
     x, P = state.mean, state.covariance
     z = model.align(z, x)  # type: ignore[attr-defined]
     nu = z - model.measure(x)  # type: ignore[attr-defined]
     Pb = batch_last(P)
     Rb = batch_last(measurement_noise)
     S = Pb[0:7, 0:7] + Rb  # a block of P plus R: exactly symmetric, as they are
+    if kernels.supports(x, P, measurement_noise, nu):  # the same update, compiled, row by row
+        R_rows = measurement_noise if measurement_noise.dim() == 3 else measurement_noise.unsqueeze(0)
+        inputs = (x.transpose(0, 1), Pb, nu.transpose(0, 1), S, R_rows)
+        if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
+            mean, P_post = _PoseUpdate.apply(*inputs)
+        else:
+            mean, P_post, _, _ = kernels.update(*inputs)
+        return FilterState(mean.transpose(0, 1), batch_first(P_post)), nu, batch_first(S)
     if torch.is_grad_enabled() and (P.requires_grad or measurement_noise.requires_grad):
         S_inv = torch.linalg.inv_ex(batch_first(S))[0].permute(1, 2, 0).contiguous()  # batch-last, contiguous
         K = _product(Pb[:, 0:7], S_inv)  # (13, 7, B): P H^T S^-1

@@ -1,16 +1,15 @@
-"""The compiled CPU kernels of the pose-twist prediction (:mod:`fkn_bench.filters.kernels`) against
-the torch operations they replace (:func:`fkn_bench.filters.structured._predict_forward` and
-:class:`~fkn_bench.filters.structured._PosePredict`'s backward): forward values and every gradient
-to rounding, with ``Q`` shared and per row, from inputs of any strides, in float64 and float32;
-and where they do not run."""
+"""The compiled CPU kernels of the pose-twist EKF step (:mod:`fkn_bench.filters.kernels`) against
+the torch operations they replace (:mod:`fkn_bench.filters.structured`): the prediction and the
+measurement update, forward values and every gradient to rounding, with ``Q`` and ``R`` shared
+and per row, from inputs of any strides, in float64 and float32; and where they do not run."""
 
 from __future__ import annotations
 
 import pytest
 import torch
 
-from fkn_bench.filters import kernels
-from fkn_bench.filters.structured import _PosePredict, _predict_forward
+from fkn_bench.filters import FilterState, PoseTwistModel, kernels
+from fkn_bench.filters.structured import _PosePredict, _predict_forward, pose_update
 
 
 def batch_last_inputs(batch: int, q_batch: int, seed: int, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, ...]:
@@ -80,3 +79,45 @@ def test_where_the_kernels_do_not_run(monkeypatch: pytest.MonkeyPatch) -> None:
     assert not kernels.supports(x.to("meta"), P, Q)  # not on the CPU
     monkeypatch.setattr(kernels, "ENABLED", False)
     assert not kernels.supports(x, P, Q)
+
+
+def update_with_gradients(enabled: bool, batch: int, per_row: bool, seed: int, dtype: torch.dtype = torch.float64) -> list[torch.Tensor]:
+    """:func:`pose_update`'s outputs and the gradients of a random function of them with respect to
+    ``x``, ``P`` and ``R``, by the kernels (``enabled``) or the torch operations. Every other
+    measured quaternion has the other sign (aligned first, as the model aligns it)."""
+    g = torch.Generator().manual_seed(seed)
+    x, P, _ = batch_last_inputs(batch, 1, seed=seed)
+    x, P = x.T.contiguous(), P.permute(2, 0, 1).contiguous()
+    L = 0.1 * torch.randn(batch if per_row else 1, 7, 7, generator=g, dtype=torch.float64)
+    R = L @ L.transpose(1, 2) + 0.01 * torch.eye(7, dtype=torch.float64)
+    R = 0.5 * (R + R.transpose(1, 2))
+    R = R if per_row else R[0]
+    z = x[:, :7] + 0.05 * torch.randn(batch, 7, generator=g, dtype=torch.float64)
+    z[::2, :4] *= -1
+    weights = [torch.randn(shape, generator=g, dtype=torch.float64) for shape in ((batch, 13), (batch, 13, 13), (batch, 7), (batch, 7, 7))]
+    previous, kernels.ENABLED = kernels.ENABLED, enabled
+    try:
+        inputs = [t.to(dtype).clone().requires_grad_(True) for t in (x, P, R)]
+        state, nu, S = pose_update(PoseTwistModel(), FilterState(inputs[0], inputs[1]), z.to(dtype), inputs[2])
+        outputs = (state.mean, state.covariance, nu, S)
+        loss = sum((out * w.to(dtype)).sum() for out, w in zip(outputs, weights))
+        gradients = torch.autograd.grad(loss, inputs)
+    finally:
+        kernels.ENABLED = previous
+    return [out.detach() for out in outputs] + list(gradients)
+
+
+@pytest.mark.parametrize("batch,per_row", [(1, False), (5, False), (5, True), (70, True)])
+def test_update_kernels_equal_the_torch_operations(batch: int, per_row: bool) -> None:
+    compiled, reference = (update_with_gradients(enabled, batch, per_row, seed=batch) for enabled in (True, False))
+    for name, a, b in zip(("x+", "P+", "nu", "S", "dx", "dP", "dR"), compiled, reference):
+        assert a.shape == b.shape, name
+        torch.testing.assert_close(a, b, rtol=1e-11, atol=1e-13, msg=name)
+    assert torch.equal(compiled[1], compiled[1].transpose(1, 2))  # P+ exactly symmetric
+
+
+def test_float32_update_kernels_equal_the_float32_torch_operations() -> None:
+    compiled, reference = (update_with_gradients(enabled, 6, True, seed=9, dtype=torch.float32) for enabled in (True, False))
+    for a, b in zip(compiled, reference):
+        assert a.dtype == torch.float32
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)
