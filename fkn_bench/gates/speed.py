@@ -454,11 +454,15 @@ MEASURED: dict[str, dict[str, float]] = {
     # --check mekf-forward --check ekf-forward-backward --check train-epoch --calibrate 6` on the
     # shared 2-core AMD machine (not quiet); the online-step entries are from before (their code
     # and the numpy reference did not change).
-    "ekf-forward": {"median": 1.351, "min": 1.3306, "max": 1.4014, "doubled_median": 0.6866, "doubled_max": 0.6977, "n": 6},
+    # ekf-forward, ekf-forward-backward and train-epoch re-measured after the EKF step's compiled
+    # CPU kernels (fkn_bench.filters.kernels, which run at any batch size: these 16-row workloads
+    # included), same command with those three checks: 1.351 -> 3.136, 0.519 -> 1.052, 10.50 ->
+    # 16.31 (shared machine).
+    "ekf-forward": {"median": 3.1363, "min": 2.9606, "max": 3.2434, "doubled_median": 1.6433, "doubled_max": 1.6598, "n": 6},
     "ukf-forward": {"median": 0.512, "min": 0.5091, "max": 0.5769, "doubled_median": 0.2615, "doubled_max": 0.2954, "n": 6},
     "mekf-forward": {"median": 0.6368, "min": 0.622, "max": 0.6508, "doubled_median": 0.3334, "doubled_max": 0.3398, "n": 6},
-    "ekf-forward-backward": {"median": 0.5193, "min": 0.4986, "max": 0.5353, "doubled_median": 0.2529, "doubled_max": 0.2569, "n": 6},
-    "train-epoch": {"median": 10.4951, "min": 10.1283, "max": 10.9785, "doubled_median": 5.245, "doubled_max": 5.2867, "n": 6},
+    "ekf-forward-backward": {"median": 1.0522, "min": 1.0006, "max": 1.1586, "doubled_median": 0.5104, "doubled_max": 0.5105, "n": 6},
+    "train-epoch": {"median": 16.3063, "min": 15.251, "max": 17.4339, "doubled_median": 7.329, "doubled_max": 7.7985, "n": 6},
     "online-step:manual-ekf": {"median": 0.5542, "min": 0.536, "max": 0.5951, "doubled_median": 0.2808, "doubled_max": 0.2866, "n": 6},
     "online-step:manual-ukf": {"median": 0.2531, "min": 0.2399, "max": 0.2657, "doubled_median": 0.1229, "doubled_max": 0.1253, "n": 6},
     "online-step:manual-mekf": {"median": 0.3511, "min": 0.3298, "max": 0.3535, "doubled_median": 0.179, "doubled_max": 0.1822, "n": 6},
@@ -482,7 +486,7 @@ def builtin_checks() -> list[RatioCheck]:
     """The filter and training checks."""
     return [
         RatioCheck("ekf-forward", "batched torch EKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("ekf"), min_ratio=0.95,
+                   _filter_setup("ekf"), min_ratio=2.2,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run"),
         RatioCheck("ukf-forward", "batched torch UKF forward vs the per-step numpy EKF loop",
                    _filter_setup("ukf"), min_ratio=0.36,
@@ -491,10 +495,10 @@ def builtin_checks() -> list[RatioCheck]:
                    _filter_setup("mekf"), min_ratio=0.45,
                    hotspot="fkn_bench.filters.mekf:MultiplicativeEKF.run"),
         RatioCheck("ekf-forward-backward", "batched EKF forward + gradient vs the per-step numpy EKF loop",
-                   _filter_setup("ekf", backward=True), min_ratio=0.36,
+                   _filter_setup("ekf", backward=True), min_ratio=0.74,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run", combine=average_filter_results),
         RatioCheck("train-epoch", "FlexKalmanNet Trainer epoch vs the sequential reference trainer",
-                   _train_setup, min_ratio=7.3,
+                   _train_setup, min_ratio=11.0,
                    hotspot="fkn_bench.training.trainer:Trainer.run_epoch", repeats=3),
     ]
 
