@@ -1,23 +1,25 @@
-"""Compiled CPU kernels (numba) of the pose-twist EKF prediction, forward and backward.
+"""Compiled CPU kernels (numba) of the pose-twist EKF step: prediction and measurement update,
+forward and backward.
 
-:func:`fkn_bench.filters.structured.pose_predict` forms ``x- = f(x)``, ``P- = F P F^T + Q`` from the
-transition's structure (``F = I + Delta``, see that module) as about thirty torch operations on
-batch-last ``(13, 13, B)`` blocks; at B = 64 (a training batch) each costs more in dispatch than in
-arithmetic, and at B = 1024 each makes its own pass over memory. These kernels do the same
-arithmetic, in the same order of operations per entry (equal to rounding: ``tests/filters/
-test_kernels.py``), in one pass over the batch each, with the batch innermost so that the
-compiler vectorises it. They run on CPU tensors of float32 or float64 (C-contiguous batch-last
-arrays: :func:`predict` and :func:`predict_backward` make them so); anything else (a GPU, another
-dtype) takes the torch operations, which stay the reference implementation.
+:mod:`fkn_bench.filters.structured` forms the step from the model's structure (``F = I + Delta``,
+``H = [I7 0]``, see that module) as a few dozen torch operations on batch-last ``(13, 13, B)``
+blocks; at B = 64 (a training batch) each costs more in dispatch than in arithmetic, and at
+B = 1024 each makes its own pass over memory. These kernels do the same arithmetic (equal to
+rounding: ``tests/filters/test_kernels.py``) in one call per step: the prediction (forward and
+backward) and the update's forward with the batch innermost, so that the compiler vectorises
+it; the update's backward row by row. They run on CPU tensors of float32 or float64 (any strides:
+inputs that are not C-contiguous are copied); anything else (a GPU, another dtype) takes the
+torch operations, which stay the reference implementation.
 
-Measured on the 2-core AMD EPYC CI machine, one thread (``fkn-bench bench run -k predict`` times
-both on any machine): the prediction's forward pass 2.2x faster than the torch operations at
-B = 1024 and 8x at B = 64; its backward pass 3.4x and 18x.
+Measured with ``fkn-bench bench run -k step_paths`` (the EKF's ``run()`` on ds1, 200 steps, with
+the kernels and with the torch operations, one thread) on the 2-core AMD EPYC CI machine, one
+run: at B = 64 the forward pass 3.4x faster with the kernels and forward + backward 2.7x; at
+B = 1024 1.35x and 1.2x.
 
-Compilation (``numba.njit``, ``cache=True``) happens on first use, a few seconds per dtype, and is
-cached on disk beside this file (or in numba's user cache directory where that is read-only);
-:data:`ENABLED` switches the kernels off (the torch operations then run everywhere), which is how
-the tests compare the two.
+Compilation (``numba.njit``, ``cache=True``) happens on first use, a few seconds per kernel and
+dtype, and is cached on disk beside this file (or in numba's user cache directory where that is
+read-only). :data:`ENABLED` switches the kernels off (the torch operations then run everywhere),
+which is how the tests compare the two.
 """
 
 from __future__ import annotations
@@ -38,8 +40,6 @@ ENABLED: bool = os.environ.get("FKN_BENCH_KERNELS", "1") != "0"
 off at import; tests set the attribute)."""
 
 _DTYPES = (torch.float64, torch.float32)
-_U = np.array([0, 1, 2, 3, 7, 8, 9], dtype=np.int64)
-"""The state components ``[q, w]`` on which the quaternion rows of ``F`` depend."""
 
 
 @functools.cache
@@ -62,24 +62,6 @@ def supports(*tensors: Tensor) -> bool:
         if not t.is_cpu or t.dtype is not dtype:
             return False
     return dtype in _DTYPES and _numba() is not None
-
-
-@functools.cache
-def _g_sparsity(dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(source, coefficient)`` per entry ``r`` of ``Ghat`` (4 x 7, row-major): ``Ghat[r] =
-    coefficient[r] * x[source[r]]`` (each entry of ``[dt/2 Omega(w) | dt/2 Theta(q)]`` is one
-    signed state component or zero: :func:`fkn_bench.filters.structured._g_basis`)."""
-    from fkn_bench.filters.structured import _g_basis
-
-    basis = _g_basis(dt)
-    source, coefficient = np.zeros(28, dtype=np.int64), np.zeros(28)
-    for r in range(28):
-        (nonzero,) = np.nonzero(basis[r])
-        if nonzero.size > 1:  # pragma: no cover - a property of the model, checked here once
-            raise AssertionError("each entry of the pose-twist model's Ghat is one state component")
-        if nonzero.size:
-            source[r], coefficient[r] = nonzero[0], basis[r, nonzero[0]]
-    return source, coefficient
 
 
 def _predict_forward_kernel(x, P, Q, dt, source, coefficient, x_out, P_out, Ghat, D, corner):  # type: ignore[no-untyped-def]
@@ -242,94 +224,127 @@ def _predict_backward_kernel(x, P, Ghat, g_mean, g_P, dt, source, coefficient, d
                 X[a, 10 + k, b] += X[a, 4 + k, b] * dt
 
 
-def _update_forward_kernel(x, P, nu, S, R, mean, P_out, Si_out, K_out, A, TK, Pl, Y, M, Pp, N):  # type: ignore[no-untyped-def]
+def _update_forward_kernel(x, P, nu, S, R, mean, P_out, Si, K, A, TK, N, Y, M, Pp, norm):  # type: ignore[no-untyped-def]
     """The measurement update of :func:`fkn_bench.filters.structured.pose_update` (the torch
-    operations' factored Joseph form, row by row): ``x (13, B)``, ``P (13, 13, B)``, the innovation
-    ``nu (7, B)``, ``S = P[o, o] + R (7, 7, B)``, ``R (B or 1, 7, 7)`` -> ``mean (13, B)`` (the
-    quaternion renormalised), ``P_out (13, 13, B)`` (exactly symmetric), and for the backward
-    pass ``Si_out = S^-1 (7, 7, B)``, ``K_out (13, 7, B)``; the rest is per-row scratch. ``S`` is
-    inverted by Gauss-Jordan elimination without pivoting (symmetric positive definite: Golub &
-    Van Loan, Matrix Computations, 4th ed., sec. 4.2), as the torch operations' solve."""
+    operations' factored Joseph form, vectorised over the batch): ``x (13, B)``,
+    ``P (13, 13, B)``, the innovation ``nu (7, B)``, ``S = P[o, o] + R (7, 7, B)``,
+    ``R (B or 1, 7, 7)`` -> ``mean (13, B)`` (the quaternion renormalised), ``P_out (13, 13, B)``
+    (exactly symmetric), and for the backward pass ``Si = S^-1 (7, 7, B)``, ``K (13, 7, B)``;
+    the rest is scratch. ``S`` is inverted by Gauss-Jordan elimination without pivoting
+    (symmetric positive definite: Golub & Van Loan, Matrix Computations, 4th ed., sec. 4.2), as
+    the torch operations' solve is."""
     B = x.shape[1]
     per_row_r = R.shape[0] != 1
+    for i in range(7):  # [S | I] -> [I | S^-1]: Gauss-Jordan without pivoting (S SPD)
+        for j in range(7):
+            for b in range(B):
+                A[i, j, b] = S[i, j, b]
+            one = 1.0 if i == j else 0.0
+            for b in range(B):
+                A[i, 7 + j, b] = one
+    for k in range(7):
+        for c in range(k + 1, 14):
+            for b in range(B):
+                A[k, c, b] = A[k, c, b] / A[k, k, b]
+        for r in range(7):
+            if r != k:
+                for c in range(k + 1, 14):
+                    for b in range(B):
+                        A[r, c, b] -= A[r, k, b] * A[k, c, b]
+    for i in range(7):
+        for j in range(7):
+            for b in range(B):
+                Si[i, j, b] = A[i, 7 + j, b]
+    for a in range(13):  # K = P[:, o] S^-1; x+ = x + K nu
+        for b in range(B):
+            mean[a, b] = x[a, b]
+        for j in range(7):
+            for b in range(B):
+                s = P[a, 0, b] * Si[0, j, b]
+                s += P[a, 1, b] * Si[1, j, b]
+                s += P[a, 2, b] * Si[2, j, b]
+                s += P[a, 3, b] * Si[3, j, b]
+                s += P[a, 4, b] * Si[4, j, b]
+                s += P[a, 5, b] * Si[5, j, b]
+                s += P[a, 6, b] * Si[6, j, b]
+                K[a, j, b] = s
+                mean[a, b] += s * nu[j, b]
     for b in range(B):
-        rb = b if per_row_r else 0
-        for a in range(13):  # this row's covariance, contiguous (the batch-last array is strided by B)
-            for c in range(13):
-                Pl[a, c] = P[a, c, b]
-        for i in range(7):  # [S | I] -> [I | S^-1], Gauss-Jordan without pivoting (S SPD)
-            for j in range(7):
-                A[i, j] = S[i, j, b]
-                A[i, 7 + j] = 1.0 if i == j else 0.0
-        for k in range(7):
-            pivot = A[k, k]
-            for c in range(k + 1, 14):
-                A[k, c] = A[k, c] / pivot
-            for r in range(7):
-                if r != k:
-                    f = A[r, k]
-                    for c in range(k + 1, 14):
-                        A[r, c] -= f * A[k, c]
-        for i in range(7):
-            for j in range(7):
-                Si_out[i, j, b] = A[i, 7 + j]
-        for a in range(13):  # K = P[:, o] S^-1; x+ = x + K nu
-            s = x[a, b]
-            for j in range(7):
-                k_aj = 0.0
-                for k in range(7):
-                    k_aj += Pl[a, k] * A[k, 7 + j]
-                TK[a, j] = k_aj
-                K_out[a, j, b] = k_aj
-                s += k_aj * nu[j, b]
-            mean[a, b] = s
-        norm = math.sqrt(mean[0, b] * mean[0, b] + mean[1, b] * mean[1, b] + mean[2, b] * mean[2, b] + mean[3, b] * mean[3, b])
-        for i in range(4):
-            mean[i, b] = mean[i, b] / norm
-        for i in range(4):  # N = (I - u u^T) / |q|
-            for k in range(4):
-                N[i, k] = ((1.0 if i == k else 0.0) - mean[i, b] * mean[k, b]) / norm
-        for a in range(4):  # TK = T K (TK holds K): rows q = N K[q]
-            for j in range(7):
-                s = 0.0
-                for k in range(4):
-                    s += N[a, k] * TK[k, j]
-                M[a, j] = s
-        for a in range(4):
-            for j in range(7):
-                TK[a, j] = M[a, j]
-        for a in range(13):  # Y = T P - (T K) P[o, :]
-            for c in range(13):
-                z = 0.0
-                for k in range(7):
-                    z += TK[a, k] * Pl[k, c]
+        norm[b] = math.sqrt(mean[0, b] * mean[0, b] + mean[1, b] * mean[1, b] + mean[2, b] * mean[2, b] + mean[3, b] * mean[3, b])
+    for i in range(4):
+        for b in range(B):
+            mean[i, b] = mean[i, b] / norm[b]
+    for i in range(4):  # N = (I - u u^T) / |q|
+        for k in range(4):
+            one = 1.0 if i == k else 0.0
+            for b in range(B):
+                N[i, k, b] = (one - mean[i, b] * mean[k, b]) / norm[b]
+    for i in range(4):  # TK[q] = N K[q] (TK's other rows are K's)
+        for j in range(7):
+            for b in range(B):
+                TK[i, j, b] = N[i, 0, b] * K[0, j, b] + N[i, 1, b] * K[1, j, b] + N[i, 2, b] * K[2, j, b] + N[i, 3, b] * K[3, j, b]
+    for a in range(13):  # Y = T P - (T K) P[o, :]
+        for c in range(13):
+            if a < 4:
+                for b in range(B):
+                    z = TK[a, 0, b] * P[0, c, b]
+                    for k in range(1, 7):
+                        z += TK[a, k, b] * P[k, c, b]
+                    tp = N[a, 0, b] * P[0, c, b] + N[a, 1, b] * P[1, c, b] + N[a, 2, b] * P[2, c, b] + N[a, 3, b] * P[3, c, b]
+                    Y[a, c, b] = tp - z
+            else:
+                for b in range(B):
+                    z = K[a, 0, b] * P[0, c, b]
+                    for k in range(1, 7):
+                        z += K[a, k, b] * P[k, c, b]
+                    Y[a, c, b] = P[a, c, b] - z
+    for a in range(13):  # M = (T K) R - Y[:, o]
+        for j in range(7):
+            if per_row_r:
                 if a < 4:
-                    tp = 0.0
-                    for k in range(4):
-                        tp += N[a, k] * Pl[k, c]
+                    for b in range(B):
+                        s = TK[a, 0, b] * R[b, 0, j]
+                        for k in range(1, 7):
+                            s += TK[a, k, b] * R[b, k, j]
+                        M[a, j, b] = s - Y[a, j, b]
                 else:
-                    tp = Pl[a, c]
-                Y[a, c] = tp - z
-        for a in range(13):  # M = (T K) R - Y[:, o]
-            for j in range(7):
-                s = 0.0
-                for k in range(7):
-                    s += TK[a, k] * R[rb, k, j]
-                M[a, j] = s - Y[a, j]
-        for a in range(13):  # P+ = M (T K)^T + Y T^T
-            for c in range(13):
-                s = 0.0
-                for j in range(7):
-                    s += M[a, j] * TK[c, j]
-                if c < 4:
-                    for k in range(4):
-                        s += Y[a, k] * N[c, k]
+                    for b in range(B):
+                        s = K[a, 0, b] * R[b, 0, j]
+                        for k in range(1, 7):
+                            s += K[a, k, b] * R[b, k, j]
+                        M[a, j, b] = s - Y[a, j, b]
+            else:
+                if a < 4:
+                    for b in range(B):
+                        s = TK[a, 0, b] * R[0, 0, j]
+                        for k in range(1, 7):
+                            s += TK[a, k, b] * R[0, k, j]
+                        M[a, j, b] = s - Y[a, j, b]
                 else:
-                    s += Y[a, c]
-                Pp[a, c] = s
-        for a in range(13):
-            for c in range(13):
-                P_out[a, c, b] = (Pp[a, c] + Pp[c, a]) * 0.5
+                    for b in range(B):
+                        s = K[a, 0, b] * R[0, 0, j]
+                        for k in range(1, 7):
+                            s += K[a, k, b] * R[0, k, j]
+                        M[a, j, b] = s - Y[a, j, b]
+    for a in range(13):  # P+ = M (T K)^T + Y T^T
+        for c in range(13):
+            if c < 4:
+                for b in range(B):
+                    s = M[a, 0, b] * TK[c, 0, b]
+                    for j in range(1, 7):
+                        s += M[a, j, b] * TK[c, j, b]
+                    s += Y[a, 0, b] * N[c, 0, b] + Y[a, 1, b] * N[c, 1, b] + Y[a, 2, b] * N[c, 2, b] + Y[a, 3, b] * N[c, 3, b]
+                    Pp[a, c, b] = s
+            else:
+                for b in range(B):
+                    s = M[a, 0, b] * K[c, 0, b]
+                    for j in range(1, 7):
+                        s += M[a, j, b] * K[c, j, b]
+                    Pp[a, c, b] = s + Y[a, c, b]
+    for a in range(13):
+        for c in range(13):
+            for b in range(B):
+                P_out[a, c, b] = (Pp[a, c, b] + Pp[c, a, b]) * 0.5
 
 
 def _update_backward_kernel(x, P, nu, R, Si, K, g_mean, g_P, dx, dP, dnu, dS, dR, TK, Y, M, N, G, dM, dTK, dY, dN, dK, q, dq, dSi, Pl, Kl, Sil, dPl):  # type: ignore[no-untyped-def]
@@ -560,15 +575,17 @@ def _array(t: Tensor) -> np.ndarray:
 _NUMPY_DTYPES = {torch.float64: np.float64, torch.float32: np.float32}
 
 
-def predict(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor, Tensor]:
+def predict(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float, g_sparsity: tuple[np.ndarray, np.ndarray]) -> tuple[Tensor, Tensor, Tensor]:
     """Batch-last prediction ``(x- (13, B), P- (13, 13, B), Ghat (4, 7, B))`` from ``xb (13, B)``,
     ``Pb (13, 13, B)``, ``Qb (13, 13, B or 1)`` (any strides, copied where not contiguous; ``Qb``
     is read batch-first, so a ``Q`` stored ``(B, 13, 13)``, as noise parameters are, is not
-    copied), CPU, one float dtype (:func:`supports`); ``dt`` in seconds. No autograd (the
-    caller's :class:`~fkn_bench.filters.structured._PosePredict` is)."""
+    copied), CPU, one float dtype (:func:`supports`); ``dt`` in seconds; ``g_sparsity`` the
+    ``(source, coefficient)`` of ``Ghat``'s entries
+    (:func:`fkn_bench.filters.structured.g_sparsity`). No autograd (the caller's
+    :class:`~fkn_bench.filters.structured._PosePredict` is)."""
     batch, dtype = xb.shape[1], _NUMPY_DTYPES[xb.dtype]
     x_out, P_out, Ghat = np.empty((13, batch), dtype), np.empty((13, 13, batch), dtype), np.empty((4, 7, batch), dtype)
-    source, coefficient = _g_sparsity(float(dt))
+    source, coefficient = g_sparsity
     _kernels()["predict_forward"](
         _array(xb), _array(Pb), _array(Qb.permute(2, 0, 1)), float(dt), source, coefficient,
         x_out, P_out, Ghat, np.empty((7, 13, batch), dtype), np.empty((7, 4, batch), dtype),
@@ -577,7 +594,8 @@ def predict(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tens
 
 
 def predict_backward(
-    xb: Tensor, Pb: Tensor, Ghat: Tensor, g_mean: Tensor, g_P: Tensor, dt: float, q_batch: int
+    xb: Tensor, Pb: Tensor, Ghat: Tensor, g_mean: Tensor, g_P: Tensor, dt: float, q_batch: int,
+    g_sparsity: tuple[np.ndarray, np.ndarray],
 ) -> tuple[Tensor, Tensor, Tensor]:
     """``(dL/dx (13, B), dL/dP (13, 13, B), dL/dQ (13, 13, q_batch))`` of :func:`predict` given
     the output gradients ``g_mean (13, B)``, ``g_P (13, 13, B)``; ``q_batch`` is ``Q``'s batch
@@ -588,7 +606,7 @@ def predict_backward(
     per_row = q_batch == batch and batch != 1
     dx, dP, dQ = np.empty((batch, 13), dtype), np.empty((13, 13, batch), dtype), np.empty((batch if per_row else 1, 13, 13), dtype)
     g_P = g_P.contiguous()
-    source, coefficient = _g_sparsity(float(dt))
+    source, coefficient = g_sparsity
     _kernels()["predict_backward"](
         _array(xb), _array(Pb), _array(Ghat), _array(g_mean), g_P.numpy(), float(dt), source, coefficient,
         dx, dP, dQ, np.empty((7, 13, batch), dtype), np.empty((4, 7, batch), dtype),
@@ -611,7 +629,8 @@ def update(xb: Tensor, Pb: Tensor, nub: Tensor, S: Tensor, R: Tensor) -> tuple[T
     e = np.empty
     _kernels()["update_forward"](
         _array(xb), _array(Pb), _array(nub), _array(S), _array(R), mean, P_out, S_inv, K,
-        e((7, 14), dtype), e((13, 7), dtype), e((13, 13), dtype), e((13, 13), dtype), e((13, 7), dtype), e((13, 13), dtype), e((4, 4), dtype),
+        e((7, 14, batch), dtype), e((4, 7, batch), dtype), e((4, 4, batch), dtype), e((13, 13, batch), dtype),
+        e((13, 7, batch), dtype), e((13, 13, batch), dtype), e(batch, dtype),
     )
     return torch.from_numpy(mean), torch.from_numpy(P_out), torch.from_numpy(S_inv), torch.from_numpy(K)
 

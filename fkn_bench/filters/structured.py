@@ -40,6 +40,7 @@ Outputs equal the generic step's to rounding (``tests/filters/test_structured.py
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -141,6 +142,22 @@ def _g_basis(dt: float) -> np.ndarray:
     return (0.5 * dt) * basis.reshape(28, 13)
 
 
+@functools.cache
+def g_sparsity(dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(source, coefficient)`` per entry ``r`` of ``Ghat`` (4 x 7, row-major): ``Ghat[r] =
+    coefficient[r] * x[source[r]]`` (each entry of ``[dt/2 Omega(w) | dt/2 Theta(q)]`` is one
+    signed state component or zero: :func:`fkn_bench.filters.structured._g_basis`)."""
+    basis = _g_basis(dt)
+    source, coefficient = np.zeros(28, dtype=np.int64), np.zeros(28)
+    for r in range(28):
+        (nonzero,) = np.nonzero(basis[r])
+        if nonzero.size > 1:  # pragma: no cover - a property of the model, checked here once
+            raise AssertionError("each entry of the pose-twist model's Ghat is one state component")
+        if nonzero.size:
+            source[r], coefficient[r] = nonzero[0], basis[r, nonzero[0]]
+    return source, coefficient
+
+
 def _g_constants(like: Tensor, dt: float) -> tuple[Tensor, Tensor]:
     """``(C (28, 13), I_u (4, 7, 1))``: ``Ghat = (C x).view(4, 7, B)`` (:func:`_g_basis`) and
     ``G = F[q, u] = Ghat + I_u``."""
@@ -169,7 +186,7 @@ def _forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Ten
     """:func:`_predict_forward` by the compiled kernel where it runs (:func:`kernels.supports`:
     CPU, float32/float64), else by the torch operations."""
     if kernels.supports(xb, Pb, Qb):
-        return kernels.predict(xb, Pb, Qb, dt)
+        return kernels.predict(xb, Pb, Qb, dt, g_sparsity(dt))
     return _predict_forward(xb, Pb, Qb, dt)
 
 
@@ -234,7 +251,7 @@ class _PosePredict(torch.autograd.Function):
         dt = ctx.dt
         batch = xb.shape[1]
         if kernels.supports(xb, Pb, Ghat, g_mean, g_P):  # the same arithmetic, compiled
-            dx, dP, dQ = kernels.predict_backward(xb, Pb, Ghat, g_mean, g_P, dt, ctx.q_shape[-1])
+            dx, dP, dQ = kernels.predict_backward(xb, Pb, Ghat, g_mean, g_P, dt, ctx.q_shape[-1], g_sparsity(dt))
             return (dx if ctx.needs_input_grad[0] else None, dP if ctx.needs_input_grad[1] else None,
                     dQ if ctx.needs_input_grad[2] else None, None)
         C, eye = _g_constants(xb, dt)

@@ -103,3 +103,28 @@ def test_small_bmm_limit(benchmark: Any, batch: int) -> None:
     benchmark.pedantic(lambda: torch.bmm(F, P, out=out), rounds=7, iterations=max(1, 20480 // batch), warmup_rounds=1)
     benchmark.extra_info.update(steps=batch // MATMULS_PER_STEP, batch=batch, small_bmm_limit=True,
                                 what=f"small-bmm limit: torch.bmm (B, 13, 13) float64, B = {batch}, {MATMULS_PER_STEP} per step")
+
+
+@pytest.mark.parametrize("path", ["kernels", "torch-ops"])
+@pytest.mark.parametrize("work", ["forward", "forward+backward"])
+@pytest.mark.parametrize("batch", [64, LARGE_BATCH])
+def test_ekf_step_paths(benchmark: Any, large_data: Any, monkeypatch: pytest.MonkeyPatch, batch: int, work: str, path: str) -> None:
+    """The EKF of the paper's model with its step's compiled CPU kernels and with the torch
+    operations that run where they do not (:mod:`fkn_bench.filters.kernels`), on the same
+    inputs: their ratio is the kernels' gain at a training batch (64) and at B = 1024."""
+    from fkn_bench.filters import ekf, kernels
+
+    monkeypatch.setattr(kernels, "ENABLED", path == "kernels")
+    monkeypatch.setattr(ekf, "STRUCTURED_MIN_BATCH", 1)  # torch-ops: the structured step, as on a GPU
+    z, m, dt = large_data
+    z, m = z[:batch], m[:batch]
+    filt = make_filter("ekf")
+    if work == "forward":
+        def run() -> Any:
+            with torch.no_grad():
+                return filt.run(manual_noise("ekf"), z, m, dt=dt, store_covariances=False, store_innovations=False)
+    else:
+        run = forward_backward_workload(filt, manual_noise("ekf"), z, m, dt)
+    benchmark.pedantic(run, rounds=3, warmup_rounds=1)
+    benchmark.extra_info.update(steps=batch * LARGE_STEPS, batch=batch,
+                                what=f"ekf run(), {batch} x {LARGE_STEPS}, {work}, {path}")

@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from fkn_bench.filters import FilterState, PoseTwistModel, kernels
-from fkn_bench.filters.structured import _PosePredict, _predict_forward, pose_update
+from fkn_bench.filters.structured import _PosePredict, _predict_forward, g_sparsity, pose_update
 
 
 def batch_last_inputs(batch: int, q_batch: int, seed: int, dtype: torch.dtype = torch.float64) -> tuple[torch.Tensor, ...]:
@@ -57,7 +57,7 @@ def test_kernels_read_inputs_of_any_strides() -> None:
     x_strided = x.T.contiguous().T
     P_batch_first = P.permute(2, 0, 1).contiguous().permute(1, 2, 0)
     Q_expanded = Q.expand(13, 13, 6)
-    compiled = kernels.predict(x_strided, P_batch_first, Q_expanded, 0.1)
+    compiled = kernels.predict(x_strided, P_batch_first, Q_expanded, 0.1, g_sparsity(0.1))
     reference = _predict_forward(x, P, Q_expanded.contiguous(), 0.1)
     for a, b in zip(compiled, reference):
         torch.testing.assert_close(a, b, rtol=1e-13, atol=1e-14)
