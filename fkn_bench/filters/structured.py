@@ -353,7 +353,7 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
     Pb = batch_last(P)
     Rb = batch_last(measurement_noise)
     S = Pb[0:7, 0:7] + Rb  # a block of P plus R: exactly symmetric, as they are
-    if kernels.supports(x, P, measurement_noise, nu):  # the same update, compiled, row by row
+    if kernels.supports(x, P, measurement_noise, nu):  # the same update, compiled
         R_rows = measurement_noise if measurement_noise.dim() == 3 else measurement_noise.unsqueeze(0)
         inputs = (x.transpose(0, 1), Pb, nu.transpose(0, 1), S, R_rows)
         if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
