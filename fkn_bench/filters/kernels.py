@@ -347,9 +347,10 @@ def _update_forward_kernel(x, P, nu, S, R, mean, P_out, Si, K, A, TK, N, Y, M, P
                 P_out[a, c, b] = (Pp[a, c, b] + Pp[c, a, b]) * 0.5
 
 
-def _update_backward_kernel(x, P, nu, R, Si, K, g_mean, g_P, dx, dP, dnu, dS, dR, TK, Y, M, N, G, dM, dTK, dY, dN, dK, q, dq, dSi, Pl, Kl, Sil, dPl):  # type: ignore[no-untyped-def]
-    """The backward pass of :func:`_update_forward_kernel`, row by row: from the saved ``Si``,
-    ``K`` and the inputs, the forward's intermediates are recomputed, then (reverse mode, with
+def _update_backward_kernel(x, P, nu, R, Si, K, N_saved, TK_saved, Y_saved, M_saved, norm_saved, g_mean, g_P, dx, dP, dnu, dS, dR, TK, Y, M, N, G, dM, dTK, dY, dN, dK, q, dq, dSi, Pl, Kl, Sil, dPl):  # type: ignore[no-untyped-def]
+    """The backward pass of :func:`_update_forward_kernel`, row by row: from the inputs and what
+    the forward saved (``Si``, ``K``, ``N``, ``TK``'s quaternion rows, ``Y``, ``M``, ``|q|``;
+    batch-last), then (reverse mode, with
     ``G = sym(g_P)``): ``P+ = M (TK)^T + Y T^T``, ``M = (TK) R - Y[:, o]``, ``Y = T P - (TK) P[o, :]``,
     ``TK = T K``, ``T``'s block ``N = I/n - q q^T/n^3`` and the mean's ``u = q/n``, ``x+ = x + K nu``,
     ``K = P[:, o] S^-1`` (``d S^-1 = -S^-1 dS S^-1``). Outputs ``dx (B, 13)``, ``dP (13, 13, B)``,
@@ -370,43 +371,25 @@ def _update_backward_kernel(x, P, nu, R, Si, K, g_mean, g_P, dx, dP, dnu, dS, dR
         for i in range(7):
             for j in range(7):
                 Sil[i, j] = Si[i, j, b]
-        # the forward's intermediates, recomputed from x, P, nu, K
+        # the forward's intermediates, saved by it (its N, TK[q], Y, M and |q|); q = x + K nu
+        norm = norm_saved[b]
         for i in range(4):
             s = x[i, b]
             for j in range(7):
                 s += Kl[i, j] * nu[j, b]
             q[i] = s
-        norm = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-        for i in range(4):
             for k in range(4):
-                N[i, k] = ((1.0 if i == k else 0.0) - (q[i] / norm) * (q[k] / norm)) / norm
-        for a in range(13):
+                N[i, k] = N_saved[i, k, b]
             for j in range(7):
-                if a < 4:
-                    s = 0.0
-                    for k in range(4):
-                        s += N[a, k] * Kl[k, j]
-                    TK[a, j] = s
-                else:
-                    TK[a, j] = Kl[a, j]
+                TK[i, j] = TK_saved[i, j, b]
+        for a in range(4, 13):
+            for j in range(7):
+                TK[a, j] = Kl[a, j]
         for a in range(13):
             for c in range(13):
-                z = 0.0
-                for k in range(7):
-                    z += TK[a, k] * Pl[k, c]
-                if a < 4:
-                    tp = 0.0
-                    for k in range(4):
-                        tp += N[a, k] * Pl[k, c]
-                else:
-                    tp = Pl[a, c]
-                Y[a, c] = tp - z
-        for a in range(13):
+                Y[a, c] = Y_saved[a, c, b]
             for j in range(7):
-                s = 0.0
-                for k in range(7):
-                    s += TK[a, k] * R[rb, k, j]
-                M[a, j] = s - Y[a, j]
+                M[a, j] = M_saved[a, j, b]
         # backward: P+ = sym(M (TK)^T + Y T^T)
         for a in range(13):
             for c in range(13):
@@ -617,35 +600,37 @@ def predict_backward(
     return torch.from_numpy(dx).transpose(0, 1), torch.from_numpy(dP), torch.from_numpy(dQ).permute(1, 2, 0)
 
 
-def update(xb: Tensor, Pb: Tensor, nub: Tensor, S: Tensor, R: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+def update(xb: Tensor, Pb: Tensor, nub: Tensor, S: Tensor, R: Tensor) -> tuple[Tensor, ...]:
     """The pose-twist measurement update, batch-last: ``xb (13, B)``, ``Pb (13, 13, B)``, the
     innovation ``nub (7, B)``, ``S = P[o, o] + R`` ``(7, 7, B)``, ``R (B or 1, 7, 7)``
-    (batch-first) -> ``(x+ (13, B), P+ (13, 13, B), S^-1 (7, 7, B), K (13, 7, B))``, the last
-    two for :func:`update_backward`. No autograd (the caller's
-    :class:`~fkn_bench.filters.structured._PoseUpdate` is)."""
+    (batch-first) -> ``(x+ (13, B), P+ (13, 13, B), *saved)``, ``saved`` what
+    :func:`update_backward` takes (``S^-1``, ``K``, ``N``, ``TK[q]``, ``Y``, ``M``, ``|q|``). No
+    autograd (the caller's :class:`~fkn_bench.filters.structured._PoseUpdate` is)."""
     batch, dtype = xb.shape[1], _NUMPY_DTYPES[xb.dtype]
-    mean, P_out = np.empty((13, batch), dtype), np.empty((13, 13, batch), dtype)
-    S_inv, K = np.empty((7, 7, batch), dtype), np.empty((13, 7, batch), dtype)
     e = np.empty
+    mean, P_out = e((13, batch), dtype), e((13, 13, batch), dtype)
+    saved = (e((7, 7, batch), dtype), e((13, 7, batch), dtype), e((4, 4, batch), dtype), e((4, 7, batch), dtype),
+             e((13, 13, batch), dtype), e((13, 7, batch), dtype), e(batch, dtype))
+    S_inv, K, N, TK, Y, M, norm = saved
     _kernels()["update_forward"](
         _array(xb), _array(Pb), _array(nub), _array(S), _array(R), mean, P_out, S_inv, K,
-        e((7, 14, batch), dtype), e((4, 7, batch), dtype), e((4, 4, batch), dtype), e((13, 13, batch), dtype),
-        e((13, 7, batch), dtype), e((13, 13, batch), dtype), e(batch, dtype),
+        e((7, 14, batch), dtype), TK, N, Y, M, e((13, 13, batch), dtype), norm,
     )
-    return torch.from_numpy(mean), torch.from_numpy(P_out), torch.from_numpy(S_inv), torch.from_numpy(K)
+    return (torch.from_numpy(mean), torch.from_numpy(P_out), *(torch.from_numpy(a) for a in saved))
 
 
 def update_backward(
-    xb: Tensor, Pb: Tensor, nub: Tensor, R: Tensor, S_inv: Tensor, K: Tensor, g_mean: Tensor, g_P: Tensor
+    xb: Tensor, Pb: Tensor, nub: Tensor, R: Tensor, saved: tuple[Tensor, ...], g_mean: Tensor, g_P: Tensor
 ) -> tuple[Tensor, Tensor, Tensor, Tensor, Tensor]:
     """``(dL/dx (13, B), dL/dP (13, 13, B), dL/dnu (7, B), dL/dS (7, 7, B), dL/dR (B or 1, 7, 7))``
-    of :func:`update` given the output gradients ``g_mean (13, B)``, ``g_P (13, 13, B)``."""
+    of :func:`update` given what it ``saved`` and the output gradients ``g_mean (13, B)``,
+    ``g_P (13, 13, B)``."""
     batch, dtype = xb.shape[1], _NUMPY_DTYPES[xb.dtype]
     dx, dP, dnu = np.empty((batch, 13), dtype), np.empty((13, 13, batch), dtype), np.empty((7, batch), dtype)
     dS, dR = np.empty((7, 7, batch), dtype), np.empty(tuple(R.shape), dtype)
     e = np.empty
     _kernels()["update_backward"](
-        _array(xb), _array(Pb), _array(nub), _array(R), _array(S_inv), _array(K), _array(g_mean), _array(g_P),
+        _array(xb), _array(Pb), _array(nub), _array(R), *(_array(t) for t in saved), _array(g_mean), _array(g_P),
         dx, dP, dnu, dS, dR,
         e((13, 7), dtype), e((13, 13), dtype), e((13, 7), dtype), e((4, 4), dtype), e((13, 13), dtype), e((13, 7), dtype),
         e((13, 7), dtype), e((13, 13), dtype), e((4, 4), dtype), e((13, 7), dtype), e(4, dtype), e(4, dtype), e((7, 7), dtype),

@@ -301,14 +301,15 @@ class _PoseUpdate(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, nub: Tensor, S: Tensor, R: Tensor) -> tuple[Tensor, Tensor]:  # type: ignore[override]
-        mean, P_post, S_inv, K = kernels.update(xb, Pb, nub, S, R)
-        ctx.save_for_backward(xb, Pb, nub, R, S_inv, K)
+        mean, P_post, *saved = kernels.update(xb, Pb, nub, S, R)
+        ctx.save_for_backward(xb, Pb, nub, R, *saved)
         return mean, P_post
 
     @staticmethod
     @torch.autograd.function.once_differentiable
     def backward(ctx: Any, g_mean: Tensor, g_P: Tensor) -> tuple[Tensor | None, ...]:  # type: ignore[override]
-        gradients = kernels.update_backward(*ctx.saved_tensors, g_mean, g_P)
+        xb, Pb, nub, R, *saved = ctx.saved_tensors
+        gradients = kernels.update_backward(xb, Pb, nub, R, tuple(saved), g_mean, g_P)
         return tuple(g if needed else None for g, needed in zip(gradients, ctx.needs_input_grad))
 
 
@@ -359,7 +360,7 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
         if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
             mean, P_post = _PoseUpdate.apply(*inputs)
         else:
-            mean, P_post, _, _ = kernels.update(*inputs)
+            mean, P_post, *_ = kernels.update(*inputs)
         return FilterState(mean.transpose(0, 1), batch_first(P_post)), nu, batch_first(S)
     if torch.is_grad_enabled() and (P.requires_grad or measurement_noise.requires_grad):
         S_inv = torch.linalg.inv_ex(batch_first(S))[0].permute(1, 2, 0).contiguous()  # batch-last, contiguous
