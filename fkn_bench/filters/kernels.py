@@ -5,9 +5,8 @@ forward and backward.
 ``H = [I7 0]``, see that module) as a few dozen torch operations on batch-last ``(13, 13, B)``
 blocks; at B = 64 (a training batch) each costs more in dispatch than in arithmetic, and at
 B = 1024 each makes its own pass over memory. These kernels do the same arithmetic (equal to
-rounding: ``tests/filters/test_kernels.py``) in one call per step: the prediction (forward and
-backward) and the update's forward with the batch innermost, so that the compiler vectorises
-it; the update's backward row by row. They run on CPU tensors of float32 or float64 (any strides:
+rounding: ``tests/filters/test_kernels.py``) in one call per step, with the batch innermost, so
+that the compiler vectorises it. They run on CPU tensors of float32 or float64 (any strides:
 inputs that are not C-contiguous are copied); anything else (a GPU, another dtype) takes the
 torch operations, which stay the reference implementation.
 
@@ -347,189 +346,192 @@ def _update_forward_kernel(x, P, nu, S, R, mean, P_out, Si, K, A, TK, N, Y, M, P
                 P_out[a, c, b] = (Pp[a, c, b] + Pp[c, a, b]) * 0.5
 
 
-def _update_backward_kernel(x, P, nu, R, Si, K, N_saved, TK_saved, Y_saved, M_saved, norm_saved, g_mean, g_P, dx, dP, dnu, dS, dR, TK, Y, M, N, G, dM, dTK, dY, dN, dK, q, dq, dSi, Pl, Kl, Sil, dPl):  # type: ignore[no-untyped-def]
-    """The backward pass of :func:`_update_forward_kernel`, row by row: from the inputs and what
+def _update_backward_kernel(x, P, nu, R, Si, K, N, TKq, Y, M, norm, g_mean, g_P, dx, dP, dnu, dS, dR, G, dM, dTK, dY, dN, dK, q, dq, dSi, W):  # type: ignore[no-untyped-def]
+    """The backward pass of :func:`_update_forward_kernel`, vectorised over the batch: from the inputs and what
     the forward saved (``Si``, ``K``, ``N``, ``TK``'s quaternion rows, ``Y``, ``M``, ``|q|``;
     batch-last), then (reverse mode, with
     ``G = sym(g_P)``): ``P+ = M (TK)^T + Y T^T``, ``M = (TK) R - Y[:, o]``, ``Y = T P - (TK) P[o, :]``,
     ``TK = T K``, ``T``'s block ``N = I/n - q q^T/n^3`` and the mean's ``u = q/n``, ``x+ = x + K nu``,
-    ``K = P[:, o] S^-1`` (``d S^-1 = -S^-1 dS S^-1``). Outputs ``dx (B, 13)``, ``dP (13, 13, B)``,
+    ``K = P[:, o] S^-1`` (``d S^-1 = -S^-1 dS S^-1``). Outputs ``dx (13, B)``, ``dP (13, 13, B)``,
     ``dnu (7, B)``, ``dS (7, 7, B)`` and ``dR`` (summed over the batch when ``R`` is shared)."""
     B = x.shape[1]
     per_row_r = R.shape[0] != 1
-    for i in range(7):
+    for i in range(4):  # q = x + K nu (the quaternion before renormalisation)
+        for b in range(B):
+            q[i, b] = x[i, b]
         for j in range(7):
-            for rb in range(dR.shape[0]):
-                dR[rb, i, j] = 0.0
-    for b in range(B):
-        rb = b if per_row_r else 0
-        for a in range(13):  # this row's matrices, contiguous (the batch-last arrays are strided by B)
-            for c in range(13):
-                Pl[a, c] = P[a, c, b]
-            for j in range(7):
-                Kl[a, j] = K[a, j, b]
-        for i in range(7):
-            for j in range(7):
-                Sil[i, j] = Si[i, j, b]
-        # the forward's intermediates, saved by it (its N, TK[q], Y, M and |q|); q = x + K nu
-        norm = norm_saved[b]
-        for i in range(4):
-            s = x[i, b]
-            for j in range(7):
-                s += Kl[i, j] * nu[j, b]
-            q[i] = s
-            for k in range(4):
-                N[i, k] = N_saved[i, k, b]
-            for j in range(7):
-                TK[i, j] = TK_saved[i, j, b]
-        for a in range(4, 13):
-            for j in range(7):
-                TK[a, j] = Kl[a, j]
-        for a in range(13):
-            for c in range(13):
-                Y[a, c] = Y_saved[a, c, b]
-            for j in range(7):
-                M[a, j] = M_saved[a, j, b]
-        # backward: P+ = sym(M (TK)^T + Y T^T)
-        for a in range(13):
-            for c in range(13):
-                G[a, c] = (g_P[a, c, b] + g_P[c, a, b]) * 0.5
-        for a in range(13):
-            for j in range(7):
+            for b in range(B):
+                q[i, b] += K[i, j, b] * nu[j, b]
+    for a in range(13):  # G = sym(g_P)
+        for c in range(13):
+            for b in range(B):
+                G[a, c, b] = (g_P[a, c, b] + g_P[c, a, b]) * 0.5
+    for a in range(13):  # dM = G TK, dTK = G M (P+ = M TK^T + Y T^T, G symmetric)
+        for j in range(7):
+            for b in range(B):
                 s = 0.0
                 t = 0.0
-                for c in range(13):
-                    s += G[a, c] * TK[c, j]
-                    t += G[a, c] * M[c, j]
-                dM[a, j] = s
-                dTK[a, j] = t
-        for a in range(13):
-            for c in range(13):
-                if c < 4:
-                    s = 0.0
-                    for e in range(4):
-                        s += G[a, e] * N[e, c]
-                    dY[a, c] = s
-                else:
-                    dY[a, c] = G[a, c]
-        for e in range(4):
-            for k in range(4):
+                for c in range(4):
+                    s += G[a, c, b] * TKq[c, j, b]
+                    t += G[a, c, b] * M[c, j, b]
+                for c in range(4, 13):
+                    s += G[a, c, b] * K[c, j, b]
+                    t += G[a, c, b] * M[c, j, b]
+                dM[a, j, b] = s
+                dTK[a, j, b] = t
+    for a in range(13):  # dY = G T (columns q: G[:, q] N)
+        for c in range(13):
+            if c < 4:
+                for b in range(B):
+                    dY[a, c, b] = G[a, 0, b] * N[0, c, b] + G[a, 1, b] * N[1, c, b] + G[a, 2, b] * N[2, c, b] + G[a, 3, b] * N[3, c, b]
+            else:
+                for b in range(B):
+                    dY[a, c, b] = G[a, c, b]
+    for e in range(4):  # dN = G[:, q]^T Y[:, q]
+        for k in range(4):
+            for b in range(B):
                 s = 0.0
                 for a in range(13):
-                    s += G[a, e] * Y[a, k]
-                dN[e, k] = s
-        # M = TK R - Y[:, o]
-        for a in range(13):
-            for k in range(7):
-                s = 0.0
-                for j in range(7):
-                    s += dM[a, j] * R[rb, k, j]
-                dTK[a, k] += s
+                    s += G[a, e, b] * Y[a, k, b]
+                dN[e, k, b] = s
+    for a in range(13):  # M = TK R - Y[:, o]: dTK += dM R^T, dR += TK^T dM, dY[:, o] -= dM
         for k in range(7):
-            for j in range(7):
-                s = 0.0
-                for a in range(13):
-                    s += TK[a, k] * dM[a, j]
-                dR[rb, k, j] += s
-        for a in range(13):
-            for j in range(7):
-                dY[a, j] -= dM[a, j]
-        # Y = T P - TK P[o, :]
-        for k in range(13):
-            for c in range(13):
-                s = 0.0
-                if k < 4:
-                    for i in range(4):
-                        s += N[i, k] * dY[i, c]
-                else:
-                    s = dY[k, c]
-                if k < 7:
-                    for a in range(13):
-                        s -= TK[a, k] * dY[a, c]
-                dPl[k, c] = s
-        for i in range(4):
-            for k in range(4):
-                s = 0.0
-                for c in range(13):
-                    s += dY[i, c] * Pl[k, c]
-                dN[i, k] += s
-        for a in range(13):
-            for k in range(7):
-                s = 0.0
-                for c in range(13):
-                    s += dY[a, c] * Pl[k, c]
-                dTK[a, k] -= s
-        # TK = [N K[q]; K[4:]]
-        for a in range(13):
-            for j in range(7):
-                if a < 4:
+            if per_row_r:
+                for b in range(B):
                     s = 0.0
-                    for i in range(4):
-                        s += N[i, a] * dTK[i, j]
-                    dK[a, j] = s
+                    for j in range(7):
+                        s += dM[a, j, b] * R[b, k, j]
+                    dTK[a, k, b] += s
+            else:
+                for b in range(B):
+                    s = 0.0
+                    for j in range(7):
+                        s += dM[a, j, b] * R[0, k, j]
+                    dTK[a, k, b] += s
+    for k in range(7):
+        for j in range(7):
+            if per_row_r:
+                for b in range(B):
+                    s = 0.0
+                    for a in range(4):
+                        s += TKq[a, k, b] * dM[a, j, b]
+                    for a in range(4, 13):
+                        s += K[a, k, b] * dM[a, j, b]
+                    dR[b, k, j] = s
+            else:
+                total = 0.0
+                for b in range(B):
+                    s = 0.0
+                    for a in range(4):
+                        s += TKq[a, k, b] * dM[a, j, b]
+                    for a in range(4, 13):
+                        s += K[a, k, b] * dM[a, j, b]
+                    total += s
+                dR[0, k, j] = total
+    for a in range(13):
+        for j in range(7):
+            for b in range(B):
+                dY[a, j, b] -= dM[a, j, b]
+    for k in range(13):  # Y = T P - TK P[o, :]: dP = T^T dY - (k < 7) TK^T dY
+        for c in range(13):
+            for b in range(B):
+                if k < 4:
+                    s = N[0, k, b] * dY[0, c, b] + N[1, k, b] * dY[1, c, b] + N[2, k, b] * dY[2, c, b] + N[3, k, b] * dY[3, c, b]
                 else:
-                    dK[a, j] = dTK[a, j]
-        for i in range(4):
-            for k in range(4):
+                    s = dY[k, c, b]
+                if k < 7:
+                    for a in range(4):
+                        s -= TKq[a, k, b] * dY[a, c, b]
+                    for a in range(4, 13):
+                        s -= K[a, k, b] * dY[a, c, b]
+                dP[k, c, b] = s
+    for i in range(4):  # dN += dY[q] P[q]^T
+        for k in range(4):
+            for b in range(B):
+                s = 0.0
+                for c in range(13):
+                    s += dY[i, c, b] * P[k, c, b]
+                dN[i, k, b] += s
+    for a in range(13):  # dTK -= dY P[o]^T
+        for k in range(7):
+            for b in range(B):
+                s = 0.0
+                for c in range(13):
+                    s += dY[a, c, b] * P[k, c, b]
+                dTK[a, k, b] -= s
+    for a in range(13):  # TK = [N K[q]; K[4:]]: dK, and dN += dTK[q] K[q]^T
+        for j in range(7):
+            if a < 4:
+                for b in range(B):
+                    dK[a, j, b] = N[0, a, b] * dTK[0, j, b] + N[1, a, b] * dTK[1, j, b] + N[2, a, b] * dTK[2, j, b] + N[3, a, b] * dTK[3, j, b]
+            else:
+                for b in range(B):
+                    dK[a, j, b] = dTK[a, j, b]
+    for i in range(4):
+        for k in range(4):
+            for b in range(B):
                 s = 0.0
                 for j in range(7):
-                    s += dTK[i, j] * Kl[k, j]
-                dN[i, k] += s
-        # N(q) = I/n - q q^T/n^3 and the mean's u = q/n
-        n3 = norm * norm * norm
-        trace = dN[0, 0] + dN[1, 1] + dN[2, 2] + dN[3, 3]
+                    s += dTK[i, j, b] * K[k, j, b]
+                dN[i, k, b] += s
+    for b in range(B):  # N = I/n - q q^T/n^3, the mean's u = q/n: dq
+        n = norm[b]
+        n3 = n * n * n
+        trace = dN[0, 0, b] + dN[1, 1, b] + dN[2, 2, b] + dN[3, 3, b]
         qdq = 0.0
         for i in range(4):
             for k in range(4):
-                qdq += q[i] * dN[i, k] * q[k]
+                qdq += q[i, b] * dN[i, k, b] * q[k, b]
         for m in range(4):
-            s = -trace * q[m] / n3
+            s = -trace * q[m, b] / n3
             t = 0.0
             for k in range(4):
-                t += (dN[m, k] + dN[k, m]) * q[k]
+                t += (dN[m, k, b] + dN[k, m, b]) * q[k, b]
             s -= t / n3
-            s += 3.0 * qdq * q[m] / (n3 * norm * norm)
+            s += 3.0 * qdq * q[m, b] / (n3 * n * n)
             for k in range(4):
-                s += N[m, k] * g_mean[k, b]
-            dq[m] = s
-        # x+ = x + K nu
-        for a in range(13):
-            d = dq[a] if a < 4 else g_mean[a, b]
-            dx[b, a] = d
-            for j in range(7):
-                dK[a, j] += d * nu[j, b]
+                s += N[m, k, b] * g_mean[k, b]
+            dq[m, b] = s
+    for a in range(13):  # x+ = x + K nu
+        for b in range(B):
+            dx[a, b] = dq[a, b] if a < 4 else g_mean[a, b]
         for j in range(7):
+            for b in range(B):
+                dK[a, j, b] += dx[a, b] * nu[j, b]
+    for j in range(7):
+        for b in range(B):
             s = 0.0
-            for a in range(4):
-                s += Kl[a, j] * dq[a]
-            for a in range(4, 13):
-                s += Kl[a, j] * g_mean[a, b]
+            for a in range(13):
+                s += K[a, j, b] * dx[a, b]
             dnu[j, b] = s
-        # K = P[:, o] S^-1: dP[:, o] += dK S^-T, dS = -S^-T (P[:, o]^T dK) S^-T
-        for a in range(13):
-            for k in range(7):
+    for a in range(13):  # K = P[:, o] S^-1: dP[:, o] += dK S^-T
+        for k in range(7):
+            for b in range(B):
                 s = 0.0
                 for j in range(7):
-                    s += dK[a, j] * Sil[k, j]
-                dPl[a, k] += s
-        for k in range(7):
-            for j in range(7):
+                    s += dK[a, j, b] * Si[k, j, b]
+                dP[a, k, b] += s
+    for k in range(7):  # dSi = P[:, o]^T dK; dS = -S^-T dSi S^-T
+        for j in range(7):
+            for b in range(B):
                 s = 0.0
                 for a in range(13):
-                    s += Pl[a, k] * dK[a, j]
-                dSi[k, j] = s
-        for i in range(7):
-            for j in range(7):
+                    s += P[a, k, b] * dK[a, j, b]
+                dSi[k, j, b] = s
+    for k in range(7):
+        for j in range(7):
+            for b in range(B):
+                s = 0.0
+                for l in range(7):
+                    s += dSi[k, l, b] * Si[j, l, b]
+                W[k, j, b] = s
+    for i in range(7):
+        for j in range(7):
+            for b in range(B):
                 s = 0.0
                 for k in range(7):
-                    t = 0.0
-                    for l in range(7):
-                        t += dSi[k, l] * Sil[j, l]
-                    s += Sil[k, i] * t
+                    s += Si[k, i, b] * W[k, j, b]
                 dS[i, j, b] = -s
-        for a in range(13):
-            for c in range(13):
-                dP[a, c, b] = dPl[a, c]
 
 
 _KERNELS = (_predict_forward_kernel, _predict_backward_kernel, _update_forward_kernel, _update_backward_kernel)
@@ -626,14 +628,14 @@ def update_backward(
     of :func:`update` given what it ``saved`` and the output gradients ``g_mean (13, B)``,
     ``g_P (13, 13, B)``."""
     batch, dtype = xb.shape[1], _NUMPY_DTYPES[xb.dtype]
-    dx, dP, dnu = np.empty((batch, 13), dtype), np.empty((13, 13, batch), dtype), np.empty((7, batch), dtype)
-    dS, dR = np.empty((7, 7, batch), dtype), np.empty(tuple(R.shape), dtype)
     e = np.empty
+    dx, dP, dnu = e((13, batch), dtype), e((13, 13, batch), dtype), e((7, batch), dtype)
+    dS, dR = e((7, 7, batch), dtype), e(tuple(R.shape), dtype)
     _kernels()["update_backward"](
         _array(xb), _array(Pb), _array(nub), _array(R), *(_array(t) for t in saved), _array(g_mean), _array(g_P),
         dx, dP, dnu, dS, dR,
-        e((13, 7), dtype), e((13, 13), dtype), e((13, 7), dtype), e((4, 4), dtype), e((13, 13), dtype), e((13, 7), dtype),
-        e((13, 7), dtype), e((13, 13), dtype), e((4, 4), dtype), e((13, 7), dtype), e(4, dtype), e(4, dtype), e((7, 7), dtype),
-        e((13, 13), dtype), e((13, 7), dtype), e((7, 7), dtype), e((13, 13), dtype),
+        e((13, 13, batch), dtype), e((13, 7, batch), dtype), e((13, 7, batch), dtype), e((13, 13, batch), dtype),
+        e((4, 4, batch), dtype), e((13, 7, batch), dtype), e((4, batch), dtype), e((4, batch), dtype),
+        e((7, 7, batch), dtype), e((7, 7, batch), dtype),
     )
-    return torch.from_numpy(dx).transpose(0, 1), torch.from_numpy(dP), torch.from_numpy(dnu), torch.from_numpy(dS), torch.from_numpy(dR)
+    return tuple(torch.from_numpy(a) for a in (dx, dP, dnu, dS, dR))  # type: ignore[return-value]
