@@ -12,7 +12,7 @@ arrays (the online ``step()`` of the estimators, batch 1, and the adaptive filte
 same code (:func:`fkn_bench.linalg.namespace`). For :class:`PoseTwistModel` torch batches of at
 least :data:`STRUCTURED_MIN_BATCH` rows, :class:`ExtendedKalmanFilter` runs the same step written
 for the model's structure instead (:mod:`fkn_bench.filters.structured`: equal to rounding), and
-so does any CPU float batch, as compiled kernels (:mod:`fkn_bench.filters.kernels`).
+so does any CPU float64 batch, as compiled kernels (:mod:`fkn_bench.filters.kernels`).
 
 Products such as ``F P F^T`` are symmetric only to rounding; ``predict`` and the update
 symmetrise the covariance they return (:func:`fkn_bench.linalg.symmetrize`, once each), so that
@@ -184,7 +184,7 @@ def ekf_predict(model: StateSpaceModel, state: FilterState, process_noise: Array
 STRUCTURED_MIN_BATCH = 128
 """Batch size from which the EKF of :class:`PoseTwistModel` runs the structured batch-last step
 (:mod:`fkn_bench.filters.structured`) as torch operations, where its compiled kernels do not run
-(not CPU float32/float64: :func:`fkn_bench.filters.kernels.supports`; where they run, the
+(not CPU float64: :func:`fkn_bench.filters.kernels.supports`; where they run, the
 structured step runs at every batch size): it costs about twice as many (smaller) torch
 operations as the generic step, so below about 100 rows the generic step's fewer calls win. Measured with
 the dense step forced, one process, alternating, 100 steps of ds1, ratio dense/structured time
@@ -204,7 +204,7 @@ class ExtendedKalmanFilter(KalmanFilter):
     With :class:`PoseTwistModel` itself (not a subclass, whose transition may differ) and torch
     batches of at least :data:`STRUCTURED_MIN_BATCH` rows, ``predict`` and ``update`` run the
     structured step (:func:`~fkn_bench.filters.structured.pose_predict`,
-    :func:`~fkn_bench.filters.structured.pose_update`), and so do CPU float batches of any size,
+    :func:`~fkn_bench.filters.structured.pose_update`), and so do CPU float64 batches of any size,
     as the structured step's compiled kernels (:mod:`fkn_bench.filters.kernels`); otherwise the
     generic step.
     """

@@ -6,8 +6,8 @@ forward and backward.
 blocks; at B = 64 (a training batch) each costs more in dispatch than in arithmetic, and at
 B = 1024 each makes its own pass over memory. These kernels do the same arithmetic (equal to
 rounding: ``tests/filters/test_kernels.py``) in one call per step, with the batch innermost, so
-that the compiler vectorises it. They run on CPU tensors of float32 or float64 (any strides:
-inputs that are not C-contiguous are copied); anything else (a GPU, another dtype) takes the
+that the compiler vectorises it. They run on CPU float64 tensors (the filters' default; any
+strides: inputs that are not C-contiguous are copied); anything else (a GPU, float32) takes the
 torch operations, which stay the reference implementation.
 
 Measured with ``fkn-bench bench run -k step_paths`` (the EKF's ``run()`` on ds1, 200 steps, with
@@ -15,8 +15,8 @@ the kernels and with the torch operations, one thread) on the 2-core AMD EPYC CI
 run: at B = 64 the forward pass 4.0x faster with the kernels and forward + backward 2.7x; at
 B = 1024 1.8x and 1.5x.
 
-Compilation (``numba.njit``, ``cache=True``) happens on first use, a few seconds per kernel and
-dtype, and is cached on disk beside this file (or in numba's user cache directory where that is
+Compilation (``numba.njit``, ``cache=True``) happens on first use, a few seconds per kernel, and
+is cached on disk beside this file (or in numba's user cache directory where that is
 read-only). :data:`ENABLED` switches the kernels off (the torch operations then run everywhere),
 which is how the tests compare the two.
 """
@@ -38,7 +38,9 @@ ENABLED: bool = os.environ.get("FKN_BENCH_KERNELS", "1") != "0"
 """Whether :func:`supports` may say yes (environment ``FKN_BENCH_KERNELS=0`` turns the kernels
 off at import; tests set the attribute)."""
 
-_DTYPES = (torch.float64, torch.float32)
+_DTYPES = (torch.float64,)
+"""The dtypes the kernels run on: float64, the filters' default. float32 batches take the torch
+operations (each dtype would be one more compilation of every kernel on first use)."""
 
 
 @functools.cache
@@ -52,7 +54,7 @@ def _numba() -> Any:
 
 
 def supports(*tensors: Tensor) -> bool:
-    """Whether the kernels can run on these tensors: CPU, float32 or float64, one dtype, kernels
+    """Whether the kernels can run on these tensors: CPU, float64 (:data:`_DTYPES`), kernels
     enabled and numba importable."""
     if not ENABLED:
         return False
@@ -551,20 +553,19 @@ def _kernels() -> dict[str, Any]:
         return {name: jit(kernel) for name, kernel in zip(names, _KERNELS)}
 
 
-
 def _array(t: Tensor) -> np.ndarray:
     """A C-contiguous numpy view of ``t`` (copied first when it is not contiguous)."""
     return t.detach().contiguous().numpy()
 
 
-_NUMPY_DTYPES = {torch.float64: np.float64, torch.float32: np.float32}
+_NUMPY_DTYPES = {torch.float64: np.float64}
 
 
 def predict(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float, g_sparsity: tuple[np.ndarray, np.ndarray]) -> tuple[Tensor, Tensor, Tensor]:
     """Batch-last prediction ``(x- (13, B), P- (13, 13, B), Ghat (4, 7, B))`` from ``xb (13, B)``,
     ``Pb (13, 13, B)``, ``Qb (13, 13, B or 1)`` (any strides, copied where not contiguous; ``Qb``
     is read batch-first, so a ``Q`` stored ``(B, 13, 13)``, as noise parameters are, is not
-    copied), CPU, one float dtype (:func:`supports`); ``dt`` in seconds; ``g_sparsity`` the
+    copied), CPU float64 (:func:`supports`); ``dt`` in seconds; ``g_sparsity`` the
     ``(source, coefficient)`` of ``Ghat``'s entries
     (:func:`fkn_bench.filters.structured.g_sparsity`). No autograd (the caller's
     :class:`~fkn_bench.filters.structured._PosePredict` is)."""

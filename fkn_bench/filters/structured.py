@@ -184,7 +184,7 @@ def pose_predict(state: FilterState, process_noise: Tensor, dt: float) -> Filter
 
 def _forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor, Tensor]:
     """:func:`_predict_forward` by the compiled kernel where it runs (:func:`kernels.supports`:
-    CPU, float32/float64), else by the torch operations."""
+    CPU float64), else by the torch operations."""
     if kernels.supports(xb, Pb, Qb):
         return kernels.predict(xb, Pb, Qb, dt, g_sparsity(dt))
     return _predict_forward(xb, Pb, Qb, dt)
@@ -343,7 +343,7 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
     quaternion's sign is aligned by ``model.align`` (as the generic update does); the posterior
     quaternion is renormalised and the covariance projected with ``N = (I - u u^T) / |q|``.
     Returns the posterior (means ``(B, 13)``, covariances ``(B, 13, 13)``, symmetrised), the
-    innovation ``nu (B, 7)`` and its covariance ``S (B, 7, 7)`` (exactly symmetric). On CPU float
+    innovation ``nu (B, 7)`` and its covariance ``S (B, 7, 7)`` (exactly symmetric). On CPU float64
     tensors the update runs as compiled kernels (:func:`fkn_bench.filters.kernels.update`,
     :class:`_PoseUpdate`); elsewhere as torch operations: the gain from :func:`_solve_spd`
     without autograd, from ``inv_ex`` with it (equal to rounding); without autograd the products
