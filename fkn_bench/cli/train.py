@@ -76,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.scenarios import get_scenario
     from fkn_bench.training import fit
+    from fkn_bench.training.pipeline import CHECKPOINT_INTERVAL_S
 
     check_minimum(args, epochs=1, seed=0)
     if args.lr is not None and not (math.isfinite(args.lr) and args.lr > 0):
@@ -93,8 +94,8 @@ def run(args: argparse.Namespace) -> int:
         saved = Path(out) / "checkpoint.pt"
         if not (saved.is_file() and saved.stat().st_mtime >= started):  # (not an earlier run's)
             raise
-        raise Interrupted(f"{out / 'checkpoint.pt'} holds the last finished epoch: add --resume to the same "
-                          "command to continue from it") from None
+        raise Interrupted(f"{out / 'checkpoint.pt'} holds the last saved epoch (checkpoints are written at most "
+                          f"{CHECKPOINT_INTERVAL_S:g} s apart): add --resume to the same command to continue from it") from None
     summary = outcome.summary()
     if args.write_artifact:
         from fkn_bench.training.artifacts import install_artifact

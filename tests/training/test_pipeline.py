@@ -85,3 +85,26 @@ def test_corrupt_and_foreign_checkpoints_are_refused(tmp_path: Path) -> None:
         load_checkpoint(future)
     with pytest.raises(CheckpointError, match="different scenario"):
         fit(NAME, get_scenario("ds1", n_steps=2400), {"epochs": 1}, out=tmp_path, resume=True, progress=False)
+
+
+def test_checkpoints_are_written_after_the_first_epoch_then_at_most_every_interval(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """After epoch 1, after an epoch once ``CHECKPOINT_INTERVAL_S`` have passed, and at the end
+    (here the interval is never reached: 1 + 1 writes for 3 epochs; with no interval, 3 + 1)."""
+    from fkn_bench.training import pipeline
+
+    saved: list[int] = []
+    real_save = pipeline.save_checkpoint
+
+    def counting_save(path: Path, payload: dict) -> Path:
+        saved.append(len(payload["trainer"]["history"]))
+        return real_save(path, payload)
+
+    monkeypatch.setattr(pipeline, "save_checkpoint", counting_save)
+    monkeypatch.setattr(pipeline, "CHECKPOINT_INTERVAL_S", 1e9)
+    fit(NAME, SHORT, {"epochs": 3}, out=tmp_path / "long", progress=False, plots=False)
+    assert saved == [1, 3]
+    saved.clear()
+    monkeypatch.setattr(pipeline, "CHECKPOINT_INTERVAL_S", 0.0)
+    fit(NAME, SHORT, {"epochs": 3}, out=tmp_path / "every", progress=False, plots=False)
+    assert saved == [1, 2, 3, 3]
+    assert load_checkpoint(tmp_path / "every" / "checkpoint.pt")["trainer"]["history"][-1]["epoch"] == 3
