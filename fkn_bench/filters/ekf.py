@@ -184,10 +184,10 @@ def ekf_predict(model: StateSpaceModel, state: FilterState, process_noise: Array
 STRUCTURED_MIN_BATCH = 128
 """Batch size from which the EKF of :class:`PoseTwistModel` runs the structured batch-last step
 (:mod:`fkn_bench.filters.structured`) as torch operations, where its compiled kernels do not run
-(not CPU float64: :func:`fkn_bench.filters.kernels.supports`; where they run, the
-structured step runs at every batch size): it costs about twice as many (smaller) torch
-operations as the generic step, so below about 100 rows the generic step's fewer calls win. Measured with
-the dense step forced, one process, alternating, 100 steps of ds1, ratio dense/structured time
+(not CPU float64: :func:`fkn_bench.filters.kernels.supports`; where they run, the structured
+step runs at every batch size): it costs about twice as many (smaller) torch operations as the
+generic step, so below about 100 rows the generic step's fewer calls win. Measured with the
+dense step forced, one process, alternating, 100 steps of ds1, ratio dense/structured time
 (forward; forward+backward): B = 16: 0.55; 0.63, B = 64: 0.83; 0.85, B = 96: 1.01; 1.03,
 B = 128: 0.99; 1.19, B = 256: 1.51; 1.48; again after the structured step lost its overheads
 (``run()`` timed with ``STRUCTURED_MIN_BATCH`` set to 1 and to a huge

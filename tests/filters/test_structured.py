@@ -3,8 +3,8 @@ the generic dense step (:func:`~fkn_bench.filters.ekf.ekf_predict`,
 :func:`~fkn_bench.filters.ekf.linear_measurement_update`): values to rounding, gradients against
 the dense step's autograd, the hand-written backward passes by finite differences, and a whole
 ``run()`` (the structured step forced at a small batch) against the generic one. Every test runs
-twice: with the prediction's compiled CPU kernels (:mod:`fkn_bench.filters.kernels`) and with the
-torch operations that run where they do not (a GPU)."""
+twice: with the step's compiled CPU kernels (:mod:`fkn_bench.filters.kernels`) and with the torch
+operations that run where they do not (a GPU, float32)."""
 
 from __future__ import annotations
 
