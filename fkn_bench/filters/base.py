@@ -14,6 +14,10 @@ Conventions of :meth:`KalmanFilter.run`:
   measurement (state from the model's ``initial_state``, covariance ``noise.initial``) and that
   measurement is not used again in an update; before it, the sequence reports the model's prior
   state propagated by the model.
+* A stretch of steps where no row has a measurement (nine in ten on ds1) is predicted, with the
+  prediction of the step after it, by one :meth:`KalmanFilter.predict_steps` call: the same
+  states as one ``predict`` per step (the EKF does it in one call of its compiled kernels and
+  one autograd node, where step by step the per-step overhead was most of a training epoch).
 * Inputs are cleaned once by the model's ``sanitize`` (non-finite or unusable measurements are
   dropped from the mask: the documented rule is "skip the update"), so no NaN reaches the
   arithmetic, neither forward nor backward.
@@ -165,7 +169,7 @@ class _StepOutputs:
 
     Without autograd the steps are written into one preallocated buffer: a list of per-step
     tensors kept alive would fragment the heap and make every step's temporaries fresh memory
-    (page faults dominated large batches). With autograd the steps are collected and stacked
+    (page faults dominated large batches). With autograd the steps are collected and concatenated
     once: writing slices of one buffer would make the backward pass copy the whole buffer's
     gradient at every step (quadratic in T). Either way a series of matrices is laid out as the
     second step's value is (the structured EKF step returns batch-last views, ``(B, 13, 13)`` over
@@ -175,7 +179,7 @@ class _StepOutputs:
 
     def __init__(self, steps: int, shape: tuple[int, ...], dtype: torch.dtype, tracked: bool) -> None:
         self._steps, self._shape, self._dtype, self._tracked = steps, shape, dtype, tracked
-        self._items: list[Tensor] = []
+        self._blocks: list[tuple[int, Tensor]] = []  # (first step, (count, ...) values), until allocated
         self._buffer: Tensor | None = None
 
     @staticmethod
@@ -196,27 +200,33 @@ class _StepOutputs:
         order = self._order(like)
         storage = torch.empty(self._steps, *(self._shape[a] for a in order), dtype=self._dtype, device=like.device)
         self._buffer = storage.permute(self._restore(order))
-        for t, item in enumerate(self._items):
-            self._buffer[t] = item
-        self._items = []
+        for t, block in self._blocks:
+            self._buffer[t : t + block.shape[0]] = block
+        self._blocks = []
 
     def put(self, t: int, value: Tensor) -> None:
+        """Step ``t``'s value."""
+        self.put_steps(t, value.unsqueeze(0))
+
+    def put_steps(self, t: int, values: Tensor) -> None:
+        """The values ``(count, ...)`` of steps ``t`` to ``t + count - 1``."""
         # the layout is the second step's (the first is an initialisation's, laid out its own way)
-        if not self._tracked and self._buffer is None and t >= 1:
-            self._allocate(value)
+        if not self._tracked and self._buffer is None and t + values.shape[0] > 1:
+            self._allocate(values[-1])
         if self._buffer is None:  # (a copy without autograd, as the buffer's would be)
-            self._items.append(value if self._tracked else value.clone())
+            self._blocks.append((t, values if self._tracked else values.clone()))
         else:
-            self._buffer[t] = value
+            self._buffer[t : t + values.shape[0]] = values
 
     def result(self) -> Tensor:
-        if not self._tracked and self._buffer is None and self._items:
-            self._allocate(self._items[-1])
+        if not self._tracked and self._buffer is None and self._blocks:
+            self._allocate(self._blocks[-1][1][-1])
         if self._buffer is not None:
             return self._buffer
-        order = self._order(self._items[-1])
-        stacked = torch.stack([item.permute(order) for item in self._items])
-        return stacked.permute(self._restore(order))
+        order = self._order(self._blocks[-1][1][-1])
+        time_major = [0, *(1 + axis for axis in order)]
+        joined = torch.cat([block.permute(time_major) for _, block in self._blocks])
+        return joined.permute(self._restore(order))
 
 
 class KalmanFilter(ABC):
@@ -278,6 +288,27 @@ class KalmanFilter(ABC):
         both covariances exactly symmetric (the posterior symmetrised).
         """
 
+    def predict_steps(
+        self, state: FilterState, process_noise: Tensor, dt: float, count: int, *, per_step: bool = False,
+        store_covariances: bool = True,
+    ) -> tuple[Tensor, Tensor | None, FilterState]:
+        """``count`` predictions in a row (torch; :meth:`run` predicts a stretch of steps without
+        a measurement, and the step after it, this way): ``process_noise`` as :meth:`predict`'s
+        at every step or, with ``per_step``, one per step ``(B or 1, count, k, k)``. Returns the
+        means ``(count - 1, B, n)`` and covariances ``(count - 1, B, k, k)`` (None unless
+        ``store_covariances``) of the states before the last, and the last state. This one calls
+        :meth:`predict` ``count`` times; a variant may do it in one call (the EKF's compiled
+        kernels)."""
+        means, covariances = [], []
+        for j in range(count):
+            if j:
+                means.append(state.mean)
+                if store_covariances:
+                    covariances.append(state.covariance)
+            state = self.predict(state, process_noise[:, j] if per_step else process_noise, dt)
+        stack = lambda values, last: torch.stack(values) if values else last.new_empty((0, *last.shape))  # noqa: E731
+        return stack(means, state.mean), stack(covariances, state.covariance) if store_covariances else None, state
+
     def initial_state(self, z: Tensor, initial_covariance: Tensor) -> FilterState:
         """State initialised from measurements ``z (B, m)`` (numpy or torch)."""
         mean = self.model.initial_state(z)
@@ -289,6 +320,16 @@ class KalmanFilter(ABC):
         mean = self.model.prior_state(batch, dtype)
         k = initial_covariance.shape[-1]
         return FilterState(mean, namespace(mean).broadcast_to(initial_covariance, (batch, k, k)))
+
+    @staticmethod
+    def _stretch_noise(noise: NoiseParameters, per_step: list[NoiseParameters] | None, t: int, count: int) -> tuple[Tensor, bool]:
+        """``(Q, per_step)`` for :meth:`predict_steps` over steps ``t`` to ``t + count - 1``: the
+        constant ``Q``, or the steps' own stacked ``(B, count, k, k)`` (from the per-step
+        ``unbind`` of :meth:`NoiseParameters.steps`, whose backward is one stack, not a slice's
+        zero-filled gradient of the whole series)."""
+        if per_step is None or noise.process.dim() != 4:
+            return noise.process, False
+        return torch.stack([per_step[j].process for j in range(t, t + count)], dim=1), True
 
     def run(
         self,
@@ -362,10 +403,38 @@ class KalmanFilter(ABC):
         unit_covariance = torch.eye(m, dtype=dtype).expand(batch, m, m)
         rejections = torch.zeros(batch, dtype=torch.long)  # consecutive gated-out measurements per row
         per_step = noise.steps() if time_varying else None
+        # stretch[t]: steps from t on (t >= 1) where no row has a measurement. They are predicted
+        # in one predict_steps call (nine steps in ten on ds1), together with the prediction of
+        # the step after them (whose update then starts from it)
+        stretch = [0] * (steps + 1)
+        for t in range(steps - 1, 0, -1):
+            stretch[t] = 0 if any_usable[t] else stretch[t + 1] + 1
+        resume, predicted = 0, False
         for t in range(steps):
+            if t < resume:  # predicted in the stretch before
+                continue
+            count = stretch[t] + (t + stretch[t] < steps)  # the stretch's predictions, and the next step's
+            if stretch[t] and count > 1:
+                resume = t + stretch[t]
+                process_noise, per_step_noise = self._stretch_noise(noise, per_step, t, count)
+                block_means, block_covariances, state = self.predict_steps(
+                    state, process_noise, dt, count, per_step=per_step_noise, store_covariances=covariances is not None
+                )
+                predicted = resume < steps  # state: the next step's prediction; else the stretch's last
+                for series, values in ((means, block_means), (covariances, block_covariances), (prior_means, block_means)):
+                    if series is not None and values is not None:
+                        series.put_steps(t, values)
+                        if not predicted:  # the stretch ends the sequence: its last step is the final state
+                            series.put(resume - 1, state.covariance if series is covariances else state.mean)
+                if innovations is not None and innovation_covs is not None:
+                    innovations.put_steps(t, no_innovation.expand(resume - t, batch, m))
+                    innovation_covs.put_steps(t, unit_covariance.expand(resume - t, batch, m, m))
+                initialised_steps[t:resume] = initialised
+                continue
             step_noise = per_step[t] if per_step is not None else noise
-            if t > 0:
+            if t > 0 and not predicted:
                 state = self.predict(state, step_noise.process, dt)
+            predicted = False
             if prior_means is not None:
                 prior_means.put(t, state.mean)
             update_rows = usable[:, t]

@@ -29,7 +29,7 @@ import numpy as np
 from fkn_bench.filters import kernels
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
-from fkn_bench.filters.structured import pose_predict, pose_update
+from fkn_bench.filters.structured import pose_predict, pose_predict_steps, pose_update
 from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, solve_spd, symmetrize
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update", "STRUCTURED_MIN_BATCH"]
@@ -235,6 +235,16 @@ class ExtendedKalmanFilter(KalmanFilter):
         if self._structured_for(state, process_noise):
             return pose_predict(state, process_noise, dt)
         return ekf_predict(self.model, state, process_noise, dt)
+
+    def predict_steps(
+        self, state: FilterState, process_noise: Array, dt: float, count: int, *, per_step: bool = False,
+        store_covariances: bool = True,
+    ) -> tuple[Array, Array | None, FilterState]:
+        """:meth:`KalmanFilter.predict_steps`, in one call of the compiled kernels where they run
+        (:func:`~fkn_bench.filters.structured.pose_predict_steps`)."""
+        if self._structured and kernels.supports(state.mean, state.covariance, process_noise):
+            return pose_predict_steps(state, process_noise, dt, count, per_step=per_step, store_covariances=store_covariances)
+        return super().predict_steps(state, process_noise, dt, count, per_step=per_step, store_covariances=store_covariances)
 
     def update(self, state: FilterState, z: Array, measurement_noise: Array) -> tuple[FilterState, Array, Array]:
         if self._structured_for(state, measurement_noise):

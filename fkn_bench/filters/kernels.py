@@ -6,7 +6,9 @@ forward and backward.
 blocks; at B = 64 (a training batch) each costs more in dispatch than in arithmetic, and at
 B = 1024 each makes its own pass over memory. These kernels do the same arithmetic (equal to
 rounding: ``tests/filters/test_kernels.py``) in one call per step, with the batch innermost, so
-that the compiler vectorises it. They run on CPU float64 tensors (the filters' default; any
+that the compiler vectorises it; :func:`predict_steps` and its backward run a stretch of
+predictions (steps without a measurement) through them on numpy views, with a few microseconds of
+overhead per step. They run on CPU float64 tensors (the filters' default; any
 strides: inputs that are not C-contiguous are copied); anything else (a GPU, float32) takes the
 torch operations, which stay the reference implementation.
 
@@ -32,7 +34,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["ENABLED", "supports", "predict", "predict_backward", "update", "update_backward"]
+__all__ = ["ENABLED", "supports", "predict", "predict_backward", "predict_steps", "predict_steps_backward", "update",
+           "update_backward"]
 
 ENABLED: bool = os.environ.get("FKN_BENCH_KERNELS", "1") != "0"
 """Whether :func:`supports` may say yes (environment ``FKN_BENCH_KERNELS=0`` turns the kernels
@@ -541,8 +544,8 @@ _KERNELS = (_predict_forward_kernel, _predict_backward_kernel, _update_forward_k
 
 @functools.cache
 def _kernels() -> dict[str, Any]:
-    """The compiled kernels (compiled once per process and dtype on first call; numba's on-disk
-    cache makes that a load after the first process)."""
+    """The compiled kernels (compiled once per process on first call; numba's on-disk cache
+    makes that a load after the first process)."""
     numba = _numba()
     names = ("predict_forward", "predict_backward", "update_forward", "update_backward")
     try:
@@ -601,6 +604,75 @@ def predict_backward(
         summed = g_P.sum(-1, keepdim=True)
         return torch.from_numpy(dx).transpose(0, 1), torch.from_numpy(dP), (summed + summed.transpose(0, 1)) * 0.5
     return torch.from_numpy(dx).transpose(0, 1), torch.from_numpy(dP), torch.from_numpy(dQ).permute(1, 2, 0)
+
+
+def predict_steps(
+    xb: Tensor, Pb: Tensor, Q: Tensor, dt: float, count: int, g_sparsity: tuple[np.ndarray, np.ndarray]
+) -> tuple[Tensor, Tensor, Tensor]:
+    """``count`` batch-last predictions in a row (a stretch of steps without a measurement):
+    ``(xs (count, 13, B), Ps (count, 13, 13, B), Ghats (count, 4, 7, B))``, the state after every
+    step, from ``xb (13, B)``, ``Pb (13, 13, B)`` and ``Q (Bq, Tq, 13, 13)``, ``Bq`` 1 or B,
+    ``Tq`` 1 (the same at every step) or ``count``. Each step is :func:`predict`'s compiled
+    kernel, bit for bit, called on numpy views of preallocated series: a few microseconds of
+    overhead per step, where a step through torch and autograd costs about a hundred. (The loop
+    is Python: a compiled loop calling the step kernel tripled the compile time, which every
+    fresh install and CI run pays.) No autograd (the caller's
+    :class:`~fkn_bench.filters.structured._PosePredictSteps` is)."""
+    batch, dtype = xb.shape[1], _NUMPY_DTYPES[xb.dtype]
+    e = np.empty
+    xs, Ps, Ghats = e((count, 13, batch), dtype), e((count, 13, 13, batch), dtype), e((count, 4, 7, batch), dtype)
+    D, corner = e((7, 13, batch), dtype), e((7, 4, batch), dtype)
+    source, coefficient = g_sparsity
+    step = _kernels()["predict_forward"]
+    x, P, noise = _array(xb), _array(Pb), _array(Q.transpose(0, 1))  # noise[j]: step j's (Bq, 13, 13)
+    per_step = noise.shape[0] != 1
+    for j in range(count):
+        step(x, P, noise[j if per_step else 0], float(dt), source, coefficient, xs[j], Ps[j], Ghats[j], D, corner)
+        x, P = xs[j], Ps[j]
+    return torch.from_numpy(xs), torch.from_numpy(Ps), torch.from_numpy(Ghats)
+
+
+def predict_steps_backward(
+    xb: Tensor, Pb: Tensor, xs: Tensor, Ps: Tensor, Ghats: Tensor, g_xs: Tensor, g_Ps: Tensor, dt: float,
+    q_shape: tuple[int, int], g_sparsity: tuple[np.ndarray, np.ndarray],
+) -> tuple[Tensor, Tensor, Tensor]:
+    """``(dL/dx (13, B), dL/dP (13, 13, B), dL/dQ (Bq, Tq, 13, 13))`` of :func:`predict_steps`
+    given the gradients of every step's mean ``g_xs (count, 13, B)`` and of every step's
+    covariance, or of the last only, ``g_Ps (count or 1, 13, 13, B)``; ``q_shape`` is ``(Bq,
+    Tq)``, ``Q``'s leading axes. Each step's backward is :func:`predict_backward`'s kernel, in
+    reverse order; ``dL/dQ`` sums ``sym(dL/dP-)`` over the steps that share a ``Q`` (and over the
+    batch when ``Bq`` is 1). ``dL/dx`` is a ``(13, B)`` view of ``(B, 13)`` storage, laid out as
+    the means are."""
+    count, batch, dtype = xs.shape[0], xb.shape[1], _NUMPY_DTYPES[xb.dtype]
+    e = np.empty
+    rows, per_step = q_shape
+    per_row = rows != 1
+    dQ = np.zeros((per_step, rows, 13, 13), dtype)  # time-major: dQ[t] is one step's
+    dQ_step = e((batch, 13, 13), dtype) if per_row else e((1, 13, 13), dtype)  # (the kernel fills a per-row one)
+    dx, g_mean = e((batch, 13), dtype), e((13, batch), dtype)
+    g_P, X = e((13, 13, batch), dtype), e((13, 13, batch), dtype)  # (C-contiguous, as the kernel was compiled for)
+    Xu, dG = e((7, 13, batch), dtype), e((4, 7, batch), dtype)
+    source, coefficient = g_sparsity
+    step = _kernels()["predict_backward"]
+    x_all, P_all, G_all = _array(xs), _array(Ps), _array(Ghats)
+    g_means, g_covariances = _array(g_xs), _array(g_Ps)
+    every = g_covariances.shape[0] == count and count != 1
+    g_mean[:], g_P[:] = g_means[count - 1], g_covariances[count - 1 if every else 0]
+    for j in range(count - 1, -1, -1):
+        x, P = (_array(xb), _array(Pb)) if j == 0 else (x_all[j - 1], P_all[j - 1])
+        step(x, P, G_all[j], g_mean, g_P, float(dt), source, coefficient, dx, X, dQ_step, Xu, dG)
+        t = j if per_step != 1 else 0
+        if per_row:
+            dQ[t] += dQ_step
+        else:  # sym(dL/dP-) summed over the batch
+            summed = g_P.sum(-1)
+            dQ[t, 0] += (summed + summed.T) * 0.5
+        if j:  # step j - 1's output gradients: its own plus step j's input gradients
+            np.add(g_means[j - 1], dx.T, out=g_mean)
+            g_P, X = X, g_P  # (the kernel reads g_P and writes X: they must not be one buffer)
+            if every:
+                g_P += g_covariances[j - 1]
+    return torch.from_numpy(dx).transpose(0, 1), torch.from_numpy(X), torch.from_numpy(dQ).transpose(0, 1)
 
 
 def update(xb: Tensor, Pb: Tensor, nub: Tensor, S: Tensor, R: Tensor) -> tuple[Tensor, ...]:

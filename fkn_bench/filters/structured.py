@@ -53,7 +53,7 @@ from fkn_bench.filters.base import FilterState
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import constant
 
-__all__ = ["pose_predict", "pose_update", "batch_last", "batch_first"]
+__all__ = ["pose_predict", "pose_predict_steps", "pose_update", "batch_last", "batch_first"]
 
 _U = (0, 1, 2, 3, 7, 8, 9)
 """The state components ``[q, w]`` on which the quaternion rows of ``F`` depend."""
@@ -182,6 +182,60 @@ def pose_predict(state: FilterState, process_noise: Tensor, dt: float) -> Filter
     return FilterState(mean.transpose(0, 1), batch_first(P_next))
 
 
+def pose_predict_steps(
+    state: FilterState, process_noise: Tensor, dt: float, count: int, *, per_step: bool = False,
+    store_covariances: bool = True,
+) -> tuple[Tensor, Tensor | None, FilterState]:
+    """``count`` predictions in a row (:func:`pose_predict` each, bit for bit) by the compiled
+    kernels (:func:`fkn_bench.filters.kernels.predict_steps`; CPU float64 only:
+    :func:`fkn_bench.filters.kernels.supports`) and, under autograd, one node
+    (:class:`_PosePredictSteps`): a stretch of steps without a measurement (nine in ten on ds1)
+    costs about one step's overhead. ``process_noise``: ``Q`` ``(13, 13)`` or ``(B or 1, 13,
+    13)`` at every step or, with ``per_step``, ``(B or 1, count, 13, 13)``.
+
+    Returns, as :meth:`~fkn_bench.filters.base.KalmanFilter.predict_steps`, the means
+    ``(count - 1, B, 13)`` and covariances ``(count - 1, B, 13, 13)`` (None unless
+    ``store_covariances``) of the states before the last, and the last state: views of
+    batch-last storage."""
+    Q = process_noise if per_step else (process_noise if process_noise.dim() == 3 else process_noise[None]).unsqueeze(1)
+    inputs = (state.mean.transpose(0, 1), batch_last(state.covariance), Q)
+    if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
+        means, mean, covariance, covariances = _PosePredictSteps.apply(*inputs, float(dt), count, store_covariances)
+    else:
+        xs, Ps, _ = kernels.predict_steps(*inputs, float(dt), count, g_sparsity(float(dt)))
+        means, mean, covariance, covariances = xs[:-1], xs[-1], Ps[-1], Ps[:-1]
+    final = FilterState(mean.transpose(0, 1), batch_first(covariance))
+    return means.permute(0, 2, 1), covariances.permute(0, 3, 1, 2) if store_covariances else None, final
+
+
+class _PosePredictSteps(torch.autograd.Function):
+    """``(x (13, B), P (13, 13, B), Q (Bq, Tq, 13, 13), dt, count, every_P) -> (xs (count - 1,
+    13, B), x- (13, B), P- (13, 13, B), Ps)``, the means before the last, the last state, and the
+    covariances before the last ``(count - 1, 13, 13, B)`` when ``every_P``, else none ``(0, 13,
+    13, B)`` (a run that stores no covariances gets no gradient buffer for them), by the compiled
+    kernels (:func:`fkn_bench.filters.kernels.predict_steps`,
+    :func:`~fkn_bench.filters.kernels.predict_steps_backward`). The last state is an output of
+    its own, not a selection of a series, whose backward would fill a zeroed gradient of the
+    whole series."""
+
+    @staticmethod
+    def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, Q: Tensor, dt: float, count: int,  # type: ignore[override]
+                every_P: bool) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        xs, Ps, Ghats = kernels.predict_steps(xb, Pb, Q, dt, count, g_sparsity(dt))
+        ctx.save_for_backward(xb, Pb, xs, Ps, Ghats)
+        ctx.dt, ctx.q_shape, ctx.every_P = dt, tuple(Q.shape[:2]), every_P
+        return xs[:-1], xs[-1], Ps[-1], Ps[:-1] if every_P else Ps[:0]
+
+    @staticmethod
+    @torch.autograd.function.once_differentiable
+    def backward(ctx: Any, g_means: Tensor, g_mean: Tensor, g_P: Tensor, g_Ps: Tensor) -> tuple[Tensor | None, ...]:  # type: ignore[override]
+        xb, Pb, xs, Ps, Ghats = ctx.saved_tensors
+        g_xs = torch.cat((g_means, g_mean[None]))
+        g_Ps = torch.cat((g_Ps, g_P[None])) if ctx.every_P else g_P[None]
+        gradients = kernels.predict_steps_backward(xb, Pb, xs, Ps, Ghats, g_xs, g_Ps, ctx.dt, ctx.q_shape, g_sparsity(ctx.dt))
+        return (*(g if needed else None for g, needed in zip(gradients, ctx.needs_input_grad)), None, None, None)
+
+
 def _forward(xb: Tensor, Pb: Tensor, Qb: Tensor, dt: float) -> tuple[Tensor, Tensor, Tensor]:
     """:func:`_predict_forward` by the compiled kernel where it runs (:func:`kernels.supports`:
     CPU float64), else by the torch operations."""
@@ -294,23 +348,40 @@ class _PosePredict(torch.autograd.Function):
 
 
 class _PoseUpdate(torch.autograd.Function):
-    """``(x (13, B), P (13, 13, B), nu (7, B), S (7, 7, B), R (B or 1, 7, 7)) -> (x+, P+)``
-    batch-last, by the compiled kernels (:func:`fkn_bench.filters.kernels.update` and its
-    backward, :func:`~fkn_bench.filters.kernels.update_backward`): one autograd node per
-    update, where the torch operations make about forty."""
+    """``(x (13, B), P (13, 13, B), z (7, B), R (B or 1, 7, 7)) -> (x+, P+, nu, S)`` batch-last,
+    with ``z`` the aligned measurement, ``nu = z - x[o]`` and ``S = P[o, o] + R`` (``H = [I7 0]``),
+    by the compiled kernels (:func:`fkn_bench.filters.kernels.update` and its backward,
+    :func:`~fkn_bench.filters.kernels.update_backward`): one autograd node per update, where the
+    torch operations make about forty. ``nu`` and ``S`` are formed here rather than by the
+    caller, whose slices of ``x`` and ``P`` would each add a backward node filling a zeroed
+    gradient of the whole ``x`` or ``P``; their gradients go to ``x[o]``, ``P[o, o]``, ``z`` and
+    ``R`` in the backward pass."""
 
     @staticmethod
-    def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, nub: Tensor, S: Tensor, R: Tensor) -> tuple[Tensor, Tensor]:  # type: ignore[override]
+    def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, zb: Tensor, R: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:  # type: ignore[override]
+        nub = zb - xb[0:7]
+        S = Pb[0:7, 0:7] + R.permute(1, 2, 0)  # a block of P plus R: exactly symmetric, as they are
         mean, P_post, *saved = kernels.update(xb, Pb, nub, S, R)
         ctx.save_for_backward(xb, Pb, nub, R, *saved)
-        return mean, P_post
+        ctx.set_materialize_grads(False)
+        return mean, P_post, nub, S
 
     @staticmethod
     @torch.autograd.function.once_differentiable
-    def backward(ctx: Any, g_mean: Tensor, g_P: Tensor) -> tuple[Tensor | None, ...]:  # type: ignore[override]
+    def backward(ctx: Any, g_mean: Tensor | None, g_P: Tensor | None, g_nu: Tensor | None, g_S: Tensor | None) -> tuple[Tensor | None, ...]:  # type: ignore[override]
         xb, Pb, nub, R, *saved = ctx.saved_tensors
-        gradients = kernels.update_backward(xb, Pb, nub, R, tuple(saved), g_mean, g_P)
-        return tuple(g if needed else None for g, needed in zip(gradients, ctx.needs_input_grad))
+        g_mean = torch.zeros_like(xb) if g_mean is None else g_mean
+        g_P = torch.zeros_like(Pb) if g_P is None else g_P
+        dx, dP, dnu, dS, dR = kernels.update_backward(xb, Pb, nub, R, tuple(saved), g_mean, g_P)
+        if g_nu is not None:
+            dnu += g_nu
+        if g_S is not None:
+            dS += g_S
+        dx[0:7] -= dnu  # nu = z - x[o]
+        dP[0:7, 0:7] += dS  # S = P[o, o] + R
+        dR += dS.permute(2, 0, 1) if R.shape[0] != 1 else dS.sum(-1).unsqueeze(0)
+        needed = ctx.needs_input_grad
+        return (dx if needed[0] else None, dP if needed[1] else None, dnu if needed[2] else None, dR if needed[3] else None)
 
 
 def _symmetrized(Pb: Tensor) -> Tensor:
@@ -350,18 +421,20 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
     are formed in place in their buffers."""
     x, P = state.mean, state.covariance
     z = model.align(z, x)  # type: ignore[attr-defined]
-    nu = z - model.measure(x)  # type: ignore[attr-defined]
     Pb = batch_last(P)
+    if kernels.supports(x, P, measurement_noise, z):  # the same update, compiled
+        R_rows = measurement_noise if measurement_noise.dim() == 3 else measurement_noise.unsqueeze(0)
+        inputs = (x.transpose(0, 1), Pb, z.transpose(0, 1), R_rows)
+        if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
+            mean, P_post, nub, S = _PoseUpdate.apply(*inputs)
+        else:
+            nub = inputs[2] - inputs[0][0:7]
+            S = Pb[0:7, 0:7] + R_rows.permute(1, 2, 0)
+            mean, P_post, *_ = kernels.update(inputs[0], Pb, nub, S, R_rows)
+        return FilterState(mean.transpose(0, 1), batch_first(P_post)), nub.transpose(0, 1), batch_first(S)
+    nu = z - model.measure(x)  # type: ignore[attr-defined]
     Rb = batch_last(measurement_noise)
     S = Pb[0:7, 0:7] + Rb  # a block of P plus R: exactly symmetric, as they are
-    if kernels.supports(x, P, measurement_noise, nu):  # the same update, compiled
-        R_rows = measurement_noise if measurement_noise.dim() == 3 else measurement_noise.unsqueeze(0)
-        inputs = (x.transpose(0, 1), Pb, nu.transpose(0, 1), S, R_rows)
-        if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
-            mean, P_post = _PoseUpdate.apply(*inputs)
-        else:
-            mean, P_post, *_ = kernels.update(*inputs)
-        return FilterState(mean.transpose(0, 1), batch_first(P_post)), nu, batch_first(S)
     if torch.is_grad_enabled() and (P.requires_grad or measurement_noise.requires_grad):
         S_inv = torch.linalg.inv_ex(batch_first(S))[0].permute(1, 2, 0).contiguous()  # batch-last, contiguous
         K = _product(Pb[:, 0:7], S_inv)  # (13, 7, B): P H^T S^-1

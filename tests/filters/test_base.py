@@ -14,6 +14,7 @@ from fkn_bench.filters import (
     VARIANTS,
     ExtendedKalmanFilter,
     FilterState,
+    KalmanFilter,
     MultiplicativeEKF,
     NoiseParameters,
     ParameterSet,
@@ -138,6 +139,42 @@ def test_missing_steps_are_predict_only(name: str, ds1_short) -> None:
         assert not result.updated[0, t]
         assert (result.innovations[0, t] == 0).all()
         torch.testing.assert_close(result.innovation_covariances[0, t], torch.eye(variant.innovation_dim, dtype=torch.float64))
+
+
+class _StepByStepEKF(ExtendedKalmanFilter):
+    """The EKF with the base class's ``predict_steps``: one ``predict`` per step."""
+
+    def predict_steps(self, *args, **kwargs):  # type: ignore[no-untyped-def]
+        return KalmanFilter.predict_steps(self, *args, **kwargs)
+
+
+@pytest.mark.parametrize("time_varying", [False, True])
+def test_stretches_without_measurements_are_predicted_in_one_call_as_step_by_step(time_varying: bool, ds1_short) -> None:
+    """run() predicts a stretch of steps without a measurement, and the step after it, in one
+    ``predict_steps`` call (the EKF's compiled kernels): the same states, bit for bit, as one
+    ``predict`` per step, and the same gradients to rounding, with a stretch at the end of the
+    sequences, an initialisation in the middle, per-step ``Q`` and every output stored."""
+    z, mask, _ = ds1_short
+    z, mask = z[:, :95].clone(), mask[:, :95].clone()
+    mask[1, :43] = False  # sequence 1 initialises at step 50
+    mask[:, 85:] = False  # a stretch ends the sequences
+    B, T = mask.shape
+    outputs = []
+    for variant in (ExtendedKalmanFilter(), _StepByStepEKF()):
+        g = torch.Generator().manual_seed(0)
+        shape = (B, T, 13) if time_varying else (13,)
+        q_std = (0.01 + 0.01 * torch.rand(shape, generator=g, dtype=torch.float64)).requires_grad_(True)
+        r_std = torch.full((7,), 0.02, dtype=torch.float64, requires_grad=True)
+        p0_std = torch.full((13,), 0.3, dtype=torch.float64, requires_grad=True)
+        result = variant.run(NoiseParameters.from_std(q_std, r_std, p0_std), z, mask, dt=0.1)
+        loss = result.means.square().sum() + result.covariances.sum() + result.innovations.square().sum()
+        loss = loss + result.prior_means.sum() + result.innovation_covariances.sum()
+        outputs.append([result.means, result.covariances, result.innovations, result.prior_means,
+                        *torch.autograd.grad(loss, (q_std, r_std, p0_std))])
+    for name, a, b in zip(("means", "covariances", "innovations", "prior means"), outputs[0][:4], outputs[1][:4]):
+        assert torch.equal(a, b), name
+    for name, a, b in zip(("dQ", "dR", "dP0"), outputs[0][4:], outputs[1][4:]):
+        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-15, msg=name)
 
 
 @pytest.mark.parametrize("name", ALL_VARIANTS)

@@ -1,7 +1,8 @@
 """The compiled CPU kernels of the pose-twist EKF step (:mod:`fkn_bench.filters.kernels`) against
-the torch operations they replace (:mod:`fkn_bench.filters.structured`): the prediction and the
-measurement update, forward values and every gradient to rounding, with ``Q`` and ``R`` shared
-and per row, from inputs of any strides; and where they do not run (float32 among them)."""
+the torch operations they replace (:mod:`fkn_bench.filters.structured`): the prediction (one step,
+and several in one call against the steps one by one) and the measurement update, forward values
+and every gradient to rounding, with ``Q`` and ``R`` shared and per row, from inputs of any
+strides; and where they do not run (float32 among them)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import pytest
 import torch
 
 from fkn_bench.filters import FilterState, PoseTwistModel, kernels
-from fkn_bench.filters.structured import _PosePredict, _predict_forward, g_sparsity, pose_update
+from fkn_bench.filters.structured import _PosePredict, _PosePredictSteps, _predict_forward, g_sparsity, pose_update
 
 
 def batch_last_inputs(batch: int, q_batch: int, seed: int) -> tuple[torch.Tensor, ...]:
@@ -106,3 +107,40 @@ def test_update_kernels_equal_the_torch_operations(batch: int, per_row: bool) ->
         assert a.shape == b.shape, name
         torch.testing.assert_close(a, b, rtol=1e-11, atol=1e-13, msg=name)
     assert torch.equal(compiled[1], compiled[1].transpose(1, 2))  # P+ exactly symmetric
+
+
+@pytest.mark.parametrize("every_P", [False, True])
+@pytest.mark.parametrize("batch,q_rows,per_step", [(1, 1, False), (5, 1, False), (5, 5, False), (5, 1, True), (5, 5, True)])
+def test_predict_steps_equal_the_steps_one_by_one(batch: int, q_rows: int, per_step: bool, every_P: bool) -> None:
+    """Several predictions in one call (:class:`_PosePredictSteps`): each step's state bit for bit
+    the one-step kernel's, and the gradients with respect to ``x``, ``P`` and ``Q`` (shared, per
+    row, per step) those of the steps chained by autograd, to rounding."""
+    count = 4
+    x, P, _ = batch_last_inputs(batch, 1, seed=batch + q_rows)
+    g = torch.Generator().manual_seed(5)
+    L = 0.1 * torch.randn(q_rows, count if per_step else 1, 13, 13, generator=g, dtype=torch.float64)
+    Q = L @ L.transpose(-1, -2)
+    inputs = [t.clone().requires_grad_(True) for t in (x, P, Q)]
+    means, mean, covariance, covariances = _PosePredictSteps.apply(*inputs, 0.1, count, every_P)
+    assert covariances.shape[0] == (count - 1 if every_P else 0)
+
+    chained = [t.clone().requires_grad_(True) for t in (x, P, Q)]
+    states = []
+    state = (chained[0], chained[1])
+    for j in range(count):
+        state = _PosePredict.apply(*state, chained[2][:, j if per_step else 0].permute(1, 2, 0), 0.1)
+        states.append(state)
+    assert torch.equal(mean, states[-1][0]) and torch.equal(covariance, states[-1][1])
+    assert torch.equal(means, torch.stack([s[0] for s in states[:-1]]))
+    if every_P:
+        assert torch.equal(covariances, torch.stack([s[1] for s in states[:-1]]))
+
+    weights = [torch.randn(t.shape, generator=g, dtype=torch.float64) for t in (means, mean, covariance, covariances)]
+    outputs = (means, mean, covariance, covariances)
+    reference = (torch.stack([s[0] for s in states[:-1]]), states[-1][0], states[-1][1],
+                 torch.stack([s[1] for s in states[:-1]])[: covariances.shape[0]])
+    gradients = torch.autograd.grad(sum((o * w).sum() for o, w in zip(outputs, weights)), inputs)
+    expected = torch.autograd.grad(sum((o * w).sum() for o, w in zip(reference, weights)), chained)
+    for name, a, b in zip(("dx", "dP", "dQ"), gradients, expected):
+        assert a.shape == b.shape, name
+        torch.testing.assert_close(a, b, rtol=1e-12, atol=1e-14, msg=name)
