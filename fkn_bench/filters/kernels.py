@@ -607,7 +607,8 @@ def predict_backward(
 
 
 def predict_steps(
-    xb: Tensor, Pb: Tensor, Q: Tensor, dt: float, count: int, g_sparsity: tuple[np.ndarray, np.ndarray]
+    xb: Tensor, Pb: Tensor, Q: Tensor, dt: float, count: int, g_sparsity: tuple[np.ndarray, np.ndarray], *,
+    every_step: bool = True,
 ) -> tuple[Tensor, Tensor, Tensor]:
     """``count`` batch-last predictions in a row (a stretch of steps without a measurement):
     ``(xs (count, 13, B), Ps (count, 13, 13, B), Ghats (count, 4, 7, B))``, the state after every
@@ -617,18 +618,26 @@ def predict_steps(
     overhead per step, where a step through torch and autograd costs about a hundred. (The loop
     is Python: a compiled loop calling the step kernel tripled the compile time, which every
     fresh install and CI run pays.) No autograd (the caller's
-    :class:`~fkn_bench.filters.structured._PosePredictSteps` is)."""
+    :class:`~fkn_bench.filters.structured._PosePredictSteps` is).
+
+    Without ``every_step`` only the last covariance is wanted (a run without autograd that stores
+    no covariances): ``Ps`` then holds two, written in turn, the last at ``(count - 1) % 2``, and
+    ``Ghats`` one; a fresh series of every step's covariance cost more in page zeroing than the
+    predictions themselves at B = 1024."""
     batch, dtype = xb.shape[1], _NUMPY_DTYPES[xb.dtype]
     e = np.empty
-    xs, Ps, Ghats = e((count, 13, batch), dtype), e((count, 13, 13, batch), dtype), e((count, 4, 7, batch), dtype)
+    slots = count if every_step else min(count, 2)
+    xs, Ps, Ghats = e((count, 13, batch), dtype), e((slots, 13, 13, batch), dtype), e((count if every_step else 1, 4, 7, batch), dtype)
     D, corner = e((7, 13, batch), dtype), e((7, 4, batch), dtype)
     source, coefficient = g_sparsity
     step = _kernels()["predict_forward"]
     x, P, noise = _array(xb), _array(Pb), _array(Q.transpose(0, 1))  # noise[j]: step j's (Bq, 13, 13)
     per_step = noise.shape[0] != 1
     for j in range(count):
-        step(x, P, noise[j if per_step else 0], float(dt), source, coefficient, xs[j], Ps[j], Ghats[j], D, corner)
-        x, P = xs[j], Ps[j]
+        slot = j if every_step else j % 2
+        step(x, P, noise[j if per_step else 0], float(dt), source, coefficient, xs[j], Ps[slot], Ghats[slot if every_step else 0],
+             D, corner)
+        x, P = xs[j], Ps[slot]
     return torch.from_numpy(xs), torch.from_numpy(Ps), torch.from_numpy(Ghats)
 
 

@@ -202,8 +202,9 @@ def pose_predict_steps(
     if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
         means, mean, covariance, covariances = _PosePredictSteps.apply(*inputs, float(dt), count, store_covariances)
     else:
-        xs, Ps, _ = kernels.predict_steps(*inputs, float(dt), count, g_sparsity(float(dt)))
-        means, mean, covariance, covariances = xs[:-1], xs[-1], Ps[-1], Ps[:-1]
+        xs, Ps, _ = kernels.predict_steps(*inputs, float(dt), count, g_sparsity(float(dt)), every_step=store_covariances)
+        last = count - 1 if store_covariances else (count - 1) % 2
+        means, mean, covariance, covariances = xs[:-1], xs[-1], Ps[last], Ps[:-1]
     final = FilterState(mean.transpose(0, 1), batch_first(covariance))
     return means.permute(0, 2, 1), covariances.permute(0, 3, 1, 2) if store_covariances else None, final
 
