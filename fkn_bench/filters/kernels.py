@@ -14,8 +14,8 @@ torch operations, which stay the reference implementation.
 
 Measured with ``fkn-bench bench run -k step_paths`` (the EKF's ``run()`` on ds1, 200 steps, with
 the kernels and with the torch operations, one thread) on the 2-core AMD EPYC CI machine, one
-run: at B = 64 the forward pass 4.0x faster with the kernels and forward + backward 2.7x; at
-B = 1024 1.8x and 1.5x.
+run: at B = 64 the forward pass 9.0x faster with the kernels and forward + backward 5.3x; at
+B = 1024 1.55x and 1.40x (the torch operations predict step by step).
 
 Compilation (``numba.njit``, ``cache=True``) happens on first use, a few seconds per kernel, and
 is cached on disk beside this file (or in numba's user cache directory where that is
