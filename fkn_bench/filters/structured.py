@@ -348,6 +348,13 @@ class _PosePredict(torch.autograd.Function):
         return dx, dP, dQ, None
 
 
+def _innovation(xb: Tensor, Pb: Tensor, zb: Tensor, R: Tensor) -> tuple[Tensor, Tensor]:
+    """``(nu (7, B), S (7, 7, B))`` batch-last for the aligned measurement ``zb (7, B)`` and
+    ``R (B or 1, 7, 7)`` batch-first: ``nu = z - x[o]``, ``S = P[o, o] + R`` (``H = [I7 0]``; a
+    block of ``P`` plus ``R``: exactly symmetric, as they are)."""
+    return zb - xb[0:7], Pb[0:7, 0:7] + R.permute(1, 2, 0)
+
+
 class _PoseUpdate(torch.autograd.Function):
     """``(x (13, B), P (13, 13, B), z (7, B), R (B or 1, 7, 7)) -> (x+, P+, nu, S)`` batch-last,
     with ``z`` the aligned measurement, ``nu = z - x[o]`` and ``S = P[o, o] + R`` (``H = [I7 0]``),
@@ -360,8 +367,7 @@ class _PoseUpdate(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, zb: Tensor, R: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:  # type: ignore[override]
-        nub = zb - xb[0:7]
-        S = Pb[0:7, 0:7] + R.permute(1, 2, 0)  # a block of P plus R: exactly symmetric, as they are
+        nub, S = _innovation(xb, Pb, zb, R)
         mean, P_post, *saved = kernels.update(xb, Pb, nub, S, R)
         ctx.save_for_backward(xb, Pb, nub, R, *saved)
         ctx.set_materialize_grads(False)
@@ -429,8 +435,7 @@ def pose_update(model: object, state: FilterState, z: Tensor, measurement_noise:
         if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
             mean, P_post, nub, S = _PoseUpdate.apply(*inputs)
         else:
-            nub = inputs[2] - inputs[0][0:7]
-            S = Pb[0:7, 0:7] + R_rows.permute(1, 2, 0)
+            nub, S = _innovation(*inputs)
             mean, P_post, *_ = kernels.update(inputs[0], Pb, nub, S, R_rows)
         return FilterState(mean.transpose(0, 1), batch_first(P_post)), nub.transpose(0, 1), batch_first(S)
     nu = z - model.measure(x)  # type: ignore[attr-defined]
