@@ -201,6 +201,9 @@ def test_store_flags_and_batch_independence(ds1_short) -> None:
     assert lean.innovation_covariances is None and lean.prior_means is None
     # exact: the store flags change what is kept, not the arithmetic (same computation twice)
     torch.testing.assert_close(lean.means, full.means, rtol=0, atol=0)
+    # (the last steps predict without a measurement: the final state of a stretch kept without its series)
+    torch.testing.assert_close(lean.final.covariance, full.final.covariance, rtol=0, atol=0)
+    torch.testing.assert_close(lean.final.mean, full.final.mean, rtol=0, atol=0)
     for b in range(z.shape[0]):
         alone = variant.run(noise, z[b : b + 1], mask[b : b + 1], dt=0.1)
         torch.testing.assert_close(alone.means[0], full.means[b], rtol=0, atol=1e-13)
