@@ -371,19 +371,26 @@ def _update_backward_kernel(x, P, nu, R, Si, K, N, TKq, Y, M, norm, g_mean, g_P,
         for c in range(13):
             for b in range(B):
                 G[a, c, b] = (g_P[a, c, b] + g_P[c, a, b]) * 0.5
+    # (A sum over a small axis inside the batch loop reads one batch-long row per term, each 8 kB
+    # apart at B = 1024: here up to 40 rows at once, which map to the same L1 cache sets. The
+    # heavy products below accumulate term by term into one row instead, in the same order, so
+    # the results are the same to the bit: 5.1 ms -> 2.7 ms per call at B = 1024 (shared R, one
+    # process). The other kernels' sums read at most 22 rows; rewritten the same way they were
+    # no faster, and are left as they are.)
     for a in range(13):  # dM = G TK, dTK = G M (P+ = M TK^T + Y T^T, G symmetric)
         for j in range(7):
             for b in range(B):
-                s = 0.0
-                t = 0.0
-                for c in range(4):
-                    s += G[a, c, b] * TKq[c, j, b]
-                    t += G[a, c, b] * M[c, j, b]
-                for c in range(4, 13):
-                    s += G[a, c, b] * K[c, j, b]
-                    t += G[a, c, b] * M[c, j, b]
-                dM[a, j, b] = s
-                dTK[a, j, b] = t
+                dM[a, j, b] = G[a, 0, b] * TKq[0, j, b]
+                dTK[a, j, b] = G[a, 0, b] * M[0, j, b]
+            for c in range(1, 13):
+                if c < 4:
+                    for b in range(B):
+                        dM[a, j, b] += G[a, c, b] * TKq[c, j, b]
+                else:
+                    for b in range(B):
+                        dM[a, j, b] += G[a, c, b] * K[c, j, b]
+                for b in range(B):
+                    dTK[a, j, b] += G[a, c, b] * M[c, j, b]
     for a in range(13):  # dY = G T (columns q: G[:, q] N)
         for c in range(13):
             if c < 4:
@@ -413,25 +420,25 @@ def _update_backward_kernel(x, P, nu, R, Si, K, N, TKq, Y, M, norm, g_mean, g_P,
                     for j in range(7):
                         s += dM[a, j, b] * R[0, k, j]
                     dTK[a, k, b] += s
+    row = np.empty(B)  # one (k, j) entry of TK^T dM along the batch
     for k in range(7):
         for j in range(7):
+            for b in range(B):
+                row[b] = TKq[0, k, b] * dM[0, j, b]
+            for a in range(1, 13):
+                if a < 4:
+                    for b in range(B):
+                        row[b] += TKq[a, k, b] * dM[a, j, b]
+                else:
+                    for b in range(B):
+                        row[b] += K[a, k, b] * dM[a, j, b]
             if per_row_r:
                 for b in range(B):
-                    s = 0.0
-                    for a in range(4):
-                        s += TKq[a, k, b] * dM[a, j, b]
-                    for a in range(4, 13):
-                        s += K[a, k, b] * dM[a, j, b]
-                    dR[b, k, j] = s
+                    dR[b, k, j] = row[b]
             else:
                 total = 0.0
                 for b in range(B):
-                    s = 0.0
-                    for a in range(4):
-                        s += TKq[a, k, b] * dM[a, j, b]
-                    for a in range(4, 13):
-                        s += K[a, k, b] * dM[a, j, b]
-                    total += s
+                    total += row[b]
                 dR[0, k, j] = total
     for a in range(13):
         for j in range(7):
@@ -439,17 +446,20 @@ def _update_backward_kernel(x, P, nu, R, Si, K, N, TKq, Y, M, norm, g_mean, g_P,
                 dY[a, j, b] -= dM[a, j, b]
     for k in range(13):  # Y = T P - TK P[o, :]: dP = T^T dY - (k < 7) TK^T dY
         for c in range(13):
-            for b in range(B):
-                if k < 4:
-                    s = N[0, k, b] * dY[0, c, b] + N[1, k, b] * dY[1, c, b] + N[2, k, b] * dY[2, c, b] + N[3, k, b] * dY[3, c, b]
-                else:
-                    s = dY[k, c, b]
-                if k < 7:
-                    for a in range(4):
-                        s -= TKq[a, k, b] * dY[a, c, b]
-                    for a in range(4, 13):
-                        s -= K[a, k, b] * dY[a, c, b]
-                dP[k, c, b] = s
+            if k < 4:
+                for b in range(B):
+                    dP[k, c, b] = N[0, k, b] * dY[0, c, b] + N[1, k, b] * dY[1, c, b] + N[2, k, b] * dY[2, c, b] + N[3, k, b] * dY[3, c, b]
+            else:
+                for b in range(B):
+                    dP[k, c, b] = dY[k, c, b]
+            if k < 7:
+                for a in range(13):
+                    if a < 4:
+                        for b in range(B):
+                            dP[k, c, b] -= TKq[a, k, b] * dY[a, c, b]
+                    else:
+                        for b in range(B):
+                            dP[k, c, b] -= K[a, k, b] * dY[a, c, b]
     for i in range(4):  # dN += dY[q] P[q]^T
         for k in range(4):
             for b in range(B):
@@ -460,10 +470,12 @@ def _update_backward_kernel(x, P, nu, R, Si, K, N, TKq, Y, M, norm, g_mean, g_P,
     for a in range(13):  # dTK -= dY P[o]^T
         for k in range(7):
             for b in range(B):
-                s = 0.0
-                for c in range(13):
-                    s += dY[a, c, b] * P[k, c, b]
-                dTK[a, k, b] -= s
+                row[b] = dY[a, 0, b] * P[k, 0, b]
+            for c in range(1, 13):
+                for b in range(B):
+                    row[b] += dY[a, c, b] * P[k, c, b]
+            for b in range(B):
+                dTK[a, k, b] -= row[b]
     for a in range(13):  # TK = [N K[q]; K[4:]]: dK, and dN += dTK[q] K[q]^T
         for j in range(7):
             if a < 4:
