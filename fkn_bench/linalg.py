@@ -26,7 +26,7 @@ import numpy as np
 if TYPE_CHECKING:
     import torch
 
-__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "divide_spd", "all_last", "dot", "sum_last", "spd_inverse", "solve_spd", "cholesky", "eye", "constant"]
+__all__ = ["symmetrize", "namespace", "add_matmul", "broadcast", "divide_spd", "all_last", "dot", "sum_last", "spd_inverse", "solve_spd", "cholesky", "eye", "constant", "zeros"]
 
 Matrices = TypeVar("Matrices", "np.ndarray", "torch.Tensor")
 
@@ -159,12 +159,12 @@ _CONSTANTS: dict[tuple, Any] = {}
 
 
 def constant(like: Any, key: Any, make: Any, cache: dict | None = None) -> Any:
-    """A cached constant array in the namespace and dtype of ``like``: ``make()`` (a float64
-    numpy array) converted once per (namespace, dtype, key), in ``cache`` (an object's own dict
+    """A cached constant array in the namespace, dtype and device of ``like``: ``make()`` (a
+    float64 numpy array) converted once per (namespace, dtype, device, key), in ``cache`` (an object's own dict
     for constants of that object) or a module cache bounded to 256 entries (irregular online
     intervals must not grow it)."""
     store = _CONSTANTS if cache is None else cache
-    full = (type(like), like.dtype, key)
+    full = (type(like), like.dtype, _device(like), key)
     value = store.get(full)
     if value is None:
         if len(store) >= 256:
@@ -176,12 +176,22 @@ def constant(like: Any, key: Any, make: Any, cache: dict | None = None) -> Any:
         else:
             import torch
 
-            value = torch.from_numpy(np.array(array, dtype=np.float64)).to(like.dtype)
+            value = torch.from_numpy(np.array(array, dtype=np.float64)).to(device=like.device, dtype=like.dtype)
         store[full] = value
     return value
 
 
+def zeros(like: Any, shape: tuple[int, ...]) -> Any:
+    """Zeros of ``shape`` in the namespace and dtype of ``like`` (and, torch, on its device)."""
+    return np.zeros(shape, dtype=like.dtype) if isinstance(like, np.ndarray) else like.new_zeros(shape)
+
+
+def _device(like: Any) -> Any:
+    """The device of a torch tensor (None for a numpy array): part of a cached constant's key."""
+    return None if isinstance(like, np.ndarray) else like.device
+
+
 def eye(like: Any, n: int) -> Any:
-    """The ``n x n`` identity in the namespace and dtype of ``like`` (cached, read-only)."""
-    value = _CONSTANTS.get((type(like), like.dtype, ("eye", n)))
+    """The ``n x n`` identity in the namespace, dtype and device of ``like`` (cached, read-only)."""
+    value = _CONSTANTS.get((type(like), like.dtype, _device(like), ("eye", n)))
     return value if value is not None else constant(like, ("eye", n), lambda: np.eye(n))

@@ -174,7 +174,7 @@ def _empty(shape: tuple[int, ...], dtype: torch.dtype, device: torch.device) -> 
     if device.type != "cpu":
         return torch.empty(shape, dtype=dtype, device=device)
     try:
-        numpy_dtype = torch.empty(0, dtype=dtype).numpy().dtype
+        numpy_dtype = torch.empty(0, dtype=dtype, device="cpu").numpy().dtype
     except TypeError:  # (a dtype numpy does not have)
         return torch.empty(shape, dtype=dtype)
     return torch.from_numpy(np.empty(shape, dtype=numpy_dtype))
@@ -334,7 +334,8 @@ class KalmanFilter(ABC):
 
     def prior(self, batch: int, initial_covariance: Tensor, dtype: Any) -> FilterState:
         """State reported before a sequence's first measurement (numpy for a numpy ``dtype``)."""
-        mean = self.model.prior_state(batch, dtype)
+        on = None if isinstance(initial_covariance, np.ndarray) else initial_covariance.device
+        mean = self.model.prior_state(batch, dtype, on)
         k = initial_covariance.shape[-1]
         return FilterState(mean, namespace(mean).broadcast_to(initial_covariance, (batch, k, k)))
 
@@ -377,14 +378,14 @@ class KalmanFilter(ABC):
         if mask.shape != measurements.shape[:2]:
             raise ValueError(f"mask must have shape {tuple(measurements.shape[:2])} (got {tuple(mask.shape)})")
         batch, steps, _ = measurements.shape
-        dtype = measurements.dtype
+        dtype, device = measurements.dtype, measurements.device
         if not dtype.is_floating_point:
             raise ValueError(f"measurements must be floating point (got {dtype})")
         if batch == 0 or steps == 0:
             raise ValueError(f"measurements hold no sequences or no time steps (shape {tuple(measurements.shape)})")
         dt = check_dt(dt)
         _check_noise_shapes(noise, batch, steps, self.covariance_dim, self.innovation_dim)
-        noise = noise.to(dtype)
+        noise = noise.to(dtype, device)
         time_varying = noise.time_varying
         z_all, usable = self.model.sanitize(measurements, mask.bool())
 
@@ -396,14 +397,14 @@ class KalmanFilter(ABC):
             init_steps = set(first[has_any].tolist())
             noise0 = noise.at_step(0) if time_varying else noise
             state = self.prior(batch, noise0.initial, dtype)
-            initialised = torch.zeros(batch, dtype=torch.bool)
+            initialised = torch.zeros(batch, dtype=torch.bool, device=device)
         else:
-            first = torch.full((batch,), -1, dtype=torch.long)
+            first = torch.full((batch,), -1, dtype=torch.long, device=device)
             init_steps = set()
             # symmetrised once: the structured EKF predict keeps a symmetric P symmetric, and makes
             # no symmetrising pass of its own (a symmetric P is returned unchanged, to the bit)
-            state = FilterState(initial.mean.to(dtype), symmetrize(initial.covariance.to(dtype)))
-            initialised = torch.ones(batch, dtype=torch.bool)
+            state = FilterState(initial.mean.to(device, dtype), symmetrize(initial.covariance.to(device, dtype)))
+            initialised = torch.ones(batch, dtype=torch.bool, device=device)
 
         m, k, n = self.innovation_dim, self.covariance_dim, self.model.state_dim
         tracked = torch.is_grad_enabled() and any(
@@ -414,11 +415,11 @@ class KalmanFilter(ABC):
         innovations = _StepOutputs(steps, (batch, m), dtype, tracked) if store_innovations else None
         innovation_covs = _StepOutputs(steps, (batch, m, m), dtype, tracked) if store_innovations else None
         prior_means = _StepOutputs(steps, (batch, n), dtype, tracked) if store_innovations else None
-        updated_steps = torch.zeros(steps, batch, dtype=torch.bool)
-        initialised_steps = torch.zeros(steps, batch, dtype=torch.bool)
-        no_innovation = torch.zeros(batch, m, dtype=dtype)
-        unit_covariance = torch.eye(m, dtype=dtype).expand(batch, m, m)
-        rejections = torch.zeros(batch, dtype=torch.long)  # consecutive gated-out measurements per row
+        updated_steps = torch.zeros(steps, batch, dtype=torch.bool, device=device)
+        initialised_steps = torch.zeros(steps, batch, dtype=torch.bool, device=device)
+        no_innovation = torch.zeros(batch, m, dtype=dtype, device=device)
+        unit_covariance = torch.eye(m, dtype=dtype, device=device).expand(batch, m, m)
+        rejections = torch.zeros(batch, dtype=torch.long, device=device)  # consecutive gated-out measurements per row
         per_step = noise.steps() if time_varying else None
         # stretch[t]: steps from t on (t >= 1) where no row has a measurement. They are predicted
         # in one predict_steps call (nine steps in ten on ds1), together with the prediction of

@@ -30,7 +30,7 @@ from fkn_bench.filters import kernels
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
 from fkn_bench.filters.structured import pose_predict, pose_predict_steps, pose_update
-from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, solve_spd, symmetrize
+from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, solve_spd, symmetrize, zeros
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update", "STRUCTURED_MIN_BATCH"]
 
@@ -129,7 +129,7 @@ def _pad_columns(M: Array, columns: slice, n: int) -> Array:
     selecting ``columns``)."""
     xp = namespace(M)
     batch, rows, _ = M.shape
-    zero = xp.zeros((1, 1, 1), dtype=M.dtype)
+    zero = zeros(M, (1, 1, 1))
     parts = [M]
     if columns.start:
         parts.insert(0, xp.broadcast_to(zero, (batch, rows, columns.start)))

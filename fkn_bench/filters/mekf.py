@@ -37,7 +37,7 @@ from fkn_bench.filters.ekf import joseph_update
 from fkn_bench.filters.models import PoseTwistModel
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import add_matmul, broadcast, constant, dot, eye, namespace, symmetrize
+from fkn_bench.linalg import add_matmul, broadcast, constant, dot, eye, namespace, symmetrize, zeros
 from fkn_bench.types import ERROR_NAMES
 
 __all__ = ["MultiplicativeEKF", "MEKF_MANUAL_LAYOUT", "left_jacobian"]
@@ -118,8 +118,8 @@ class MultiplicativeEKF(KalmanFilter):
             Phi = broadcast(lower, (batch, 12, 12))
             Phi[:, 0:3, 0:3], Phi[:, 0:3, 6:9] = qx.rotation_matrix(dq), dt * left_jacobian(dt * x[:, 7:10])
             return Phi
-        zeros = xp.zeros((batch, 3, 3), dtype=x.dtype)
-        top = xp.concat((qx.rotation_matrix(dq), zeros, dt * left_jacobian(dt * x[:, 7:10]), zeros), axis=2)
+        blank = zeros(x, (batch, 3, 3))
+        top = xp.concat((qx.rotation_matrix(dq), blank, dt * left_jacobian(dt * x[:, 7:10]), blank), axis=2)
         return xp.concat((top, broadcast(lower[3:], (batch, 9, 12))), axis=1)
 
     def predict(self, state: FilterState, process_noise: Array, dt: float) -> FilterState:
@@ -144,12 +144,12 @@ class MultiplicativeEKF(KalmanFilter):
         mean = xp.concat((q, mean[:, 4:]), axis=1)
         n = x.shape[1]
         eye = constant(x, ("eye", n - 4), lambda: np.eye(n - 4))
-        zeros = xp.zeros((x.shape[0], 4, n - 4), dtype=x.dtype)
-        into = xp.concat((xp.concat((0.5 * qx.theta_matrix(x[:, 0:4]), zeros), axis=2),  # M: error -> additive
-                          broadcast(xp.concat((xp.zeros((n - 4, 3), dtype=x.dtype), eye), axis=1), (x.shape[0], n - 4, n - 1))),
+        blank = zeros(x, (x.shape[0], 4, n - 4))
+        into = xp.concat((xp.concat((0.5 * qx.theta_matrix(x[:, 0:4]), blank), axis=2),  # M: error -> additive
+                          broadcast(xp.concat((zeros(x, (n - 4, 3)), eye), axis=1), (x.shape[0], n - 4, n - 1))),
                          axis=1)
-        out = xp.concat((xp.concat((2.0 * qx.theta_matrix(q).swapaxes(1, 2), zeros[:, :3]), axis=2),  # T: additive -> error
-                         broadcast(xp.concat((xp.zeros((n - 4, 4), dtype=x.dtype), eye), axis=1), (x.shape[0], n - 4, n))),
+        out = xp.concat((xp.concat((2.0 * qx.theta_matrix(q).swapaxes(1, 2), blank[:, :3]), axis=2),  # T: additive -> error
+                         broadcast(xp.concat((zeros(x, (n - 4, 4)), eye), axis=1), (x.shape[0], n - 4, n))),
                         axis=1)
         Phi = out @ F @ into
         return FilterState(mean, symmetrize(add_matmul(process_noise, Phi @ P, Phi.swapaxes(1, 2))))
@@ -164,7 +164,7 @@ class MultiplicativeEKF(KalmanFilter):
         def reset(dx: Array) -> tuple[Array, slice, Array]:
             return dx, slice(0, 3), eye(dx, 3) + 0.5 * qx.skew(dx[:, 0:3])
 
-        error = xp.zeros((x.shape[0], x.shape[1] - 1), dtype=x.dtype)
+        error = zeros(x, (x.shape[0], x.shape[1] - 1))
         # P_post comes back symmetrised (the reset's G P G^T is part of joseph_update's product)
         dx, P_post, S, _ = joseph_update(error, P, nu, measurement_noise, observed=slice(0, 6), normalize=reset)
         q_post = qx.multiply(qx.from_rotation_vector(dx[:, 0:3]), q)

@@ -28,7 +28,7 @@ import numpy as np
 
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, dot, eye, namespace, sum_last
+from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, dot, eye, namespace, sum_last, zeros
 from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES, STATE_UNITS
 
 __all__ = ["StateSpaceModel", "PoseTwistModel", "LinearGaussianModel", "PAPER_MANUAL_LAYOUT"]
@@ -54,10 +54,6 @@ PAPER_MANUAL_LAYOUT = NoiseLayout(
     p0_default=(0.1,) * 4 + (0.1,) * 3 + (0.2,) * 3 + (0.003,) * 3,
 )
 """Components, units and defaults (the paper's manual tuning) of the additive pose-twist model."""
-
-
-def _zeros(like: Array, shape: tuple[int, ...]) -> Array:
-    return namespace(like).zeros(shape, dtype=like.dtype)
 
 
 class StateSpaceModel:
@@ -124,19 +120,21 @@ class StateSpaceModel:
         """State ``(B, n)`` initialised from measurements ``(B, m)``."""
         raise NotImplementedError
 
-    def prior_state(self, batch: int, dtype: Any) -> Array:
+    def prior_state(self, batch: int, dtype: Any, device: Any = None) -> Array:
         """State ``(B, n)`` reported before a sequence's first measurement (a torch tensor for a
-        torch ``dtype``, else a numpy array)."""
-        return _prior(batch, self.state_dim, dtype, first=0.0)
+        torch ``dtype``, on ``device``; else a numpy array)."""
+        return _prior(batch, self.state_dim, dtype, first=0.0, device=device)
 
 
-def _prior(batch: int, n: int, dtype: Any, *, first: float) -> Array:
+def _prior(batch: int, n: int, dtype: Any, *, first: float, device: Any = None) -> Array:
+    """``(B, n)`` zeros but ``first`` in the first column: a torch tensor on ``device`` for a
+    torch ``dtype``, else a numpy array."""
     x = np.zeros((batch, n))
     x[:, 0] = first
     if type(dtype).__module__.startswith("torch"):
         import torch
 
-        return torch.from_numpy(x).to(dtype)
+        return torch.from_numpy(x).to(device=device, dtype=dtype)
     return x.astype(dtype, copy=False)
 
 
@@ -219,7 +217,7 @@ class PoseTwistModel(StateSpaceModel):
         A, At, basis = constants[:, 0:13], constants[:, 13:26], constants[:, 26:78]
         E = xp.reshape(x @ basis, (batch, 4, 13))  # [dt/2 Omega(w) | 0 | dt/2 Theta(q) | 0]
         increment = (E[:, :, 0:4] @ x[:, 0:4, None])[:, :, 0]  # dt/2 Omega(w) q
-        mean = add_matmul(xp.concat((increment, _zeros(x, (batch, 9))), axis=1), x, At)
+        mean = add_matmul(xp.concat((increment, zeros(x, (batch, 9))), axis=1), x, At)
         F = xp.concat((A[0:4] + E, broadcast(A[4:13], (batch, 9, 13))), axis=1)
         return mean, F
 
@@ -290,10 +288,10 @@ class PoseTwistModel(StateSpaceModel):
         return xp.concat((q / xp.sqrt(xp.sum(q * q, axis=1, keepdims=True)), xp.zeros_like(x[:, 4:])), axis=1)
 
     def initial_state(self, z: Array) -> Array:
-        return namespace(z).concat((z[:, :7], _zeros(z, (z.shape[0], 6))), axis=1)
+        return namespace(z).concat((z[:, :7], zeros(z, (z.shape[0], 6))), axis=1)
 
-    def prior_state(self, batch: int, dtype: Any) -> Array:
-        return _prior(batch, 13, dtype, first=1.0)
+    def prior_state(self, batch: int, dtype: Any, device: Any = None) -> Array:
+        return _prior(batch, 13, dtype, first=1.0, device=device)
 
 
 def _pose_constants(dt: float) -> np.ndarray:

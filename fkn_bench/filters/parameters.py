@@ -63,16 +63,18 @@ class NoiseParameters:
         *,
         dtype: torch.dtype = torch.float64,
     ) -> NoiseParameters:
-        """Diagonal covariances from standard deviations (``(..., k)`` each; exactly symmetric)."""
+        """Diagonal covariances from standard deviations (``(..., k)`` each; exactly symmetric),
+        on the device of a tensor given (a sequence: torch's default device)."""
 
         def diag(std: Tensor | Sequence[float]) -> Tensor:
-            t = torch.as_tensor(std, dtype=dtype)
+            t = std.to(dtype) if isinstance(std, Tensor) else torch.as_tensor(std, dtype=dtype)
             return torch.diag_embed(t * t)
 
         return cls(diag(q_std), diag(r_std), diag(p0_std))
 
-    def to(self, dtype: torch.dtype) -> NoiseParameters:
-        return NoiseParameters(self.process.to(dtype), self.measurement.to(dtype), self.initial.to(dtype))
+    def to(self, dtype: torch.dtype, device: torch.device | str | None = None) -> NoiseParameters:
+        """The parameters in ``dtype`` (and on ``device``; None: where they are), differentiably."""
+        return NoiseParameters(*(m.to(device=device, dtype=dtype) for m in (self.process, self.measurement, self.initial)))
 
     def at_step(self, t: int) -> NoiseParameters:
         """The parameters of step ``t`` when they are time-varying (``(B, T, k, k)``)."""

@@ -44,7 +44,7 @@ import numpy as np
 from fkn_bench.filters.models import PAPER_MANUAL_LAYOUT, PoseTwistModel, _prior
 from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
-from fkn_bench.linalg import constant, eye, namespace
+from fkn_bench.linalg import constant, eye, namespace, zeros
 
 __all__ = ["RigidBodyModel", "RIGID_BODY_LAYOUT", "RIGID_BODY_RATIO_LAYOUT", "inertia_ratios", "moments_from_ratios", "euler_coefficients"]
 
@@ -176,8 +176,8 @@ class RigidBodyModel(PoseTwistModel):
         if not isinstance(x, np.ndarray):
             import torch
 
-            if not (x.requires_grad and torch.is_grad_enabled()):
-                # a tensor nobody differentiates (the batched filters at evaluation): the same
+            if x.device.type == "cpu" and not (x.requires_grad and torch.is_grad_enabled()):
+                # a CPU tensor nobody differentiates (the batched filters at evaluation): the same
                 # arithmetic on numpy views of it, whose ~150 small operations per step cost less
                 # than torch's dispatch of them (results agree to rounding)
                 mean, F = self._transition(x.detach().numpy(), dt, jacobian=jacobian)
@@ -231,11 +231,11 @@ class RigidBodyModel(PoseTwistModel):
         tame_rows, wild_rows = np.flatnonzero(~wild), np.flatnonzero(wild)
         steps = int(min(math.ceil(min(float(needed[wild].max()), MAX_SUBSTEPS)), MAX_SUBSTEPS))
         pick = (lambda a, rows: a if a is None or a.shape[0] == 1 else a[rows]) if xp is np else (
-            lambda a, rows: a if a is None or a.shape[0] == 1 else a[xp.from_numpy(rows)])
+            lambda a, rows: a if a is None or a.shape[0] == 1 else a[xp.from_numpy(rows).to(a.device)])
         parts = [self._rk4(pick(y, rows), pick(tangent, rows), pick(p, rows), pick(dp, rows), dt, n)
                  for rows, n in ((tame_rows, self.substeps), (wild_rows, steps)) if rows.size]
         order = np.argsort(np.concatenate((tame_rows, wild_rows)))
-        index = order if xp is np else xp.from_numpy(order)
+        index = order if xp is np else xp.from_numpy(order).to(y.device)
         y = xp.concat([part[0] for part in parts], axis=0)[index]
         if tangent is not None:
             tangent = xp.concat([part[1] for part in parts], axis=0)[index]
@@ -260,9 +260,9 @@ class RigidBodyModel(PoseTwistModel):
         q, w = y[:, 0:4], y[:, 4:7]
         rates = xp.reshape(w @ constant(y, "euler-rates", _rates_matrix), (batch, 3, 3))
         top = xp.concat((0.5 * qx.right_omega_matrix(w), 0.5 * qx.right_theta_matrix(q)), axis=2)
-        bottom = [xp.zeros((batch, 3, 4), dtype=y.dtype), p[:, :, None] * rates]
+        bottom = [zeros(y, (batch, 3, 4)), p[:, :, None] * rates]
         if dp is not None:
-            top = xp.concat((top, xp.zeros((batch, 4, 2), dtype=y.dtype)), axis=2)
+            top = xp.concat((top, zeros(y, (batch, 4, 2))), axis=2)
             bottom.append((w[:, _CYCLIC[0]] * w[:, _CYCLIC[1]])[:, :, None] * dp)
         return xp.concat((top, xp.concat(bottom, axis=2)), axis=1)
 
@@ -293,28 +293,28 @@ class RigidBodyModel(PoseTwistModel):
         xp = namespace(x)
         batch, n = x.shape[0], self.state_dim
         q0, w0 = x[:, 0:4], x[:, 7:10]
-        zeros = lambda rows, cols: xp.zeros((batch, rows, cols), dtype=x.dtype)  # noqa: E731
+        blank = lambda rows, cols: zeros(x, (batch, rows, cols))  # noqa: E731
         eye4 = xp.broadcast_to(constant(x, ("eye", 4), lambda: np.eye(4)), (batch, 4, 4))
         # into the body frame: d(q0, w_b0)/d(q0, w0); the rotations use the unit quaternion
         # u = q / |q|, so that the norm of q (which the additive filter lets drift between
         # updates, and removes from the covariance at each update) does not leak into the rate
         u0, u1 = _unit(q0), _unit(q1)
         into = xp.concat(
-            (xp.concat((eye4, zeros(4, 3)), axis=2),
+            (xp.concat((eye4, blank(4, 3)), axis=2),
              xp.concat((qx.rotation_jacobian(u0, w0, transpose=True) @ _unit_jacobian(q0), qx.rotation_matrix(u0).swapaxes(1, 2)), axis=2)),
             axis=1,
         )  # fmt: skip
         # back to the world frame: d(q1, w1)/d(q1, w_b1)
         out = xp.concat(
-            (xp.concat((eye4, zeros(4, 3)), axis=2),
+            (xp.concat((eye4, blank(4, 3)), axis=2),
              xp.concat((qx.rotation_jacobian(u1, wb1) @ _unit_jacobian(q1), qx.rotation_matrix(u1)), axis=2)),
             axis=1,
         )  # fmt: skip
         rotational = out @ (tangent[:, :, :7] @ into)  # d(q1, w1)/d(q0, w0)
         ratio = out @ tangent[:, :, 7:] if n == 15 else None  # d(q1, w1)/dk
         # the paper's layout: q 0:4, r 4:7, w 7:10, v 10:13 (, k 13:15)
-        rows_q = [rotational[:, 0:4, 0:4], zeros(4, 3), rotational[:, 0:4, 4:7], zeros(4, 3)]
-        rows_w = [rotational[:, 4:7, 0:4], zeros(3, 3), rotational[:, 4:7, 4:7], zeros(3, 3)]
+        rows_q = [rotational[:, 0:4, 0:4], blank(4, 3), rotational[:, 0:4, 4:7], blank(4, 3)]
+        rows_w = [rotational[:, 4:7, 0:4], blank(3, 3), rotational[:, 4:7, 4:7], blank(3, 3)]
         if ratio is not None:
             rows_q.append(ratio[:, 0:4])
             rows_w.append(ratio[:, 4:7])
@@ -327,11 +327,11 @@ class RigidBodyModel(PoseTwistModel):
 
     def initial_state(self, z: Array) -> Array:
         xp = namespace(z)
-        x = xp.concat((z[:, :7], xp.zeros((z.shape[0], self.state_dim - 7), dtype=z.dtype)), axis=1)
+        x = xp.concat((z[:, :7], zeros(z, (z.shape[0], self.state_dim - 7))), axis=1)
         return x + self._ratio_offset(z) if self.estimate_ratios else x
 
-    def prior_state(self, batch: int, dtype: Any) -> Array:
-        x = _prior(batch, self.state_dim, dtype, first=1.0)
+    def prior_state(self, batch: int, dtype: Any, device: Any = None) -> Array:
+        x = _prior(batch, self.state_dim, dtype, first=1.0, device=device)
         return x + self._ratio_offset(x) if self.estimate_ratios else x
 
     def _ratio_offset(self, like: Array) -> Array:
@@ -359,7 +359,7 @@ def _unit_jacobian(q: Array) -> Array:
 def _pad_left(direct: Array) -> Array:
     """``[0 | direct]`` ``(B, 7, 7 + r)``: the direct ratio terms of a stage's tangent."""
     xp = namespace(direct)
-    return xp.concat((xp.zeros((direct.shape[0], 7, 7), dtype=direct.dtype), direct), axis=2)
+    return xp.concat((zeros(direct, (direct.shape[0], 7, 7)), direct), axis=2)
 
 
 def _linear_rows(n: int, dt: float) -> np.ndarray:
