@@ -1,4 +1,5 @@
-"""Process-level settings for the torch parts: thread count and default dtype handling.
+"""Process-level settings for the torch parts: thread count, default dtype handling, and the
+device batched work runs on (:func:`resolve_device`: ``--device``).
 
 On small machines the filter's many small operations run fastest on one thread, and with two
 threads and a busy second core a step can run ten times slower (REFERENCE.md, measured here:
@@ -15,7 +16,7 @@ from contextlib import contextmanager
 
 import torch
 
-__all__ = ["FILTER_THREADS", "torch_threads"]
+__all__ = ["FILTER_THREADS", "torch_threads", "resolve_device"]
 
 
 def _threads_from_environment() -> int:
@@ -44,3 +45,27 @@ def torch_threads(threads: int | None = FILTER_THREADS) -> Iterator[None]:
     finally:
         if change:
             torch.set_num_threads(previous)
+
+
+def resolve_device(name: str | torch.device) -> torch.device:
+    """The torch device ``name`` (``cpu``, ``cuda``, ``cuda:1``, ``mps``) for batched filtering
+    and training, checked to exist on this machine: ``ValueError`` naming the problem for a name
+    torch does not know, and for an accelerator this torch build or machine lacks (a CPU-only
+    build, no GPU, an index past the last GPU). The CPU is the default everywhere; nothing
+    requires an accelerator."""
+    try:
+        device = torch.device(name)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"unknown device {name!r}: use cpu, cuda or cuda:N") from None
+    if device.type == "cuda":
+        if not torch.cuda.is_available():
+            build = "a CPU-only build" if torch.version.cuda is None else f"built for CUDA {torch.version.cuda}"
+            raise ValueError(f"device {str(device)!r} asked for, but CUDA is not available here (torch "
+                             f"{torch.__version__}, {build}; no usable GPU): use --device cpu")
+        if device.index is not None and device.index >= torch.cuda.device_count():
+            raise ValueError(f"device {str(device)!r} asked for, but this machine has {torch.cuda.device_count()} GPU(s)")
+    elif device.type == "mps" and not torch.backends.mps.is_available():
+        raise ValueError(f"device {str(device)!r} asked for, but MPS is not available here: use --device cpu")
+    elif device.type not in ("cpu", "cuda", "mps"):
+        raise ValueError(f"device {str(device)!r} is not supported: use cpu, cuda or cuda:N")
+    return device

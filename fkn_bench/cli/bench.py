@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -60,6 +61,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     run.add_argument("--json", default="bench.json", metavar="FILE",
                      help="where pytest-benchmark writes its results (default: bench.json)")
     run.add_argument("-k", dest="keyword", metavar="EXPR", help="only benchmarks matching this pytest -k expression")
+    run.add_argument("--device", default="cpu", help="where the batched filter and training benchmarks run: cpu "
+                                                     "(default) or cuda (a GPU)")
+    run.add_argument("--large-batch", type=int, default=1024, metavar="B",
+                     help="the filter core's large batch (default 1024; the benchmarks keep their batch_1024 names)")
     run.add_argument("--suite", metavar="DIR",
                      help="the suite's directory (default: tests/benchmarks here or in the source checkout)")
     run.set_defaults(handler=run_suite)
@@ -85,6 +90,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     train.add_argument("--trainer-epochs", type=int, default=3, help="trainer epochs timed (median reported)")
     train.add_argument("--time-varying", action="store_true",
                        help="also time the trainer in time-varying mode and print its ratio to the constant mode")
+    train.add_argument("--device", default="cpu", help="where the batched trainer runs (cpu, default, or cuda); "
+                                                       "the sequential reference runs on the CPU")
     train.add_argument("--json", action="store_true")
     train.set_defaults(handler=run_train)
 
@@ -213,14 +220,23 @@ def _suite_directory(given: str | None) -> Path:
 
 
 def run_suite(args: argparse.Namespace) -> int:
+    from fkn_bench.runtime import resolve_device
+
     suite = _suite_directory(args.suite)
+    try:
+        device = resolve_device(args.device)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    if args.large_batch < 1:
+        raise UsageError("--large-batch must be >= 1")
+    environment = {**os.environ, "FKN_BENCH_DEVICE": str(device), "FKN_BENCH_LARGE_BATCH": str(args.large_batch)}
     output = Path(args.json).resolve()
     command = [sys.executable, "-m", "pytest", str(suite), "-n", "0", "--benchmark-only", f"--benchmark-json={output}",
                "-q", "-p", "no:cacheprovider"]
     if args.keyword:
         command += ["-k", args.keyword]
     print(f"fkn-bench bench run: {' '.join(command)}", file=sys.stderr)
-    code = subprocess.call(command, cwd=suite.parents[1])
+    code = subprocess.call(command, cwd=suite.parents[1], env=environment)
     if output.is_file():
         print(format_summary(_load_benchmarks(output), source=str(args.json)))
     return code
@@ -273,7 +289,12 @@ def run_train(args: argparse.Namespace) -> int:
 
     if args.reference_windows is not None and args.reference_windows < 1:
         raise UsageError("--reference-windows must be >= 1")
-    config = FlexKalmanNetConfig()
+    from fkn_bench.runtime import resolve_device
+
+    try:
+        config = FlexKalmanNetConfig(device=str(resolve_device(args.device)))
+    except ValueError as error:
+        raise UsageError(str(error)) from None
     if args.paper_windows:
         config = config.replace(window=512, stride=None, train_measurement_every=1)
     speed = measure_training_speed(args.scenario, config, reference_windows=args.reference_windows, trainer_epochs=args.trainer_epochs)
@@ -284,7 +305,8 @@ def run_train(args: argparse.Namespace) -> int:
     print(f"FlexKalmanNet training speed on {speed.scenario}: {speed.windows} windows of {speed.window} samples, "
           f"a measurement every {speed.train_measurement_every} step(s)")
     print(f"  sequential reference  {speed.reference_seconds_per_epoch:8.2f} s/epoch{timed}")
-    print(f"  batched trainer       {speed.trainer_seconds_per_epoch:8.2f} s/epoch (median of {speed.trainer_epochs_timed})")
+    print(f"  batched trainer       {speed.trainer_seconds_per_epoch:8.2f} s/epoch (median of {speed.trainer_epochs_timed}, "
+          f"on {config.device})")
     print(f"  ratio                 {speed.ratio:8.1f}x")
     if args.time_varying:
         from fkn_bench.flexkalmannet.benchmark import time_varying_ratio

@@ -49,6 +49,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--epochs", type=int, help="maximum epochs")
     parser.add_argument("--lr", type=float, help="learning rate")
     parser.add_argument("--seed", type=int, help="random seed")
+    parser.add_argument("--device", help="where the network, the data and the filter run: cpu (default) or cuda "
+                                         "(a GPU; the window order is drawn on the CPU, so a seed trains on the same windows)")
     parser.add_argument(
         "--set", action="append", default=[], metavar="KEY=VALUE",
         help="any other config field, e.g. --set hidden=256 --set learn=q_std,r_std (repeatable)",
@@ -65,7 +67,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def parse_options(args: argparse.Namespace) -> dict[str, Any]:
     """Config overrides from the named options and ``--set KEY=VALUE`` pairs."""
     options = parse_key_values(args.set, "--set")
-    for name in ("variant", "process_model", "objective", "epochs", "lr", "seed", "config"):
+    for name in ("variant", "process_model", "objective", "epochs", "lr", "seed", "device", "config"):
         value = getattr(args, name)
         if value is not None:
             options[name] = value

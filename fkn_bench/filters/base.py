@@ -334,8 +334,9 @@ class KalmanFilter(ABC):
 
     def prior(self, batch: int, initial_covariance: Tensor, dtype: Any) -> FilterState:
         """State reported before a sequence's first measurement (numpy for a numpy ``dtype``)."""
-        on = None if isinstance(initial_covariance, np.ndarray) else initial_covariance.device
-        mean = self.model.prior_state(batch, dtype, on)
+        mean = self.model.prior_state(batch, dtype)
+        if not isinstance(initial_covariance, np.ndarray):  # (a model's prior is on the CPU)
+            mean = mean.to(initial_covariance.device)
         k = initial_covariance.shape[-1]
         return FilterState(mean, namespace(mean).broadcast_to(initial_covariance, (batch, k, k)))
 

@@ -120,21 +120,22 @@ class StateSpaceModel:
         """State ``(B, n)`` initialised from measurements ``(B, m)``."""
         raise NotImplementedError
 
-    def prior_state(self, batch: int, dtype: Any, device: Any = None) -> Array:
-        """State ``(B, n)`` reported before a sequence's first measurement (a torch tensor for a
-        torch ``dtype``, on ``device``; else a numpy array)."""
-        return _prior(batch, self.state_dim, dtype, first=0.0, device=device)
+    def prior_state(self, batch: int, dtype: Any) -> Array:
+        """State ``(B, n)`` reported before a sequence's first measurement (a CPU torch tensor
+        for a torch ``dtype``, which the filters move to their inputs' device; else a numpy
+        array)."""
+        return _prior(batch, self.state_dim, dtype, first=0.0)
 
 
-def _prior(batch: int, n: int, dtype: Any, *, first: float, device: Any = None) -> Array:
-    """``(B, n)`` zeros but ``first`` in the first column: a torch tensor on ``device`` for a
-    torch ``dtype``, else a numpy array."""
+def _prior(batch: int, n: int, dtype: Any, *, first: float) -> Array:
+    """``(B, n)`` zeros but ``first`` in the first column: a CPU torch tensor for a torch
+    ``dtype``, else a numpy array."""
     x = np.zeros((batch, n))
     x[:, 0] = first
     if type(dtype).__module__.startswith("torch"):
         import torch
 
-        return torch.from_numpy(x).to(device=device, dtype=dtype)
+        return torch.from_numpy(x).to(dtype)
     return x.astype(dtype, copy=False)
 
 
@@ -290,8 +291,8 @@ class PoseTwistModel(StateSpaceModel):
     def initial_state(self, z: Array) -> Array:
         return namespace(z).concat((z[:, :7], zeros(z, (z.shape[0], 6))), axis=1)
 
-    def prior_state(self, batch: int, dtype: Any, device: Any = None) -> Array:
-        return _prior(batch, 13, dtype, first=1.0, device=device)
+    def prior_state(self, batch: int, dtype: Any) -> Array:
+        return _prior(batch, 13, dtype, first=1.0)
 
 
 def _pose_constants(dt: float) -> np.ndarray:

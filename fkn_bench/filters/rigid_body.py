@@ -330,8 +330,8 @@ class RigidBodyModel(PoseTwistModel):
         x = xp.concat((z[:, :7], zeros(z, (z.shape[0], self.state_dim - 7))), axis=1)
         return x + self._ratio_offset(z) if self.estimate_ratios else x
 
-    def prior_state(self, batch: int, dtype: Any, device: Any = None) -> Array:
-        x = _prior(batch, self.state_dim, dtype, first=1.0, device=device)
+    def prior_state(self, batch: int, dtype: Any) -> Array:
+        x = _prior(batch, self.state_dim, dtype, first=1.0)
         return x + self._ratio_offset(x) if self.estimate_ratios else x
 
     def _ratio_offset(self, like: Array) -> Array:

@@ -344,6 +344,46 @@ def numpy_ekf_loop(measurements: ArrayF, valid: ArrayB, Q: ArrayF, R: ArrayF, P0
 
 
 @lru_cache(maxsize=4)
+@lru_cache(maxsize=1)
+def suite_device() -> Any:
+    """The ``torch.device`` the speed suite's batched filter and training benchmarks run on:
+    environment ``FKN_BENCH_DEVICE`` (``cpu`` by default; ``fkn-bench bench run --device``),
+    checked by :func:`fkn_bench.runtime.resolve_device`."""
+    import os
+
+    from fkn_bench.runtime import resolve_device
+
+    return resolve_device(os.environ.get("FKN_BENCH_DEVICE", "cpu"))
+
+
+def suite_large_batch() -> int:
+    """The speed suite's large batch: environment ``FKN_BENCH_LARGE_BATCH`` (1024 by default;
+    ``fkn-bench bench run --large-batch``)."""
+    import os
+
+    value = os.environ.get("FKN_BENCH_LARGE_BATCH", "1024")
+    if not value.isdigit() or int(value) < 1:
+        raise ValueError(f"FKN_BENCH_LARGE_BATCH must be a positive integer (got {value!r})")
+    return int(value)
+
+
+def synchronized(call: Callable[[], Any]) -> Callable[[], Any]:
+    """``call``, waiting at its end for the work it queued on :func:`suite_device` when that is
+    a GPU (which runs asynchronously: a timing would otherwise measure the launch, not the work);
+    ``call`` itself on the CPU."""
+    device = suite_device()
+    if device.type != "cuda":
+        return call
+    import torch
+
+    def timed() -> Any:
+        result = call()
+        torch.cuda.synchronize(device)
+        return result
+
+    return timed
+
+
 def episodes_for(scenario: str, batch: int, steps: int) -> tuple[ArrayF, ArrayB, float]:
     """``(measurements (B, T, 7), valid (B, T), dt)``: the first ``steps`` test-split steps of
     seeds ``0 .. batch-1`` of ``scenario`` (read-only, cached)."""

@@ -135,7 +135,7 @@ class ManifoldRecursion(SequenceModel):
         self.detach_every = detach_every
 
     # ------------------------------------------------------------------ steps (pure), by subclasses
-    def prior(self, batch: int, dtype: torch.dtype = torch.float64) -> Any:
+    def prior(self, batch: int, dtype: torch.dtype = torch.float64, device: torch.device | None = None) -> Any:
         raise NotImplementedError
 
     def predict(self, state: Any, dt: float) -> Any:
@@ -174,12 +174,12 @@ class ManifoldRecursion(SequenceModel):
         z_all, usable = self.model.sanitize(measurements, mask.bool())
         has_any = usable.any(1)
         first = torch.where(has_any, usable.to(torch.int8).argmax(1), torch.full_like(has_any, -1, dtype=torch.long))
-        starts = first[:, None] == torch.arange(steps)[None, :]  # (B, T) the initialisation step
+        starts = first[:, None] == torch.arange(steps, device=first.device)[None, :]  # (B, T) the initialisation step
         updates = usable & ~starts
         start_any, update_any, update_all = starts.any(0).tolist(), updates.any(0).tolist(), updates.all(0).tolist()
         truncate = self.detach_every if torch.is_grad_enabled() else None
-        state = self.prior(batch, measurements.dtype)
-        initialised = torch.zeros(batch, dtype=torch.bool)
+        state = self.prior(batch, measurements.dtype, measurements.device)
+        initialised = torch.zeros(batch, dtype=torch.bool, device=measurements.device)
         records, initialised_steps = [], []
         for t in range(steps):
             if truncate is not None and t > 0 and t % truncate == 0:
@@ -248,9 +248,9 @@ class KalmanNet(ManifoldRecursion):
                                    output_scale=output_scale)
 
     # ------------------------------------------------------------------ steps (pure)
-    def prior(self, batch: int, dtype: torch.dtype = torch.float64) -> KalmanNetState:
+    def prior(self, batch: int, dtype: torch.dtype = torch.float64, device: torch.device | None = None) -> KalmanNetState:
         """The state reported before a sequence's first usable measurement."""
-        mean = self.model.prior_state(batch, dtype)
+        mean = self.model.prior_state(batch, dtype).to(device)  # (a model's prior is on the CPU)
         tangent = mean.new_zeros(batch, self.manifold.state_tangent_dim)
         return KalmanNetState(mean, mean, tangent, tangent, mean.new_zeros(batch, self.manifold.measurement_dim),
                               self.network.initial_hidden(batch))

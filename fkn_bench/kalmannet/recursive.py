@@ -255,9 +255,10 @@ class RecursiveKalmanNet(ManifoldRecursion):
 
     # ------------------------------------------------------------------ pieces
     def process_noise(self, dt: float, dtype: torch.dtype) -> Tensor:
-        """``Q (n', n')`` added over a prediction of ``dt`` seconds (zeros without process noise)."""
+        """``Q (n', n')`` added over a prediction of ``dt`` seconds (zeros without process noise),
+        on the module's device."""
         if self.process_raw is None:
-            return torch.zeros(self.n, self.n, dtype=dtype)
+            return self.initial_covariance.new_zeros(self.n, self.n, dtype=dtype)
         return torch.diag(functional.softplus(self.process_raw).square() * dt).to(dtype)
 
     def factor(self, raw: Tensor) -> Tensor:
@@ -280,9 +281,9 @@ class RecursiveKalmanNet(ManifoldRecursion):
         hidden = RecursiveHidden(self.gain_branch.initial_hidden(batch), self.covariance_branch.initial_hidden(batch))
         return RecursiveKalmanNetState(mean, mean, tangent, tangent, last_measurement, covariance, hidden)
 
-    def prior(self, batch: int, dtype: torch.dtype = torch.float64) -> RecursiveKalmanNetState:
+    def prior(self, batch: int, dtype: torch.dtype = torch.float64, device: torch.device | None = None) -> RecursiveKalmanNetState:
         """The state reported before a sequence's first usable measurement (covariance ``P0``)."""
-        mean = self.model.prior_state(batch, dtype)
+        mean = self.model.prior_state(batch, dtype).to(device)  # (a model's prior is on the CPU)
         return self._start(mean, mean.new_zeros(batch, self.manifold.measurement_dim))
 
     def predict(self, state: RecursiveKalmanNetState, dt: float) -> RecursiveKalmanNetState:
@@ -310,7 +311,7 @@ class RecursiveKalmanNet(ManifoldRecursion):
         delta = (K @ innovation[:, :, None])[:, :, 0]
         posterior = self.model.normalize(self.manifold.correct(prior, delta))[0]
         evolution = self.manifold.state_difference(posterior, state.last_posterior)
-        eye = torch.eye(self.n, dtype=prior.dtype)
+        eye = torch.eye(self.n, dtype=prior.dtype, device=prior.device)
         IKH = eye - K @ self.H.to(prior.dtype)
         P = IKH @ state.covariance @ IKH.transpose(1, 2) + L @ L.transpose(1, 2) + self.std_floor**2 * eye
         return RecursiveKalmanNetState(posterior, posterior, evolution, delta, z, symmetrize(P),

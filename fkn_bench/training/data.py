@@ -20,6 +20,7 @@ of the same ground truth (noise draws are keyed by scheduled step, see
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -53,6 +54,10 @@ class Sequences:
 
     def select(self, index: Tensor) -> Sequences:
         return Sequences(self.measurements[index], self.mask[index], self.truth[index])
+
+    def to(self, device: torch.device | str) -> Sequences:
+        """The sequences on ``device`` (themselves when already there)."""
+        return Sequences(self.measurements.to(device), self.mask.to(device), self.truth.to(device))
 
 
 def _split(scenario: Scenario, split: str, every: int, dtype: torch.dtype, episodes: int = 1) -> Sequences:
@@ -118,9 +123,21 @@ class TrainingData:
     def n_windows(self) -> int:
         return self.train.batch_size
 
+    def to(self, device: torch.device | str) -> TrainingData:
+        """The data set with its sequences on ``device``: itself when they are there already,
+        else a copy (this one, which :func:`training_data` may share, is left as it is)."""
+        device = torch.device(device)
+        if self.train.measurements.device == device:
+            return self
+        moved = copy.copy(self)
+        moved.train, moved.train_full, moved.val = (s.to(device) for s in (self.train, self.train_full, self.val))
+        moved.position_mean, moved.position_std = self.position_mean.to(device), self.position_std.to(device)
+        return moved
+
     def batches(self, windows_per_batch: int, generator: torch.Generator) -> Iterator[Sequences]:
-        """Shuffled batches of training windows (the last one may be smaller)."""
-        order = torch.randperm(self.n_windows, generator=generator)
+        """Shuffled batches of training windows (the last one may be smaller); the order is
+        drawn on ``generator``'s device (the CPU's: the same windows on every device)."""
+        order = torch.randperm(self.n_windows, generator=generator, device=generator.device)
         for start in range(0, self.n_windows, windows_per_batch):
             yield self.train.select(order[start : start + windows_per_batch])
 
@@ -136,8 +153,8 @@ class TrainingData:
             "windows": self.n_windows,
             "train_measurement_every": self.train_measurement_every,
             "val_measurement_every": self.scenario.measurement_every,
-            "position_mean_m": np.round(self.position_mean.numpy(), 6).tolist(),
-            "position_std_m": np.round(self.position_std.numpy(), 6).tolist(),
+            "position_mean_m": np.round(self.position_mean.cpu().numpy(), 6).tolist(),
+            "position_std_m": np.round(self.position_std.cpu().numpy(), 6).tolist(),
         }
 
 

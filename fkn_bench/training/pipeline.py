@@ -172,17 +172,18 @@ def split_metrics(model: NoiseModel | SequenceModel, settings: TrainConfig, scen
 
     episode = generate_episodes(scenario, [scenario.dataset_seed], split="test")
     cut = settings.loss_cut
+    device = next(iter(model.parameters()), torch.empty(0)).device  # (where it was trained)
     with torch.no_grad(), torch_threads(settings.threads):
-        z, mask = torch.as_tensor(episode.measurements), torch.as_tensor(episode.valid)
+        z, mask = torch.as_tensor(episode.measurements, device=device), torch.as_tensor(episode.valid, device=device)
         if isinstance(model, SequenceModel):
             means = model.run_means(z, mask, dt=scenario.dt)
         else:
             noise = model.parameter_set.to_noise(model.sequence_raw(z, mask))
             means = settings.build_filter(scenario).run(noise, z, mask, dt=scenario.dt, store_covariances=False,
                                                         store_innovations=False).means
-        truth = torch.as_tensor(episode.truth)
+        truth = torch.as_tensor(episode.truth, device=device)
         mse = float(state_mse(means, truth, cut))
-        per_component = aligned_state_error(means[:, cut:], truth[:, cut:]).square().mean((0, 1)).sqrt().numpy()
+        per_component = aligned_state_error(means[:, cut:], truth[:, cut:]).square().mean((0, 1)).sqrt().cpu().numpy()
     return {
         "test_rmse": math.sqrt(mse),
         "test_rmse_components": dict(zip(STATE_NAMES, np.round(per_component, 8).tolist())),

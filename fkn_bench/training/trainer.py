@@ -47,7 +47,7 @@ from torch import Tensor, nn
 
 from fkn_bench.filters import MODELS, VARIANTS, KalmanFilter, ParameterSet, make_filter, make_model
 from fkn_bench.limits import check_memory
-from fkn_bench.runtime import torch_threads
+from fkn_bench.runtime import resolve_device, torch_threads
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
 
@@ -173,6 +173,10 @@ class TrainConfig:
         scheduler_factor, scheduler_patience: ``ReduceLROnPlateau`` settings.
         max_grad_norm: gradient-norm clip (None: off).
         threads: torch threads during training.
+        device: where the model, the data and the filter run (``cpu``, the default; ``cuda``
+            where a GPU exists: :func:`fkn_bench.runtime.resolve_device`). The window order and
+            FlexKalmanNet's sample picks are drawn on the CPU either way, so a seed picks the same
+            windows on every device; results differ only by the devices' rounding.
     """
 
     variant: str = "ekf"
@@ -198,6 +202,7 @@ class TrainConfig:
     scheduler_patience: int = 5
     max_grad_norm: float | None = None
     threads: int = 1
+    device: str = "cpu"
 
     objectives: ClassVar[tuple[str, ...]] = OBJECTIVES
     """The values ``objective`` may take (a subclass for a :class:`SequenceModel` with its own)."""
@@ -224,11 +229,18 @@ class TrainConfig:
             raise ValueError(f"lr must be a finite number > 0 (got {self.lr!r})")
         if self.loss_cut < 0:
             raise ValueError(f"loss_cut must be >= 0 (got {self.loss_cut!r})")
+        try:  # (a name torch knows; whether this machine has it is checked when training starts)
+            torch.device(self.device)
+        except (RuntimeError, TypeError):
+            raise ValueError(f"unknown device {self.device!r}: use cpu, cuda or cuda:N") from None
 
     def to_dict(self) -> dict[str, Any]:
-        """The fields; the process model's only when it is not the paper's (so that the configs
-        of earlier runs, in checkpoints, artefacts and sweep studies, read the same)."""
+        """The fields; the process model's and the device only when they are not the paper's
+        and the CPU (so that the configs of earlier runs, in checkpoints, artefacts and sweep
+        studies, read the same)."""
         values = asdict(self)
+        if self.device == "cpu":
+            del values["device"]
         if self.process_model == "constant-velocity" and self.inertia is None:
             del values["process_model"], values["inertia"]
         elif values["inertia"] is not None:
@@ -278,12 +290,17 @@ steps; twice that for the heavier variants and models), for :func:`fkn_bench.lim
 
 class Trainer:
     """Trains a :class:`NoiseModel` through ``variant`` (or a :class:`SequenceModel` through its
-    own recursion) on ``data`` (see module docstring)."""
+    own recursion) on ``data`` (see module docstring), on ``config.device``: the model and the
+    data are moved there."""
 
     def __init__(self, model: NoiseModel | SequenceModel, variant: KalmanFilter, data: TrainingData, config: TrainConfig) -> None:
         if config.loss_cut >= data.window:
             raise ValueError(f"loss_cut ({config.loss_cut}) must be smaller than the window ({data.window})")
-        self.model, self.variant, self.data, self.config = model, variant, data, config
+        self.device = resolve_device(config.device)
+        model.to(self.device)
+        move = getattr(data, "to", None)  # (a duck-typed data set without it stays where it is)
+        self.model, self.variant, self.config = model, variant, config
+        self.data = move(self.device) if move is not None else data
         total = data.train.batch_size  # (duck-typed data: the training sequences are all we rely on)
         windows = total if config.optimizer == "lbfgs" else min(config.windows_per_batch, total)
         check_memory(windows * data.window * TRAINING_BYTES_PER_STEP,

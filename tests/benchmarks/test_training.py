@@ -12,13 +12,15 @@ from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet.checkpoint import build_model
 from fkn_bench.flexkalmannet.config import FlexKalmanNetConfig
 from fkn_bench.flexkalmannet.reference import sequential_reference_epoch
+from fkn_bench.gates.speed import suite_device, synchronized
 from fkn_bench.training import Trainer, TrainingData
 
+DEVICE = suite_device()
 
 
 @pytest.fixture(scope="module")
 def setup() -> tuple[FlexKalmanNetConfig, TrainingData, Any]:
-    config = FlexKalmanNetConfig()
+    config = FlexKalmanNetConfig(device=str(DEVICE))
     data = TrainingData("ds1", window=config.window, stride=config.stride,
                         train_measurement_every=config.train_measurement_every, episodes=config.episodes)
     return config, data, build_model(config, data)
@@ -27,9 +29,10 @@ def setup() -> tuple[FlexKalmanNetConfig, TrainingData, Any]:
 def test_training_epoch(benchmark: Any, setup: Any) -> None:
     config, data, fresh = setup
     trainer = Trainer(copy.deepcopy(fresh), make_filter(config.variant), data, config.train_config())
-    benchmark.pedantic(trainer.run_epoch, rounds=3, warmup_rounds=1)
+    benchmark.pedantic(synchronized(trainer.run_epoch), rounds=3, warmup_rounds=1)
+    on = "" if DEVICE.type == "cpu" else f", on {DEVICE}"
     benchmark.extra_info.update(steps=data.n_windows * data.window,
-           what=f"Trainer.run_epoch, {data.n_windows} windows of {data.window}, batches of {config.windows_per_batch}")
+           what=f"Trainer.run_epoch, {data.n_windows} windows of {data.window}, batches of {config.windows_per_batch}{on}")
 
 
 def test_sequential_reference_window(benchmark: Any, setup: Any) -> None:
