@@ -146,9 +146,12 @@ def _predict_forward_kernel(x, P, Q, dt, source, coefficient, x_out, P_out, Ghat
                 for b in range(B):
                     P_out[i, j, b] += D[j, i, b]
 
-def _predict_backward_kernel(x, P, Ghat, g_mean, g_P, dt, source, coefficient, dx, X, dQ, Xu, dG):  # type: ignore[no-untyped-def]
+def _predict_backward_kernel(x, P_q, P_w, Ghat, g_mean, g_P, dt, source, coefficient, dx, X, dQ, Xu, dG):  # type: ignore[no-untyped-def]
     """The backward pass of :class:`fkn_bench.filters.structured._PosePredict` (same
-    operations per entry): ``x (13, B)``, ``P (13, 13, B)``, ``Ghat (4, 7, B)``, the output
+    operations per entry): ``x (13, B)``, the input covariance's rows ``q`` and ``w``, ``P_q (4,
+    13, B)`` and ``P_w (3, 13, B)`` (all it reads of ``P``: the columns ``u`` of the product
+    ``dG = 2 X[:, q]^T P[:, u]`` are these rows, ``P`` being exactly symmetric, as every covariance
+    of the filters is), ``Ghat (4, 7, B)``, the output
     gradients ``g_mean (13, B)``, ``g_P (13, 13, B)`` -> ``dx (B, 13)``, ``X (13, 13, B)``
     (``dL/dP``) and, when ``dQ`` is ``(B, 13, 13)`` (batch-first, as ``Q``), ``dQ = sym(g_P)``
     (a broadcast ``Q``'s sum over the batch is the caller's); ``Xu (7, 13, B)`` and
@@ -181,15 +184,14 @@ def _predict_backward_kernel(x, P, Ghat, g_mean, g_P, dt, source, coefficient, d
                 X[7 + i, j, b] += Xu[4 + i, j, b]
             for b in range(B):
                 X[10 + i, j, b] += X[4 + i, j, b] * dt
-    U = (0, 1, 2, 3, 7, 8, 9)
-    for i in range(4):  # dG = 2 X[:, q]^T P[:, u] + (g_q x_q^T on the columns q)
+    for i in range(4):  # dG = 2 X[:, q]^T P[:, u] + (g_q x_q^T on the columns q); P[:, u] = P[u, :]^T
         for k in range(7):
-            u = U[k]
+            P_u = P_q[k] if k < 4 else P_w[k - 4]  # (13, B): row u of P
             for b in range(B):
-                dG[i, k, b] = X[0, i, b] * P[0, u, b]
+                dG[i, k, b] = X[0, i, b] * P_u[0, b]
             for a in range(1, 13):
                 for b in range(B):
-                    dG[i, k, b] += X[a, i, b] * P[a, u, b]
+                    dG[i, k, b] += X[a, i, b] * P_u[a, b]
             for b in range(B):
                 dG[i, k, b] *= 2.0
             if k < 4:
@@ -608,8 +610,9 @@ def predict_backward(
     dx, dP, dQ = np.empty((batch, 13), dtype), np.empty((13, 13, batch), dtype), np.empty((batch if per_row else 1, 13, 13), dtype)
     g_P = g_P.contiguous()
     source, coefficient = g_sparsity
+    P = _array(Pb)
     _kernels()["predict_backward"](
-        _array(xb), _array(Pb), _array(Ghat), _array(g_mean), g_P.numpy(), float(dt), source, coefficient,
+        _array(xb), P[0:4], P[7:10], _array(Ghat), _array(g_mean), g_P.numpy(), float(dt), source, coefficient,
         dx, dP, dQ, np.empty((7, 13, batch), dtype), np.empty((4, 7, batch), dtype),
     )
     if not per_row:
@@ -620,37 +623,54 @@ def predict_backward(
 
 def predict_steps(
     xb: Tensor, Pb: Tensor, Q: Tensor, dt: float, count: int, g_sparsity: tuple[np.ndarray, np.ndarray], *,
-    every_step: bool = True,
-) -> tuple[Tensor, Tensor, Tensor]:
+    keep: str = "every",
+) -> tuple[Tensor, Tensor, Tensor, Tensor | None]:
     """``count`` batch-last predictions in a row (a stretch of steps without a measurement):
-    ``(xs (count, 13, B), Ps (count, 13, 13, B), Ghats (count, 4, 7, B))``, the state after every
-    step, from ``xb (13, B)``, ``Pb (13, 13, B)`` and ``Q (Bq, Tq, 13, 13)``, ``Bq`` 1 or B,
-    ``Tq`` 1 (the same at every step) or ``count``. Each step is :func:`predict`'s compiled
-    kernel, bit for bit, called on numpy views of preallocated series: a few microseconds of
-    overhead per step, where a step through torch and autograd costs about a hundred. (The loop
-    is Python: a compiled loop calling the step kernel tripled the compile time, which every
-    fresh install and CI run pays.) No autograd (the caller's
+    ``(xs (count, 13, B), Ps, Ghats, P_rows)``, the means after every step and the covariances
+    ``keep`` asks for, from ``xb (13, B)``, ``Pb (13, 13, B)`` and ``Q (Bq, Tq, 13, 13)``, ``Bq``
+    1 or B, ``Tq`` 1 (the same at every step) or ``count``. Each step is :func:`predict`'s
+    compiled kernel, bit for bit, called on numpy views of preallocated series: a few
+    microseconds of overhead per step, where a step through torch and autograd costs about a
+    hundred. (The loop is Python: a compiled loop calling the step kernel tripled the compile
+    time, which every fresh install and CI run pays.) No autograd (the caller's
     :class:`~fkn_bench.filters.structured._PosePredictSteps` is).
 
-    Without ``every_step`` only the last covariance is wanted (a run without autograd that stores
-    no covariances): ``Ps`` then holds two, written in turn, the last at ``(count - 1) % 2``, and
-    ``Ghats`` one; a fresh series of every step's covariance cost more in page zeroing than the
-    predictions themselves at B = 1024."""
+    ``keep``:
+
+    * ``"every"``: every step's covariance, ``Ps (count, 13, 13, B)``, and ``Ghats (count, 4, 7,
+      B)``; ``P_rows`` None.
+    * ``"last"`` (a run without autograd that stores no covariances): ``Ps`` holds two, written in
+      turn, the last at ``(count - 1) % 2``, ``Ghats`` one, ``P_rows`` None. A fresh series of
+      every step's covariance cost more in page zeroing than the predictions themselves at
+      B = 1024.
+    * ``"rows"`` (autograd, no covariances stored): ``Ps`` and ``Ghats (count, 4, 7, B)`` as for
+      ``"every"`` but two slots of ``Ps``, and ``P_rows (count - 1, 7, 13, B)``, the rows ``q``
+      and ``w`` of the covariance after every step but the last: all that
+      :func:`predict_steps_backward` reads of them (:func:`_predict_backward_kernel`), 7/13 of
+      the memory a full series writes.
+    """
+    if keep not in ("every", "last", "rows"):
+        raise ValueError(f"keep must be 'every', 'last' or 'rows' (got {keep!r})")
     batch, dtype = xb.shape[1], _NUMPY_DTYPES[xb.dtype]
     e = np.empty
-    slots = count if every_step else min(count, 2)
-    xs, Ps, Ghats = e((count, 13, batch), dtype), e((slots, 13, 13, batch), dtype), e((count if every_step else 1, 4, 7, batch), dtype)
+    every = keep == "every"
+    slots = count if every else min(count, 2)
+    xs, Ps = e((count, 13, batch), dtype), e((slots, 13, 13, batch), dtype)
+    Ghats = e((1 if keep == "last" else count, 4, 7, batch), dtype)
+    P_rows = e((count - 1, 7, 13, batch), dtype) if keep == "rows" else None
     D, corner = e((7, 13, batch), dtype), e((7, 4, batch), dtype)
     source, coefficient = g_sparsity
     step = _kernels()["predict_forward"]
     x, P, noise = _array(xb), _array(Pb), _array(Q.transpose(0, 1))  # noise[j]: step j's (Bq, 13, 13)
     per_step = noise.shape[0] != 1
     for j in range(count):
-        slot = j if every_step else j % 2
-        step(x, P, noise[j if per_step else 0], float(dt), source, coefficient, xs[j], Ps[slot], Ghats[slot if every_step else 0],
+        slot = j if every else j % 2
+        step(x, P, noise[j if per_step else 0], float(dt), source, coefficient, xs[j], Ps[slot], Ghats[0 if keep == "last" else j],
              D, corner)
         x, P = xs[j], Ps[slot]
-    return torch.from_numpy(xs), torch.from_numpy(Ps), torch.from_numpy(Ghats)
+        if P_rows is not None and j < count - 1:
+            P_rows[j, 0:4], P_rows[j, 4:7] = P[0:4], P[7:10]
+    return torch.from_numpy(xs), torch.from_numpy(Ps), torch.from_numpy(Ghats), None if P_rows is None else torch.from_numpy(P_rows)
 
 
 def predict_steps_backward(
@@ -658,7 +678,10 @@ def predict_steps_backward(
     q_shape: tuple[int, int], g_sparsity: tuple[np.ndarray, np.ndarray],
 ) -> tuple[Tensor, Tensor, Tensor]:
     """``(dL/dx (13, B), dL/dP (13, 13, B), dL/dQ (Bq, Tq, 13, 13))`` of :func:`predict_steps`
-    given the gradients of every step's mean ``g_xs (count, 13, B)`` and of every step's
+    from its inputs ``xb``, ``Pb``, its means ``xs``, the covariances of every step but the last,
+    whole ``Ps (>= count - 1, 13, 13, B)`` or their rows ``q`` and ``w`` (``P_rows``, ``(count -
+    1, 7, 13, B)``), and ``Ghats``, given the gradients of every step's mean ``g_xs (count, 13,
+    B)`` and of every step's
     covariance, or of the last only, ``g_Ps (count or 1, 13, 13, B)``; ``q_shape`` is ``(Bq,
     Tq)``, ``Q``'s leading axes. Each step's backward is :func:`predict_backward`'s kernel, in
     reverse order; ``dL/dQ`` sums ``sym(dL/dP-)`` over the steps that share a ``Q`` (and over the
@@ -676,12 +699,17 @@ def predict_steps_backward(
     source, coefficient = g_sparsity
     step = _kernels()["predict_backward"]
     x_all, P_all, G_all = _array(xs), _array(Ps), _array(Ghats)
+    w = slice(7, 10) if P_all.shape[1] == 13 else slice(4, 7)  # (the rows w of a whole P, or of P_rows)
     g_means, g_covariances = _array(g_xs), _array(g_Ps)
     every = g_covariances.shape[0] == count and count != 1
     g_mean[:], g_P[:] = g_means[count - 1], g_covariances[count - 1 if every else 0]
     for j in range(count - 1, -1, -1):
-        x, P = (_array(xb), _array(Pb)) if j == 0 else (x_all[j - 1], P_all[j - 1])
-        step(x, P, G_all[j], g_mean, g_P, float(dt), source, coefficient, dx, X, dQ_step, Xu, dG)
+        if j == 0:
+            x, P = _array(xb), _array(Pb)
+            P_q, P_w = P[0:4], P[7:10]
+        else:
+            x, P_q, P_w = x_all[j - 1], P_all[j - 1, 0:4], P_all[j - 1, w]
+        step(x, P_q, P_w, G_all[j], g_mean, g_P, float(dt), source, coefficient, dx, X, dQ_step, Xu, dG)
         t = j if per_step != 1 else 0
         if per_row:
             dQ[t] += dQ_step

@@ -202,7 +202,8 @@ def pose_predict_steps(
     if torch.is_grad_enabled() and any(t.requires_grad for t in inputs):
         means, mean, covariance, covariances = _PosePredictSteps.apply(*inputs, float(dt), count, store_covariances)
     else:
-        xs, Ps, _ = kernels.predict_steps(*inputs, float(dt), count, g_sparsity(float(dt)), every_step=store_covariances)
+        xs, Ps, _, _ = kernels.predict_steps(*inputs, float(dt), count, g_sparsity(float(dt)),
+                                             keep="every" if store_covariances else "last")
         last = count - 1 if store_covariances else (count - 1) % 2
         means, mean, covariance, covariances = xs[:-1], xs[-1], Ps[last], Ps[:-1]
     final = FilterState(mean.transpose(0, 1), batch_first(covariance))
@@ -217,15 +218,17 @@ class _PosePredictSteps(torch.autograd.Function):
     kernels (:func:`fkn_bench.filters.kernels.predict_steps`,
     :func:`~fkn_bench.filters.kernels.predict_steps_backward`). The last state is an output of
     its own, not a selection of a series, whose backward would fill a zeroed gradient of the
-    whole series."""
+    whole series. Without ``every_P`` the backward pass keeps only the rows of each covariance it
+    reads (``keep="rows"``: 7 of 13 rows)."""
 
     @staticmethod
     def forward(ctx: torch.autograd.function.FunctionCtx, xb: Tensor, Pb: Tensor, Q: Tensor, dt: float, count: int,  # type: ignore[override]
                 every_P: bool) -> tuple[Tensor, Tensor, Tensor, Tensor]:
-        xs, Ps, Ghats = kernels.predict_steps(xb, Pb, Q, dt, count, g_sparsity(dt))
-        ctx.save_for_backward(xb, Pb, xs, Ps, Ghats)
+        xs, Ps, Ghats, P_rows = kernels.predict_steps(xb, Pb, Q, dt, count, g_sparsity(dt), keep="every" if every_P else "rows")
+        ctx.save_for_backward(xb, Pb, xs, Ps if P_rows is None else P_rows, Ghats)
         ctx.dt, ctx.q_shape, ctx.every_P = dt, tuple(Q.shape[:2]), every_P
-        return xs[:-1], xs[-1], Ps[-1], Ps[:-1] if every_P else Ps[:0]
+        last = count - 1 if every_P else (count - 1) % 2
+        return xs[:-1], xs[-1], Ps[last], Ps[:-1] if every_P else Ps[:0]
 
     @staticmethod
     @torch.autograd.function.once_differentiable
