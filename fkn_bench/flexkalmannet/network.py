@@ -167,7 +167,7 @@ class FlexKalmanNet(NoiseModel):
         else:
             # choose samples_per_window valid steps per window (random keys, invalid ones last)
             # (drawn on the CPU generator whatever the device: the same picks on every device)
-            keys = torch.rand(mask.shape, generator=self._generator, dtype=torch.float64, device="cpu").to(mask.device) + (~mask).to(torch.float64) * 2.0
+            keys = torch.rand(mask.shape, generator=self._generator, device="cpu").to(mask.device) + (~mask).to(torch.float64) * 2.0
             picked = keys.argsort(dim=1)[:, : self.samples_per_window]
             chosen = torch.gather(z, 1, picked[..., None].expand(-1, -1, 7))
             outputs = self._outputs(chosen)

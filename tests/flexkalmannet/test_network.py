@@ -73,6 +73,21 @@ def test_subsampled_windows_use_only_valid_measurements() -> None:
     assert raw.shape == (4, 20)
 
 
+def test_subsampled_picks_are_the_cpu_generators_whatever_the_device() -> None:
+    """A window's samples are picked by float32 keys drawn on the model's CPU generator (seed 0),
+    on any device, so a seed trains on the same samples everywhere and a changed draw (another
+    dtype, a device generator) is caught here rather than as a silently different training run
+    (a float64 draw moved the committed ds1 training from best epoch 84 to 83)."""
+    model = make_model(samples=3)
+    seqs = measurements(4, 30, every=5)
+    raw = model.window_raw(seqs)
+    keys = torch.rand(seqs.mask.shape, generator=torch.Generator().manual_seed(0)) + (~seqs.mask).to(torch.float64) * 2.0
+    picked = keys.argsort(dim=1)[:, :3]
+    for b in range(4):
+        expected = model._outputs(seqs.measurements[b, picked[b]]).mean(0)
+        assert torch.allclose(raw[b], expected, atol=1e-6)
+
+
 def test_time_varying_parameters_average_the_last_history_measurements() -> None:
     model = make_model(mode="time_varying", history=3)
     seqs = measurements(2, 12, every=2)
