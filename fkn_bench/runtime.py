@@ -61,11 +61,11 @@ def resolve_device(name: str | torch.device) -> torch.device:
         if not torch.cuda.is_available():
             build = "a CPU-only build" if torch.version.cuda is None else f"built for CUDA {torch.version.cuda}"
             raise ValueError(f"device {str(device)!r} asked for, but CUDA is not available here (torch "
-                             f"{torch.__version__}, {build}; no usable GPU): use --device cpu")
+                             f"{torch.__version__}, {build}; no usable GPU): use the CPU (--device cpu, or device = \"cpu\" in a config)")
         if device.index is not None and device.index >= torch.cuda.device_count():
             raise ValueError(f"device {str(device)!r} asked for, but this machine has {torch.cuda.device_count()} GPU(s)")
     elif device.type == "mps" and not torch.backends.mps.is_available():
-        raise ValueError(f"device {str(device)!r} asked for, but MPS is not available here: use --device cpu")
+        raise ValueError(f"device {str(device)!r} asked for, but MPS is not available here: use the CPU (--device cpu)")
     elif device.type not in ("cpu", "cuda", "mps"):
         raise ValueError(f"device {str(device)!r} is not supported: use cpu, cuda or cuda:N")
     return device

@@ -46,6 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.flexkalmannet import FlexKalmanNetConfig
     from fkn_bench.reproduce import ReproduceSettings, run_reproduction
     from fkn_bench.reproduce.pipeline import stderr_log
+    from fkn_bench.runtime import resolve_device
 
     check_minimum(args, seed=0, seeds=1)
     with usage_errors(ValueError, TypeError):
@@ -53,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         settings = ReproduceSettings(seed=args.seed, eval_seeds=args.seeds, quick=args.quick, config=config,
                                      config_source=str(args.config) if args.config is not None else None,
                                      figures=not args.no_figures)
-        settings.training_config()
+        resolve_device(settings.training_config().device)  # (a GPU the config names must be here)
     out = output_directory(args.out if args.out is not None else Path("runs") / ("reproduce-quick" if args.quick else "reproduce"))
     reproduction = run_reproduction(out, settings, progress=not args.no_progress,
                                     log=None if args.no_progress else stderr_log)

@@ -70,6 +70,7 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.scenarios import get_scenario
     from fkn_bench.sweep import SearchSpace, SpaceError, SweepError, SweepSettings, load_space, resolve_space, run_sweep
     from fkn_bench.sweep import trial_config
+    from fkn_bench.runtime import resolve_device
     from fkn_bench.sweep.objective import is_trainable
     from fkn_bench.training import trainable
 
@@ -88,8 +89,10 @@ def run(args: argparse.Namespace) -> int:
     sampler = option("sampler", "random-grid")
     with usage_errors(UnknownEstimatorError, SpaceError, ValueError, TypeError):
         if is_trainable(estimator):
-            space.check_fields(trainable(estimator).config({}).to_dict(), f"{estimator} training config")
-            trial_config(estimator, space, {})  # the fixed values on their own must be valid
+            fields = {"device": "cpu", **trainable(estimator).config({}).to_dict()}  # (to_dict leaves the CPU out)
+            space.check_fields(fields, f"{estimator} training config")
+            fixed = trial_config(estimator, space, {})  # the fixed values on their own must be valid
+            resolve_device(fixed.train_config().device)  # (a GPU the space names must be here)
         else:  # its options: every knob's first value with the fixed ones must build it
             try:
                 trial_config(estimator, space, {k.name: k.values[0] if k.values else k.low for k in space.knobs})

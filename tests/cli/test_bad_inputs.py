@@ -45,6 +45,10 @@ BAD_INPUTS = [
     ("train --set hidden=abc --estimator flexkalmannet --out t", "FlexKalmanNet config key 'hidden' must be an integer (got 'abc')"),
     ("train --epochs 0 --estimator flexkalmannet --out t", "--epochs must be a positive integer (got 0)"),
     ("train --lr -1 --estimator flexkalmannet --out t", "--lr must be a finite number > 0 (got -1)"),
+    ("train --device gpu --estimator flexkalmannet --out t", "unknown device 'gpu': use cpu, cuda or cuda:N"),
+    ("train --device cuda:7 --estimator flexkalmannet --out t", "device 'cuda:7' asked for, but "),
+    ("bench train --device cuda:7", "device 'cuda:7' asked for, but "),
+    ("bench run --device gpu", "unknown device 'gpu': use cpu, cuda or cuda:N"),
     ("record --scenario nope --out r.mcap", "unknown scenario 'nope'"),
     ("record --out /proc/fkn-bench/r.mcap --steps 10", "cannot write /proc/fkn-bench/r.mcap: "),  # (not even root may)
     ("reproduce --out afile", "--out: afile is a file, not a directory"),
