@@ -1,4 +1,5 @@
-"""fkn_bench.runtime: the torch thread count is set for a block and restored."""
+"""fkn_bench.runtime: the torch thread count is set for a block and restored; a device is checked
+to exist before batched work is put on it."""
 
 from __future__ import annotations
 
@@ -63,3 +64,15 @@ def test_default_comes_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> 
     finally:
         monkeypatch.undo()
         importlib.reload(runtime)
+
+
+def test_resolve_device_names_what_is_wrong() -> None:
+    assert runtime.resolve_device("cpu") == torch.device("cpu")
+    for name, message in (("gpu", "unknown device 'gpu': use cpu, cuda or cuda:N"),
+                          ("meta", "device 'meta' is not supported"),
+                          ("cuda:7", "device 'cuda:7' asked for, but ")):
+        with pytest.raises(ValueError, match=message):
+            runtime.resolve_device(name)
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="CUDA is not available here"):
+            runtime.resolve_device("cuda")
