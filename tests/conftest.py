@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import os
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 
 import pytest
@@ -74,3 +75,32 @@ def _scenario_registry_restored_after_the_module() -> Iterator[None]:
 def _scenario_registry_restored_after_the_test() -> Iterator[None]:
     """The same after each test, for the tests of a file that follow it."""
     yield from _restoring_the_scenario_registry()
+
+
+@pytest.fixture
+def gpu_path(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The filter step a GPU runs, on the CPU: no compiled CPU kernels
+    (:mod:`fkn_bench.filters.kernels`), the structured EKF step at any batch."""
+    from fkn_bench.filters import ekf, kernels
+
+    monkeypatch.setattr(kernels, "ENABLED", False)
+    monkeypatch.setattr(ekf, "STRUCTURED_MIN_BATCH", 1)
+
+
+@pytest.fixture
+def meta_default_device() -> Callable[[], AbstractContextManager[None]]:
+    """``with meta_default_device(): ...`` runs the block with torch's default device ``meta``
+    (restored after): a tensor made there without following its inputs' device lands on ``meta``
+    and fails against the CPU inputs, as it would land on the CPU beside a GPU's inputs
+    (``tests/filters/test_device.py``)."""
+    import torch
+
+    @contextmanager
+    def block() -> Iterator[None]:
+        torch.set_default_device("meta")
+        try:
+            yield
+        finally:
+            torch.set_default_device(None)
+
+    return block

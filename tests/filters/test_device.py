@@ -10,7 +10,8 @@ forced, as on a GPU, where the compiled CPU kernels (:mod:`fkn_bench.filters.ker
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager
 
 import numpy as np
 import pytest
@@ -20,24 +21,12 @@ from fkn_bench.filters import MODELS, VARIANTS, FilterState, NoiseParameters, ma
 
 
 @pytest.fixture
-def torch_operations(monkeypatch: pytest.MonkeyPatch) -> None:
-    """The path a GPU takes: no compiled kernels, the structured EKF step at any batch."""
-    from fkn_bench.filters import ekf, kernels
-
-    monkeypatch.setattr(kernels, "ENABLED", False)
-    monkeypatch.setattr(ekf, "STRUCTURED_MIN_BATCH", 1)
-
-
-@pytest.fixture
-def default_device_meta() -> Iterator[None]:
-    torch.set_default_device("meta")
-    try:
+def on_meta(meta_default_device: Callable[[], AbstractContextManager[None]]) -> Iterator[None]:
+    with meta_default_device():
         yield
-    finally:
-        torch.set_default_device(None)
 
 
-def _episodes(model_name: str, batch: int = 4, steps: int = 40) -> tuple[torch.Tensor, torch.Tensor]:
+def _episodes(batch: int = 4, steps: int = 40) -> tuple[torch.Tensor, torch.Tensor]:
     """Noisy poses of a slow tumble, a measurement every 5 steps, one row starting late and one
     measurement NaN (sanitised away)."""
     rng = np.random.default_rng(0)
@@ -56,9 +45,9 @@ def _episodes(model_name: str, batch: int = 4, steps: int = 40) -> tuple[torch.T
 @pytest.mark.parametrize("model_name", MODELS)
 @pytest.mark.parametrize("variant", sorted(VARIANTS))
 def test_run_and_gradient_make_no_tensor_off_the_inputs_device(
-    torch_operations: None, default_device_meta: None, variant: str, model_name: str
+    gpu_path: None, on_meta: None, variant: str, model_name: str
 ) -> None:
-    z, mask = _episodes(model_name)
+    z, mask = _episodes()
     model = make_model(model_name, inertia=(0.153, 0.143, 0.162) if model_name == "rigid-body" else None)
     filt = make_filter(variant, model=model)
     filt.set_gate(0.9999)
@@ -78,9 +67,9 @@ def test_run_and_gradient_make_no_tensor_off_the_inputs_device(
 
 
 def test_time_varying_noise_and_a_given_initial_state_stay_on_the_inputs_device(
-    torch_operations: None, default_device_meta: None
+    gpu_path: None, on_meta: None
 ) -> None:
-    z, mask = _episodes("constant-velocity")
+    z, mask = _episodes()
     filt = make_filter("ekf")
     layout = filt.layout
     cpu = dict(dtype=torch.float64, device="cpu")

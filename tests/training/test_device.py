@@ -9,7 +9,8 @@ its step counter on the default device).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from typing import Any
 
 import pytest
@@ -28,28 +29,20 @@ def data() -> TrainingData:
     return TrainingData(SHORT, window=200)
 
 
-def _on_meta(method: Callable[..., Any]) -> Callable[..., Any]:
-    def wrapped(*args: Any, **kwargs: Any) -> Any:
-        torch.set_default_device("meta")
-        try:
-            return method(*args, **kwargs)
-        finally:
-            torch.set_default_device(None)
-
-    return wrapped
-
-
 @pytest.fixture
-def torch_operations_on_meta_default(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
-    """The GPU's path (no compiled CPU kernels), with training steps and validation computed
-    under a ``meta`` default device."""
-    from fkn_bench.filters import ekf, kernels
+def steps_on_meta(gpu_path: None, meta_default_device: Callable[[], AbstractContextManager[None]],
+                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """The GPU's filter step, with training steps and validation computed under a ``meta``
+    default device."""
+    def on_meta(method: Callable[..., Any]) -> Callable[..., Any]:
+        def wrapped(*args: Any, **kwargs: Any) -> Any:
+            with meta_default_device():
+                return method(*args, **kwargs)
 
-    monkeypatch.setattr(kernels, "ENABLED", False)
-    monkeypatch.setattr(ekf, "STRUCTURED_MIN_BATCH", 1)
-    monkeypatch.setattr(Trainer, "_backward", _on_meta(Trainer._backward))
-    monkeypatch.setattr(Trainer, "validate", _on_meta(Trainer.validate))
-    yield
+        return wrapped
+
+    monkeypatch.setattr(Trainer, "_backward", on_meta(Trainer._backward))
+    monkeypatch.setattr(Trainer, "validate", on_meta(Trainer.validate))
 
 
 CONFIGS = {
@@ -63,7 +56,7 @@ CONFIGS = {
 
 @pytest.mark.parametrize("name", sorted(CONFIGS))
 def test_a_training_epoch_makes_no_tensor_off_the_models_device(
-    data: TrainingData, torch_operations_on_meta_default: None, name: str
+    data: TrainingData, steps_on_meta: None, name: str
 ) -> None:
     options = CONFIGS[name]
     common = {"window": 200, "loss_cut": 50, "epochs": 1, "windows_per_batch": 4}
