@@ -277,7 +277,9 @@ class KalmanFilter(ABC):
         torch, not differentiated; a non-finite NIS fails)."""
         xp = namespace(innovation)
         if self.gate is None:
-            return torch.ones(innovation.shape[:-1], dtype=torch.bool) if xp is torch else xp.ones(innovation.shape[:-1], dtype=bool)
+            if xp is torch:
+                return torch.ones(innovation.shape[:-1], dtype=torch.bool, device=innovation.device)
+            return xp.ones(innovation.shape[:-1], dtype=bool)
         solved = xp.linalg.solve(innovation_covariance, innovation[..., None])[..., 0]
         return (innovation * solved).sum(-1) <= self._gate_threshold
 
