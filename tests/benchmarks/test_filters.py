@@ -61,8 +61,8 @@ def test_numpy_reference_loop(benchmark: Any) -> None:
 LARGE_STEPS = 200
 ON = "" if DEVICE.type == "cpu" else f", on {DEVICE}"
 EPISODES = 1024
-"""Distinct episodes of the large batch; a larger batch (``FKN_BENCH_LARGE_BATCH``) repeats them
-(the same work per row; 65536 distinct episodes would take minutes and gigabytes to simulate)."""
+"""Distinct episodes of the large batch; a larger batch (``FKN_BENCH_LARGE_BATCH``) repeats them:
+the same work per row, without simulating 65536 whole episodes to keep 200 steps of each."""
 
 
 @pytest.fixture(scope="module")
