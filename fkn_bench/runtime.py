@@ -16,7 +16,7 @@ from contextlib import contextmanager
 
 import torch
 
-__all__ = ["FILTER_THREADS", "torch_threads", "resolve_device"]
+__all__ = ["FILTER_THREADS", "torch_threads", "parse_device", "resolve_device"]
 
 
 def _threads_from_environment() -> int:
@@ -47,16 +47,22 @@ def torch_threads(threads: int | None = FILTER_THREADS) -> Iterator[None]:
             torch.set_num_threads(previous)
 
 
+def parse_device(name: str | torch.device) -> torch.device:
+    """The torch device ``name`` names, whether or not this machine has it (a stored config may
+    name another machine's GPU); ``ValueError`` for a name torch does not know."""
+    try:
+        return torch.device(name)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"unknown device {name!r}: use cpu, cuda or cuda:N") from None
+
+
 def resolve_device(name: str | torch.device) -> torch.device:
     """The torch device ``name`` (``cpu``, ``cuda``, ``cuda:1``, ``mps``) for batched filtering
     and training, checked to exist on this machine: ``ValueError`` naming the problem for a name
     torch does not know, and for an accelerator this torch build or machine lacks (a CPU-only
     build, no GPU, an index past the last GPU). The CPU is the default everywhere; nothing
     requires an accelerator."""
-    try:
-        device = torch.device(name)
-    except (RuntimeError, TypeError):
-        raise ValueError(f"unknown device {name!r}: use cpu, cuda or cuda:N") from None
+    device = parse_device(name)
     if device.type == "cuda":
         if not torch.cuda.is_available():
             build = "a CPU-only build" if torch.version.cuda is None else f"built for CUDA {torch.version.cuda}"

@@ -47,7 +47,7 @@ from torch import Tensor, nn
 
 from fkn_bench.filters import MODELS, VARIANTS, KalmanFilter, ParameterSet, make_filter, make_model
 from fkn_bench.limits import check_memory
-from fkn_bench.runtime import resolve_device, torch_threads
+from fkn_bench.runtime import parse_device, resolve_device, torch_threads
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
 
@@ -229,10 +229,7 @@ class TrainConfig:
             raise ValueError(f"lr must be a finite number > 0 (got {self.lr!r})")
         if self.loss_cut < 0:
             raise ValueError(f"loss_cut must be >= 0 (got {self.loss_cut!r})")
-        try:  # (a name torch knows; whether this machine has it is checked when training starts)
-            torch.device(self.device)
-        except (RuntimeError, TypeError):
-            raise ValueError(f"unknown device {self.device!r}: use cpu, cuda or cuda:N") from None
+        parse_device(self.device)  # (whether this machine has it is checked when training starts)
 
     def to_dict(self) -> dict[str, Any]:
         """The fields; the process model's and the device only when they are not the paper's
