@@ -2,13 +2,28 @@
 
 A file is written to a temporary sibling, flushed and fsynced, then renamed over the target
 (``os.replace`` is atomic on POSIX), so readers see the old file or the new one, never a torn one.
+
+Failed writes. Any failure while writing (``OSError``, or the ``RuntimeError`` a library such as
+torch raises when its stream fails) leaves the target as it was and raises :class:`WriteError`, one
+line naming the path; when the file system is full it is :class:`DiskFullError`, which also says
+how much space is free and about how much the write needed. Both are ``OSError`` subclasses, so
+existing ``except OSError`` handlers keep working; the command line prints them in one line with
+exit code 2. :func:`check_free_space` refuses work up front when its output cannot fit.
+
+Temporary files are named ``.<target name>.<random>[suffix].tmp`` (:data:`TEMPORARY_PATTERN`). A
+process killed between creating one and the rename leaves it behind; :func:`remove_temporaries`
+deletes such leftovers, and writers call it while they hold :func:`directory_lock`, so that no live
+writer's file is removed.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import json
 import math
 import os
+import shutil
 import tempfile
 import tomllib
 from collections.abc import Callable, Iterator
@@ -16,7 +31,84 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["atomic_path", "write_bytes_atomic", "write_text_atomic", "write_json_atomic", "read_json", "read_toml", "to_jsonable"]
+__all__ = [
+    "atomic_path", "write_bytes_atomic", "write_text_atomic", "write_json_atomic", "read_json", "read_toml", "to_jsonable",
+    "WriteError", "DiskFullError", "LockedError", "check_free_space", "directory_lock", "remove_temporaries",
+    "format_bytes", "TEMPORARY_PATTERN",
+]
+
+TEMPORARY_PATTERN = ".*.tmp"
+"""Glob of the temporary files :func:`atomic_path` creates (module docstring)."""
+
+_DISK_FULL = {errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)}
+
+
+def format_bytes(count: float) -> str:
+    """``count`` bytes for people: ``"812 B"``, ``"3.4 MB"``, ``"1.2 GB"`` (powers of 1000)."""
+    for unit, size in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if abs(count) >= size:
+            return f"{count / size:.3g} {unit}"
+    return f"{int(count)} B"
+
+
+def _free_bytes(path: Path) -> int | None:
+    """Free bytes on the file system of ``path`` (its nearest existing ancestor), or None."""
+    for candidate in (path, *path.parents):
+        if candidate.exists():
+            try:
+                return shutil.disk_usage(candidate).free
+            except OSError:
+                return None
+    return None
+
+
+class WriteError(OSError):
+    """A file could not be written; the message names the path and the cause (one line)."""
+
+    def __init__(self, message: str, path: str | Path) -> None:
+        super().__init__(message)
+        self.path = Path(path)
+
+    def __str__(self) -> str:
+        return str(self.args[0])
+
+
+class DiskFullError(WriteError):
+    """The file system filled while writing (or would have): the message names the path, the free
+    space and about how much the write needed."""
+
+    def __init__(self, path: str | Path, needed: float | None = None, *, what: str | None = None) -> None:
+        path = Path(path)
+        free = _free_bytes(path)
+        parts = [f"no space left on the device to write {what or path}" + (f" ({path})" if what else "")]
+        parts.append(f"{format_bytes(free)} free" if free is not None else "free space unknown")
+        if needed:
+            parts.append(f"about {format_bytes(needed)} needed")
+        super().__init__(": ".join(parts[:1]) + " (" + ", ".join(parts[1:]) + "); free some space or choose another "
+                         "directory", path)
+        self.free, self.needed = free, needed
+
+
+class LockedError(OSError):
+    """Another process holds the lock of a directory (:func:`directory_lock`)."""
+
+
+def _is_disk_full(exc: BaseException, directory: Path) -> bool:
+    if isinstance(exc, OSError) and exc.errno in _DISK_FULL:
+        return True
+    # torch and h5py turn ENOSPC into their own errors ("unexpected pos ...", "file write failed"):
+    # a failure while the file system has (almost) nothing left is a full disk
+    free = _free_bytes(directory)
+    return free is not None and free < 64 * 1024
+
+
+def check_free_space(directory: str | Path, needed: float, what: str) -> None:
+    """Raise :class:`DiskFullError` when the file system of ``directory`` has fewer than ``needed``
+    bytes free (plus a 1 MB margin); ``what`` names the output ("the dataset fkn-bench/ds1-full-v0")."""
+    directory = Path(directory)
+    free = _free_bytes(directory)
+    if free is not None and free < needed + 1e6:
+        raise DiskFullError(directory, needed, what=what)
 
 
 @contextmanager
@@ -24,21 +116,54 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically.
 
     Use for writers that need a file name (e.g. ``torch.save``, pandas, matplotlib).
+    Failures of the file system (and of the writer, when the disk is full) raise
+    :class:`WriteError` / :class:`DiskFullError` naming ``path`` (module docstring); other errors of
+    the writer propagate unchanged. The target is never left torn.
     """
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix + ".tmp", dir=target.parent)
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix + ".tmp", dir=target.parent)
+    except OSError as exc:
+        raise _write_error(exc, target) from None
     os.close(fd)
     tmp = Path(tmp_name)
-    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the file the usual permissions
     try:
-        yield tmp
-        with open(tmp, "rb+") as fh:
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the file the usual permissions
+        try:
+            yield tmp
+        except (OSError, RuntimeError) as exc:
+            if isinstance(exc, WriteError) or not (isinstance(exc, OSError) or _is_disk_full(exc, target.parent)):
+                raise
+            raise _write_error(exc, target, _size(tmp)) from None
+        try:
+            with open(tmp, "rb+") as fh:
+                os.fsync(fh.fileno())
+            os.replace(tmp, target)
+        except OSError as exc:
+            raise _write_error(exc, target, _size(tmp)) from None
     finally:
-        if tmp.exists():
+        try:
             tmp.unlink()
+        except FileNotFoundError:
+            pass
+        except OSError:  # pragma: no cover - a directory that vanished or turned read-only
+            pass
+
+
+def _size(path: Path) -> int:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return 0
+
+
+def _write_error(exc: BaseException, target: Path, written: int = 0) -> WriteError:
+    """The :class:`WriteError` (or :class:`DiskFullError`) for ``exc`` raised writing ``target``."""
+    if _is_disk_full(exc, target.parent):
+        return DiskFullError(target, written or None)
+    reason = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+    return WriteError(f"cannot write {target}: {reason}", target)
 
 
 def _umask() -> int:
@@ -52,6 +177,48 @@ def _write_atomic(path: str | Path, mode: str, write: Callable[[IO[Any]], None])
         with open(tmp, mode) as fh:
             write(fh)
     return Path(path)
+
+
+@contextmanager
+def directory_lock(directory: str | Path, what: str = "this directory") -> Iterator[Path]:
+    """Hold an exclusive advisory lock on ``directory`` (file ``.fkn-bench.lock`` inside it,
+    created with the directory) for the block; another process already holding it raises
+    :class:`LockedError` at once, naming the directory (no waiting). The lock dies with its
+    process, so a killed run never leaves a directory locked. Yields the directory."""
+    directory = Path(directory)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        fd = os.open(directory / ".fkn-bench.lock", os.O_RDWR | os.O_CREAT, 0o666 & ~_umask())
+    except OSError as exc:
+        raise _write_error(exc, directory / ".fkn-bench.lock") from None
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise LockedError(f"{directory} is in use by another fkn-bench process writing {what}: wait for it to "
+                              f"finish, or write somewhere else") from None
+        yield directory
+    finally:
+        os.close(fd)  # closing releases the lock
+
+
+def remove_temporaries(directory: str | Path, *, recursive: bool = True) -> list[Path]:
+    """Delete the temporary files (:data:`TEMPORARY_PATTERN`) that killed writers left under
+    ``directory``; returns them. Call it only while holding :func:`directory_lock` on
+    ``directory`` (a live writer's temporary file would go too)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        return []
+    found = directory.rglob(TEMPORARY_PATTERN) if recursive else directory.glob(TEMPORARY_PATTERN)
+    removed = []
+    for path in sorted(found):
+        if path.is_file():
+            try:
+                path.unlink()
+            except OSError:
+                continue
+            removed.append(path)
+    return removed
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> Path:

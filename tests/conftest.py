@@ -104,3 +104,45 @@ def meta_default_device() -> Callable[[], AbstractContextManager[None]]:
             torch.set_default_device(None)
 
     return block
+
+
+class SimulatedKill(BaseException):
+    """Raised by :func:`kill_at_write` in place of a SIGKILL (a ``BaseException``: no
+    ``except Exception`` of the code under test catches it)."""
+
+
+@pytest.fixture
+def kill_at_write(monkeypatch: pytest.MonkeyPatch) -> Callable[[int], AbstractContextManager[list[str]]]:
+    """``with kill_at_write(n) as written: ...`` lets the first ``n - 1`` atomic writes of
+    :mod:`fkn_bench.io` through and "kills" the process at the ``n``-th, as SIGKILL would between
+    writing a file's temporary copy and renaming it over the target: the target is not replaced,
+    a stray temporary file is left beside it, and :class:`SimulatedKill` propagates (caught by the
+    block; ``written`` lists the targets replaced before the kill). A block that makes fewer than
+    ``n`` writes finishes normally. Resume tests run a command once per kill point and compare
+    the resumed result with the uninterrupted one."""
+    import shutil
+
+    from fkn_bench import io
+
+    real_replace = io.os.replace
+
+    @contextmanager
+    def block(n: int) -> Iterator[list[str]]:
+        written: list[str] = []
+
+        def replace(src: str | os.PathLike[str], dst: str | os.PathLike[str]) -> None:
+            if len(written) + 1 == n:
+                shutil.copyfile(src, f"{src}.killed.tmp")  # what a real kill leaves behind
+                raise SimulatedKill(f"killed before writing {dst}")
+            real_replace(src, dst)
+            written.append(str(dst))
+
+        monkeypatch.setattr(io.os, "replace", replace)
+        try:
+            yield written
+        except SimulatedKill:
+            pass
+        finally:
+            monkeypatch.setattr(io.os, "replace", real_replace)
+
+    return block

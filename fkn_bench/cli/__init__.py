@@ -2,8 +2,9 @@
 exposes ``add_parser(subparsers)``, which registers the subcommand and sets ``handler``.
 
 Exit codes: 0 success, 1 failure while running, 2 invalid usage (unknown estimator or scenario,
-bad option values, unreadable input files, work over the memory limit), 130 interrupted (Ctrl-C,
-start-up included: one line, no traceback).
+bad option values, unreadable input files, work over the memory limit) or an output that cannot be
+written (a full disk: the path, the free space and the space needed; a directory locked by another
+fkn-bench process), 130 interrupted (Ctrl-C, start-up included: one line, no traceback).
 """
 
 from __future__ import annotations
@@ -92,6 +93,7 @@ def _handle_sigterm() -> object:
 
 def _main(argv: Sequence[str] | None) -> int:
     try:
+        from fkn_bench.io import LockedError, WriteError
         from fkn_bench.limits import SizeLimitError
         from fkn_bench.scenarios import ConfigError
         from fkn_bench.wording import cli_words, one_line_warnings
@@ -104,7 +106,7 @@ def _main(argv: Sequence[str] | None) -> int:
     try:
         with cli_words(), one_line_warnings(f"fkn-bench {args.command}"):  # flags, not keywords
             return int(args.handler(args) or 0)
-    except (UsageError, ConfigError, SizeLimitError) as exc:
+    except (UsageError, ConfigError, SizeLimitError, WriteError, LockedError) as exc:
         print(f"fkn-bench {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as exc:
