@@ -20,8 +20,9 @@ Problems, and what ``repair=True`` does about them (without it, each raises
   the damage, front to back;
 * corrupt chunk (CRC mismatch, undecodable or unknown compression): skip it (its messages are
   lost);
-* undecodable message, non-finite values, zero quaternion, zero stamp among non-zero ones: drop
-  the message;
+* undecodable message, non-finite values, implausible values (a position beyond +-1e6 m, a
+  rate beyond +-1e3 rad/s or m/s: :mod:`fkn_bench.recordings.plausibility`), zero quaternion,
+  zero stamp among non-zero ones: drop the message;
 * quaternion norm off 1 by more than ``quaternion_tolerance`` (default 1e-6): renormalise it;
 * header stamps going backwards: sort the messages by stamp (stable);
 * duplicate header stamps: keep the first message of each stamp.
@@ -52,7 +53,9 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from fkn_bench.geometry.quaternion import xyzw_to_wxyz
 from fkn_bench.recordings.codecs import DecodeError, decode_stamped
+from fkn_bench.recordings.plausibility import component_limits, first_implausible
 from fkn_bench.recordings.schemas import canonical_type_name
+from fkn_bench.types import STATE_NAMES
 from fkn_bench.wording import option, option_name
 
 __all__ = [
@@ -573,19 +576,27 @@ class McapRecording:
         if type_name in TWIST_TYPES:
             linear = 43 if type_name == _ODOMETRY else 0
             twists = np.concatenate([values[:, linear + 3 : linear + 6], values[:, linear : linear + 3]], axis=1)
-        ok = np.isfinite(np.concatenate([a for a in (poses, twists) if a is not None], axis=1)).all(axis=1)
+        checked = np.concatenate([a for a in (poses, twists) if a is not None], axis=1)
+        names = (STATE_NAMES[:7] if poses is not None else ()) + (STATE_NAMES[7:] if twists is not None else ())
+        ok = np.isfinite(checked).all(axis=1)
         zero_q = np.zeros_like(ok)
         if poses is not None:
             zero_q = ok & (np.linalg.norm(np.nan_to_num(poses[:, :4]), axis=1) < 1e-9)
         ok &= ~zero_q
+        beyond = ok.copy()
+        with np.errstate(invalid="ignore"):
+            beyond[ok] = np.any(np.abs(checked[ok]) > component_limits(names), axis=1)
+        ok &= ~beyond
         bad = keep & ~ok
         if bad.any():
             i = int(np.argmax(bad))
-            what = "a zero quaternion" if zero_q[i] else "a non-finite value (NaN or infinity)"
+            what = ("a zero quaternion" if zero_q[i] else
+                    f"an implausible value ({first_implausible(checked[i], names, quaternion_tolerance=None)[1]})"
+                    if beyond[i] else "a non-finite value (NaN or infinity)")
             refuse(
                 int(indices[i]),
                 f"has {what}; pass {option('repair')} to drop such messages",
-                f"dropped {int(bad.sum())} message(s) with non-finite values or zero quaternions "
+                f"dropped {int(bad.sum())} message(s) with non-finite or implausible values or zero quaternions "
                 f"(first: #{int(indices[i])})",
             )
         keep &= ok

@@ -42,6 +42,11 @@ How the episode is built:
   ``dt`` and ``n_steps`` (and, for recordings too short for its split, 2 validation and 2 test
   steps; at least 6 steps are needed). Only ``dt``, ``n_steps`` and, for synthesised measurements, the noise
   and schedule fields describe the replayed data.
+* **Plausibility.** The resampled true states (twists included) must be plausible
+  (:mod:`fkn_bench.recordings.plausibility`: finite, positions within +-1e6 m, rates within
+  +-1e3 rad/s and m/s, unit quaternions within ``quaternion_tolerance``), else a
+  :class:`~fkn_bench.recordings.RecordingError` names the file, the truth topic and the step:
+  never scored, an overflow would read as the estimator diverging.
 """
 
 from __future__ import annotations
@@ -60,6 +65,7 @@ from fkn_bench.envs.episodes import Episodes
 from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
 from fkn_bench.envs.measurements import MeasurementGenerator
 from fkn_bench.geometry import quaternion as quat
+from fkn_bench.recordings.plausibility import QUATERNION_TOLERANCE, first_implausible
 from fkn_bench.recordings.reader import (
     McapRecording,
     PoseSeries,
@@ -394,6 +400,14 @@ def read_recording(
     if frame == "body":
         twists = np.concatenate([quat.rotate(poses[:, :4], twists[:, :3]), quat.rotate(poses[:, :4], twists[:, 3:])], axis=1)
     states = np.concatenate([poses, twists], axis=1)
+    implausible = first_implausible(states, quaternion_tolerance=max(quaternion_tolerance, QUATERNION_TOLERANCE))
+    if implausible is not None:  # e.g. a finite-difference velocity of two poses 1 ns apart
+        (k,), problem = implausible
+        raise RecordingError(
+            f"{rec.path}: the true state of step {k} (t = {k * step:.6g} s after the first truth message; truth "
+            f"{truth_name!r}, twist from {source}) is implausible: {problem} (fkn_bench.recordings.plausibility)",
+            path=rec.path, topic=truth_name,
+        )
 
     # measurements
     measurements = valid = None

@@ -201,7 +201,9 @@ def test_non_unit_quaternion(simple_truth, tools) -> None:
 
 @pytest.mark.parametrize(
     ("row", "value", "match"),
-    [(4, ("q", 0.0), "a zero quaternion"), (9, ("r", np.nan), r"a non-finite value \(NaN or infinity\)")],
+    [(4, ("q", 0.0), "a zero quaternion"), (9, ("r", np.nan), r"a non-finite value \(NaN or infinity\)"),
+     # issue 34: a truth position of 1e300 was accepted and its overflow scored as the estimator diverging
+     (7, ("r", 1e300), r"an implausible value \(rx = 1e\+300 m is beyond \+-1e\+06 m\)")],
 )
 def test_zero_quaternions_and_non_finite_values(simple_truth, tools, row, value, match) -> None:
     stamps, states = _truth(tools)
@@ -212,6 +214,17 @@ def test_zero_quaternions_and_non_finite_values(simple_truth, tools, row, value,
     trajectory, repairs = _replay(path, repair=True)
     assert len(repairs) == 1 and "dropped 1 message(s)" in repairs[0]
     assert trajectory.report.truth_messages == 39
+
+
+def test_an_implausible_resampled_truth_is_a_named_error(simple_truth, tools) -> None:
+    """Issue 34: plausible poses 2 ns apart give a finite-difference angular rate of 1e7 rad/s;
+    the replayed truth is refused, naming the file, topic and step, instead of being scored."""
+    stamps, states = _truth(tools)
+    stamps[19], stamps[21] = stamps[20] - 1, stamps[20] + 1  # message 20 stays on grid step 20
+    path = simple_truth(stamps=stamps)  # (messages 19 and 21, 0.2 s of rotation apart, now 2 ns apart)
+    error = _error(path, r"the true state of step 20 .*truth '/loc/truth/pose', twist from finite differences\) is "
+                         r"implausible: wx = 1e\+07 rad/s is beyond \+-1000 rad/s", twist_topic=None)
+    assert error.topic == "/loc/truth/pose"
 
 
 def test_zero_stamp_among_others(simple_truth, tools) -> None:
