@@ -8,7 +8,9 @@ per-epoch history, an ``on_epoch`` callback, and with ``out=DIR`` these files:
 
 * ``checkpoint.pt``: everything to resume (``resume=True``; see
   :mod:`fkn_bench.training.checkpoint`), written atomically after the first epoch, then after an
-  epoch when :data:`CHECKPOINT_INTERVAL_S` have passed since the last one, and at the end;
+  epoch when :data:`CHECKPOINT_INTERVAL_S` have passed since the last one, and at the end. A run
+  killed at any point (or stopped by a full disk) and resumed gives exactly the numbers of the
+  uninterrupted run: the checkpoint holds every random generator's state;
 * ``history.csv``: epoch, losses, validation RMSE, learning rate, seconds and the deployed
   standard deviations;
 * ``loss.png`` and ``parameters.png``: the loss curves and the learned standard deviations over
@@ -18,6 +20,12 @@ per-epoch history, an ``on_epoch`` callback, and with ``out=DIR`` these files:
   :mod:`fkn_bench.training.artifacts`), with the test-split metrics and the per-epoch history
   (``training.history``: every column of ``history.csv`` but the seconds), so that a committed
   artefact can be checked against a short retraining.
+
+Every file is written atomically (:mod:`fkn_bench.io`): a write that fails, e.g. on a full disk,
+raises :class:`~fkn_bench.io.WriteError` (:class:`~fkn_bench.io.DiskFullError`) naming the file
+and leaves the file it would have replaced as it was, so ``resume=True`` continues from the last
+complete checkpoint. ``out`` is locked while a run writes into it (a second run into it is refused
+with :class:`~fkn_bench.io.LockedError`), and the temporary files of a killed run are removed.
 
 A trainable whose module is a :class:`~fkn_bench.training.trainer.SequenceModel` (KalmanNet: a
 network inside the filter loop, no noise parameters) gets the same files but ``parameters.png``;
@@ -42,7 +50,7 @@ import numpy as np
 import pandas as pd
 import torch
 
-from fkn_bench.io import atomic_path, read_toml
+from fkn_bench.io import atomic_path, directory_lock, read_toml, remove_temporaries
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.training.artifacts import deployed_estimator_config, run_provenance, write_artifact
@@ -213,8 +221,11 @@ def fit(
             :class:`~fkn_bench.training.TrainingData`; the test metrics are the mean over them).
         config: the estimator's training config, or options for its :attr:`Trainable.config`
             (None: the defaults).
-        out: output directory (created); None: no files, no test metrics.
-        resume: continue from ``out/checkpoint.pt`` (same estimator, config and scenario).
+        out: output directory (created), locked for the run (:func:`fkn_bench.io.directory_lock`:
+            a second training into it is refused with :class:`~fkn_bench.io.LockedError`), its
+            stray temporary files removed; None: no files, no test metrics.
+        resume: continue from ``out/checkpoint.pt`` (same estimator, config and scenario), exactly
+            where the uninterrupted run would be (:meth:`~fkn_bench.training.Trainer.state_dict`).
         progress: show a progress bar on stderr.
         plots: write the two training figures.
         on_epoch: ``on_epoch(epoch, history)`` after every epoch (and its checkpoint, when one
@@ -222,6 +233,16 @@ def fit(
         family: the model family the artefact is for (default: the scenarios' common
             ``model_family``, else ``default``).
     """
+    if out is None:
+        return _fit(estimator, scenario, config, None, resume, progress, plots, on_epoch, family)
+    with directory_lock(out, "a training run"):
+        remove_temporaries(out, recursive=False)  # (what a killed run's atomic writes left)
+        return _fit(estimator, scenario, config, Path(out), resume, progress, plots, on_epoch, family)
+
+
+def _fit(estimator: str, scenario: str | Scenario | Sequence[str | Scenario], config: Any, directory: Path | None,
+         resume: bool, progress: bool, plots: bool, on_epoch: OnEpoch | None, family: str | None) -> TrainingOutcome:
+    """:func:`fit` (into ``directory``, whose lock the caller holds, or without files)."""
     declared = trainable(estimator)
     scenarios = [get_scenario(s) for s in ([scenario] if isinstance(scenario, (str, Scenario)) else scenario)]
     scenario = scenarios[0]
@@ -236,10 +257,8 @@ def fit(
     data = training_data(scenario if len(scenarios) == 1 else scenarios, settings)
     model = declared.build(config, data)
     trainer = Trainer(model, settings.build_filter(scenario), data, settings)
-    directory = None if out is None else Path(out)
     checkpoint = None if directory is None else directory / "checkpoint.pt"
-    if directory is not None:
-        directory.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(settings.seed)  # (dropout's generator; a resumed trainer restores its state)
     if resume:
         if checkpoint is None:
             raise ValueError("resume=True needs out=DIR (the directory of the checkpoint to resume)")
@@ -273,7 +292,6 @@ def fit(
             last_saved = time.monotonic()
         return on_epoch(epoch, history) if on_epoch is not None else None
 
-    torch.manual_seed(settings.seed)
     trainer.fit(on_epoch=after_epoch, progress=progress)  # restores the best epoch's weights
     save()
     history = pd.DataFrame([record.flat() for record in trainer.history])

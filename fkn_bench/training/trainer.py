@@ -480,23 +480,53 @@ class Trainer:
 
     # ------------------------------------------------------------------ resume
     _MODULES = ("model", "optimizer", "scheduler")
-    _VALUES = ("best_loss", "best_epoch", "best_state", "epochs_without_improvement")
+    _VALUES = ("best_loss", "best_epoch", "best_state", "epochs_without_improvement", "evaluations")
+
+    def _generators(self) -> dict[str, torch.Generator]:
+        """Every random generator the training draws from, by name: the window order's
+        (``generator``), the model's own (a :class:`torch.Generator` attribute of any submodule,
+        e.g. FlexKalmanNet's sample picks: ``model.<submodule>.<attribute>``) and torch's default
+        generators (``torch``: dropout on the CPU; ``cuda``: on the GPU, when training there)."""
+        found = {"generator": self.generator, "torch": torch.default_generator}
+        for prefix, module in self.model.named_modules():
+            for attribute, value in vars(module).items():
+                if isinstance(value, torch.Generator):
+                    found[".".join(filter(None, ("model", prefix, attribute)))] = value
+        if self.device.type == "cuda":
+            found["cuda"] = torch.cuda.default_generators[self.device.index or 0]
+        return found
 
     def state_dict(self) -> dict[str, Any]:
-        """Everything needed to resume: model, optimiser, scheduler, RNG, history, best."""
+        """Everything needed to resume exactly: model, optimiser, scheduler, the states of every
+        random generator (:meth:`_generators`; numpy's and Python's are not used), history, best
+        epoch, counts, and the weights and optimiser state before the last step (a non-finite first
+        batch of the next epoch undoes that step, module docstring). A trainer that loads it
+        continues as the uninterrupted one would, bit for bit on the same machine."""
         return {
             **{name: getattr(self, name).state_dict() for name in self._MODULES},
             "generator": self.generator.get_state(),
+            "generators": {name: generator.get_state() for name, generator in self._generators().items()},
+            "before_step": None if self._before_step is None else {"model": self._before_step[0],
+                                                                    "optimizer": self._before_step[1]},
             "history": [asdict(r) for r in self.history],
             "gradient_steps": dict(self.gradient_steps),
             **{name: getattr(self, name) for name in self._VALUES},
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict` (one written before the generators' and the last step's
+        states were recorded restores the window order's generator only)."""
         for name in self._MODULES:
             getattr(self, name).load_state_dict(state[name])
         self.generator.set_state(state["generator"])
+        generators = self._generators()
+        for name, generator_state in state.get("generators", {}).items():
+            if name in generators:
+                generators[name].set_state(generator_state)
+        before = state.get("before_step")
+        self._before_step = None if before is None else (before["model"], before["optimizer"])
         self.history = [EpochRecord(**r) for r in state["history"]]
         self.gradient_steps.update(state.get("gradient_steps", {}))
         for name in self._VALUES:
-            setattr(self, name, state[name])
+            if name in state:
+                setattr(self, name, state[name])

@@ -108,3 +108,44 @@ def test_checkpoints_are_written_after_the_first_epoch_then_at_most_every_interv
     fit(NAME, SHORT, {"epochs": 3}, out=tmp_path / "every", progress=False, plots=False)
     assert saved == [1, 2, 3, 3]
     assert load_checkpoint(tmp_path / "every" / "checkpoint.pt")["trainer"]["history"][-1]["epoch"] == 3
+
+
+def test_a_full_disk_ends_train_in_one_line_and_resume_trusts_only_complete_checkpoints(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 34, finding 4: the disk fills while ``fkn-bench train`` writes its epoch-2 checkpoint
+    (torch has written part of it): one line naming the file and the space, exit 2, no torn file;
+    ``--resume`` continues from the epoch-1 checkpoint to the uninterrupted run's history. A
+    second training into a directory in use is refused (finding 6)."""
+    import errno
+
+    from fkn_bench.cli import main
+    from fkn_bench.io import directory_lock
+    from fkn_bench.training import pipeline
+
+    (tmp_path / "scenarios.toml").write_text('[scenario.tiny-train]\nbase = "ds1"\nn_steps = 2000\n')
+    monkeypatch.setattr(pipeline, "CHECKPOINT_INTERVAL_S", 0.0)  # a checkpoint after every epoch
+    out = tmp_path / "run"
+    argv = ["train", "--estimator", NAME, "--scenario", "tiny-train", "--scenario-file", str(tmp_path / "scenarios.toml"),
+            "--no-progress", "--out"]  # (2 epochs)
+    real_save, saves = torch.save, []
+
+    def full_disk(document: object, path: Path, *args: object, **kwargs: object) -> None:
+        saves.append(path)
+        if len(saves) == 2:
+            Path(path).write_bytes(b"PK\x03\x04 torn")  # what torch leaves before ENOSPC
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_save(document, path, *args, **kwargs)
+
+    monkeypatch.setattr(torch, "save", full_disk)
+    assert main([*argv, str(out)]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    assert len(error) == 1 and "no space left" in error[0] and str(out / "checkpoint.pt") in error[0], error
+    assert not list(out.glob(".*.tmp")) and load_checkpoint(out / "checkpoint.pt")["trainer"]["history"][-1]["epoch"] == 1
+    monkeypatch.setattr(torch, "save", real_save)
+    with directory_lock(out):
+        assert main([*argv, str(out), "--resume"]) == 2
+    assert "in use by another fkn-bench process" in capsys.readouterr().err
+    assert main([*argv, str(out), "--resume"]) == 0
+    straight = fit(NAME, get_scenario("tiny-train"), {}, progress=False).history.drop(columns="seconds")
+    pd.testing.assert_frame_equal(pd.read_csv(out / "history.csv").drop(columns="seconds"), straight, check_exact=True)
