@@ -5,6 +5,13 @@ Markdown table, HTML page and CSV per scenario, an index (README.md), the per-se
 (results.csv) and provenance.json. The output is a pure function of the results: rebuilding from
 the same results gives byte-identical files.
 
+``--out`` (default: the directory holding ``--results``) keeps a list of the files fkn-bench
+wrote there with their SHA-256 (``.fkn-bench-files.json``): a file is replaced only when
+fkn-bench wrote it and nobody edited it since, or when it already holds the new text; any other
+file in the way (your own README.md or results.csv) is refused in one line naming it, and nothing
+is written, unless ``--force``. Results that mix, for one scenario, another split, cut or scenario
+configuration are refused in one line: build those from one results directory each.
+
 Regenerate the committed leaderboards from scratch (cells already stored are reused; add --rerun
 to the first command to recompute them)::
 
@@ -17,7 +24,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from fkn_bench.cli import UsageError
+from fkn_bench.cli import UsageError, usage_errors
 from fkn_bench.cli.options import add_command, default_leaderboards
 
 __all__ = ["add_parser", "run"]
@@ -29,7 +36,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="results directory written by fkn-bench run --out (default: leaderboards/results, here "
                              "or in the fkn-bench checkout)")
     parser.add_argument("--out", metavar="DIR",
-                        help="where to write the leaderboards (default: the directory holding --results)")
+                        help="where to write the leaderboards (default: the directory holding --results); files "
+                             "fkn-bench did not write there are never replaced without --force")
+    parser.add_argument("--force", action="store_true",
+                        help="replace files in --out that fkn-bench did not write (or that were edited since)")
     parser.add_argument("--cross", action="store_true",
                         help="instead: run every learned or tuned estimator with every family's committed parameters "
                              "on every named scenario and write the cross-scenario table (cross-scenario.md/.csv)")
@@ -50,10 +60,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         results = ResultStore(args.results).load()
         notes = Path(args.results) / NOTES_FILE
-        paths = write_leaderboards(results, args.out, notes.read_text(encoding="utf-8") if notes.is_file() else None)
+        paths = write_leaderboards(results, args.out, notes.read_text(encoding="utf-8") if notes.is_file() else None,
+                                   force=args.force)
     except StoreError as exc:
         raise UsageError(f"{exc} (write results with: fkn-bench run --all --out {args.results})") from None
-    except ValueError as exc:  # results that cannot be combined (mixed settings)
+    except ValueError as exc:  # results that cannot be combined (mixed settings); a file in the way
         raise UsageError(str(exc)) from None
     print(f"fkn-bench leaderboard: wrote {len(paths)} files from {len(results)} cells to {args.out}", file=sys.stderr)
     for path in paths:
@@ -67,17 +78,21 @@ CROSS_FAMILIES = ("ds1", "ds2", "tumble", "default", "ds1-noise-step")
 
 def _cross(args: argparse.Namespace) -> int:
     from fkn_bench.harness.cross import cross_scores, cross_table
+    from fkn_bench.harness.manifest import check_files, write_files
     from fkn_bench.harness.tables import markdown_table
-    from fkn_bench.io import write_bytes_atomic
     from fkn_bench.scenarios import scenario_names
 
     if args.seeds < 1:
         raise UsageError(f"--seeds must be a positive integer (got {args.seeds})")
+    names = ["cross-scenario.md", "cross-scenario.csv"]
+    with usage_errors(ValueError):
+        check_files(args.out, names, force=args.force)  # before minutes of work
     scenarios = scenario_names()
     table = cross_table(cross_scores(CROSS_ESTIMATORS, CROSS_FAMILIES, scenarios, args.seeds), scenarios)
-    out = Path(args.out)
     header = f"# Cross-scenario table ({args.seeds} seeds)\n\nRegenerate: `fkn-bench leaderboard --cross --seeds {args.seeds}`\n\n"
-    for path, text in ((out / "cross-scenario.md", header + markdown_table(table)), (out / "cross-scenario.csv", table.to_csv())):
-        write_bytes_atomic(path, text.encode())
+    with usage_errors(ValueError):
+        paths = write_files(args.out, dict(zip(names, (header + markdown_table(table), table.to_csv()))),
+                            force=args.force, what="the cross-scenario table")
+    for path in paths:
         print(path)
     return 0

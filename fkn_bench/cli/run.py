@@ -6,8 +6,13 @@ writes every cell's results there as it completes, so an interrupted run resumes
 stopped (a stored cell whose data does not match its recorded SHA-256 is recomputed, with a line
 on stderr). ``--out`` writes only into a directory fkn-bench created (its ``.fkn-bench-results``
 marker or an earlier run's ``results.json``), a new one or an empty one; any other directory is
-refused unless ``--force``. Results are identical for the same seeds whatever the backend or
-worker count.
+refused unless ``--force``. A cell is filed under its estimator, scenario and variant (split,
+``--cut``, ``--estimator-option`` values and the scenario's configuration hash:
+``cells/<estimator>/<scenario>/<variant>/seeds-A-B.*``), so runs that differ there share an
+``--out`` without replacing each other's cells; an estimator run with options is shown as
+``manual-ekf (gate=0.5)``. One run at a time writes to an ``--out`` (a second is refused, exit 2);
+a killed run leaves nothing that the next run trusts and resumes to the same results. Results are
+identical for the same seeds whatever the backend or worker count.
 
 Examples::
 
@@ -30,6 +35,8 @@ import argparse
 import json
 import shutil
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from fkn_bench.cli import Interrupted, UsageError, usage_errors
@@ -102,20 +109,31 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise UsageError("--force needs --out (without it nothing is written)")
 
 
-def _store(args: argparse.Namespace) -> Any:
-    """The result store of ``--out``, checked to be fkn-bench's and writable before anything runs
-    (:meth:`~fkn_bench.harness.ResultStore.prepare`); a directory fkn-bench did not write is
-    refused unless ``--force``. Every refusal is a one-line usage error naming ``--out``."""
-    from fkn_bench.harness import ForeignDirectoryError, ResultStore, StoreError
+@contextmanager
+def _store_errors() -> Iterator[None]:
+    """:class:`~fkn_bench.harness.StoreError` s of ``--out`` as one-line usage errors naming it
+    (a foreign directory with the hint to use ``--force``)."""
+    from fkn_bench.harness import ForeignDirectoryError, StoreError
 
-    store = ResultStore(args.out)
     try:
-        store.prepare(force=args.force)
+        yield
     except ForeignDirectoryError as exc:
         raise UsageError(f"--out: {exc}; choose another directory, or pass --force to write cells/, results.csv "
                          f"and results.json there anyway") from None
     except StoreError as exc:
         raise UsageError(f"--out: {exc}") from None
+
+
+def _store(args: argparse.Namespace) -> Any:
+    """The result store of ``--out``, checked to be fkn-bench's before anything runs
+    (:meth:`~fkn_bench.harness.ResultStore.check`; it is marked, locked and written by
+    :func:`~fkn_bench.harness.run_grid`); a directory fkn-bench did not write is refused unless
+    ``--force``."""
+    from fkn_bench.harness import ResultStore
+
+    store = ResultStore(args.out)
+    with _store_errors():
+        store.check(force=args.force)
     return store
 
 
@@ -220,6 +238,7 @@ def run(args: argparse.Namespace) -> int:
         summarize_results,
         summary_text,
     )
+    from fkn_bench.harness.grid import estimator_label
     from fkn_bench.io import to_jsonable
 
     _check_arguments(args)
@@ -248,12 +267,14 @@ def run(args: argparse.Namespace) -> int:
     store = _store(args) if args.out else None
     backend = make_backend(args.backend, workers=args.workers, scheduler=args.scheduler)
     try:
-        outcome = run_grid(cells, store=store, backend=backend, progress=not args.no_progress, rerun=args.rerun)
+        with _store_errors():
+            outcome = run_grid(cells, store=store, backend=backend, progress=not args.no_progress, rerun=args.rerun,
+                               force=args.force)
     except KeyboardInterrupt:
         if store is None:
             raise
         raise Interrupted(f"the finished cells are saved in {args.out}: run the same command again to resume") from None
-    order = [(r.name, r.scenario) for r in resolved]
+    order = [(estimator_label(r.name, r.options), r.scenario) for r in resolved]
     summaries = summarize_results(outcome.results, order)
     if args.json:
         document = {

@@ -8,6 +8,10 @@ batch with :func:`fkn_bench.metrics.score_run`. Everything runs under
 :func:`fkn_bench.runtime.torch_threads` (one torch thread by default), so results do not depend on
 the process that runs the cell.
 
+The rows' ``estimator`` column is the cell's label (:attr:`~fkn_bench.harness.grid.CellSpec.label`:
+the name, with the options it ran with), so that rows of one estimator with and without options
+stay apart.
+
 An estimator that raises does not stop the grid: the cell is recorded as failed, with the error,
 and each of its seeds counts as diverged.
 """
@@ -62,7 +66,7 @@ def _record(spec: CellSpec, status: str, rows: list[pd.DataFrame], **fields: Any
 
 def _failure(spec: CellSpec, exc: BaseException) -> CellRecord:
     detail = "".join(traceback.format_exception(type(exc), exc, exc.__traceback__))
-    rows = [failure_rows(spec.estimator, spec.scenario, spec.seeds), cost_rows(spec.estimator, spec.scenario, spec.seeds, {})]
+    rows = [failure_rows(spec.label, spec.scenario, spec.seeds), cost_rows(spec.label, spec.scenario, spec.seeds, {})]
     return _record(spec, "failed", rows, error=_message(exc), notes={"traceback": detail})
 
 
@@ -101,6 +105,6 @@ def run_cell(spec: CellSpec) -> CellRecord:
         "us_per_step_online": us_online,
         "peak_memory_mib": batched.peak_memory_mib,
     }
-    rows = [score_rows(spec.estimator, spec.scenario, spec.seeds, scores),
-            cost_rows(spec.estimator, spec.scenario, spec.seeds, cost)]
+    rows = [score_rows(spec.label, spec.scenario, spec.seeds, scores),
+            cost_rows(spec.label, spec.scenario, spec.seeds, cost)]
     return _record(spec, "ok", rows, nees=scores.nees_sums, nis=scores.nis_sums, notes=notes)

@@ -4,12 +4,21 @@ Seeds are cut into chunks of :data:`SEED_CHUNK` consecutive entries of the seed 
 function of that list, independent of the backend and worker count). Each chunk is one cell,
 filtered as one batch, so the batched computation inside a cell, and hence every metric, is the
 same on every backend.
+
+A cell's identity (:meth:`CellSpec.key`) holds everything that changes its numbers; the part of it
+that is not the estimator's trained state or the seeds -- the source (scenario, configuration
+hash, split), the metric settings (``cut``, ...) and the estimator's options -- is its *variant*
+(:func:`variant_id`), so that cells differing only there never share a file, while a retrained
+estimator (a new fingerprint) replaces its old cell. Names become file names through
+:func:`path_name`, an injective encoding that cannot leave its directory.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,7 +27,8 @@ from fkn_bench.harness.sources import EpisodeSource
 from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
 from fkn_bench.metrics import MetricSettings
 
-__all__ = ["SEED_CHUNK", "ONLINE_STEPS", "CellSpec", "chunk_seeds", "build_grid", "safe_name"]
+__all__ = ["SEED_CHUNK", "ONLINE_STEPS", "CellSpec", "chunk_seeds", "build_grid", "safe_name", "path_name",
+           "estimator_label", "variant_id"]
 
 SEED_CHUNK = 10
 """Seeds per cell."""
@@ -45,8 +55,50 @@ def chunk_seeds(seeds: Sequence[int], size: int = SEED_CHUNK) -> list[tuple[int,
 
 
 def safe_name(name: str) -> str:
-    """A file-system-safe version of an estimator or scenario name."""
+    """A file-system-safe, readable version of a name for figure files (several names can give
+    the same result; result cells use :func:`path_name`)."""
     return re.sub(r"[^A-Za-z0-9._-]+", "_", name) or "_"
+
+
+_PLAIN = re.compile(r"[A-Za-z0-9_.-]")
+
+
+def path_name(name: str) -> str:
+    """``name`` as one path component, injectively: every character outside ``[A-Za-z0-9_.-]``
+    (``/``, ``%``, spaces, non-ASCII: each UTF-8 byte) and a leading dot become ``%XX`` (upper-case
+    hex), as in URLs. Distinct names give distinct components (``my fast`` -> ``my%20fast``,
+    ``my_fast``, ``my/fast`` -> ``my%2Ffast``), and no result is empty, ``.``, ``..`` or holds a
+    separator, so a path built from it stays in its directory. Raises ``ValueError`` for an
+    empty name."""
+    if not name:
+        raise ValueError("an empty name cannot be a file name")
+    out = []
+    for i, char in enumerate(name):
+        if _PLAIN.fullmatch(char) and not (i == 0 and char == "."):
+            out.append(char)
+        else:
+            out.extend(f"%{byte:02X}" for byte in char.encode("utf-8"))
+    return "".join(out)
+
+
+def estimator_label(name: str, options: Sequence[Sequence[Any]] = ()) -> str:
+    """The name results show for estimator ``name`` run with factory ``options`` (``(key,
+    value)`` pairs): the name alone, or ``"manual-ekf (gate=0.5)"`` (values other than strings
+    as JSON)."""
+    if not options:
+        return name
+    shown = ", ".join(f"{key}={value if isinstance(value, str) else json.dumps(value)}" for key, value in options)
+    return f"{name} ({shown})"
+
+
+def variant_id(key: Mapping[str, Any]) -> str:
+    """12 hex digits of SHA-256 over the variant part of a cell key (:meth:`CellSpec.key`): the
+    source key, the metric settings and the estimator options -- not the estimator's name or
+    fingerprint, the seeds or the format version (module docstring)."""
+    variant = {"source": key.get("source"), "settings": key.get("settings"),
+               "estimator_options": key.get("estimator_options") or []}
+    text = json.dumps(variant, sort_keys=True, separators=(",", ":"), allow_nan=False, default=str)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:12]
 
 
 @dataclass(frozen=True)
@@ -70,9 +122,15 @@ class CellSpec:
         return self.source.label
 
     @property
+    def label(self) -> str:
+        """The estimator as results show it: its name and options (:func:`estimator_label`)."""
+        return estimator_label(self.estimator, self.resolved.options)
+
+    @property
     def name(self) -> str:
-        """Human-readable cell name, e.g. ``manual-ekf/ds1/seeds-0-9``."""
-        return f"{self.estimator}/{self.scenario}/seeds-{self.seeds[0]}-{self.seeds[-1]}"
+        """Human-readable cell name, e.g. ``manual-ekf/ds1/seeds-0-9`` or
+        ``manual-ekf (gate=0.5)/ds1/seeds-0-9``."""
+        return f"{self.label}/{self.scenario}/seeds-{self.seeds[0]}-{self.seeds[-1]}"
 
     def key(self) -> dict[str, Any]:
         """Everything that determines the cell's deterministic results (resume compares it)."""

@@ -18,6 +18,19 @@ met and missed, each number with the command that produced it), is copied into t
     <scenario>.csv       the ranking table's deterministic columns
     results.csv          per-seed tidy rows of record (cost excluded), sorted
     provenance.json      seeds, settings, scenario hashes, estimator fingerprints, environments
+    .fkn-bench-files.json  the files fkn-bench wrote here, with their SHA-256
+
+``<scenario>`` is the name encoded by :func:`fkn_bench.harness.grid.path_name` (the name itself
+for the named scenarios). An estimator run with options is its own row, named with them
+(``manual-ekf (gate=0.5)``). Results that mix, for one scenario, different data (split, scenario
+configuration) or metric settings (``cut``) are refused in one line
+(:meth:`~fkn_bench.harness.records.Results.check_comparable`): build such leaderboards from one
+results directory per split and cut.
+
+Writing (:func:`write_leaderboards`) follows :mod:`fkn_bench.harness.manifest`: a file is
+replaced only when fkn-bench wrote it (listed in ``.fkn-bench-files.json`` with its SHA-256, and
+not edited since) or it already holds the new text; anybody else's ``README.md`` or
+``results.csv`` is refused in one line unless ``force``.
 """
 
 from __future__ import annotations
@@ -27,9 +40,12 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+from urllib.parse import quote
 
 import pandas as pd
 
+from fkn_bench.harness.grid import path_name
+from fkn_bench.harness.manifest import write_files
 from fkn_bench.harness.records import Results
 from fkn_bench.harness.reference import QuotedRow, quoted_rows
 from fkn_bench.harness.report import format_number, format_percent
@@ -37,7 +53,7 @@ from fkn_bench.harness.rows import deterministic_rows
 from fkn_bench.harness.store import rows_to_csv
 from fkn_bench.harness.summary import GROUP_RMSE_KEYS, summarize_pair
 from fkn_bench.harness.tables import Table, html_page, markdown_table
-from fkn_bench.io import to_jsonable, write_text_atomic
+from fkn_bench.io import to_jsonable
 from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS
 from fkn_bench.types import STATE_NAMES
 
@@ -205,7 +221,7 @@ def _scenario_intro(results: Results, scenario: str, runs: int) -> list[str]:
 
 def ranked_summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
     """The summaries of every estimator stored for ``scenario``, ranked (:func:`rank`)."""
-    estimators = sorted({r.estimator for r in results.records if r.scenario == scenario})
+    estimators = sorted({r.label for r in results.records if r.scenario == scenario})
     return rank([summarize_pair(results, e, scenario) for e in estimators])
 
 
@@ -218,7 +234,8 @@ def _scenario_files(results: Results, scenario: str, ranked: Sequence[dict[str, 
     title = f"fkn-bench leaderboard: {scenario}"
     markdown = f"# {title}\n\n" + "\n\n".join(intro) + "\n\n" + "\n".join(markdown_table(t) for t in tables)
     page = html_page(title, [p.replace("`", "") for p in intro], tables)
-    return {f"{scenario}.md": markdown, f"{scenario}.html": page, f"{scenario}.csv": _scenario_csv(ranked)}
+    stem = path_name(scenario)
+    return {f"{stem}.md": markdown, f"{stem}.html": page, f"{stem}.csv": _scenario_csv(ranked)}
 
 
 def _scenario_csv(ranked: Sequence[dict[str, Any]]) -> str:
@@ -263,9 +280,9 @@ def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[di
         ["estimator", *scenarios], [[e, *(cell(e, s) for s in scenarios)] for e in estimators],
     )
     links = [
-        f"- [{s}]({s}.md) ([HTML]({s}.html), [CSV]({s}.csv)): best {ranked[s][0]['estimator']} "
+        f"- [{s}]({u}.md) ([HTML]({u}.html), [CSV]({u}.csv)): best {ranked[s][0]['estimator']} "
         f"({_fmt(ranked[s][0]['state_rmse'], 4)})"
-        for s in scenarios
+        for s, u in ((s, quote(path_name(s))) for s in scenarios)
     ]
     env_lines = [
         f"- fkn-bench {e.get('fkn_bench')}, commit {e.get('git_commit')}, Python {e.get('python')}, "
@@ -335,7 +352,7 @@ def _provenance(results: Results, scenarios: Sequence[str]) -> str:
             for s in scenarios
         },
         "estimators": {
-            e: sorted({r.key.get("estimator_fingerprint", "") for r in results.records if r.estimator == e})
+            e: sorted({r.key.get("estimator_fingerprint", "") for r in results.records if r.label == e})
             for e in results.estimators()
         },
         "cells": len(results),
@@ -350,6 +367,7 @@ def build_leaderboards(results: Results, notes: str | None = None) -> dict[str, 
     (Markdown) becomes the index's "Notes" section."""
     if not len(results):
         raise ValueError("no results to build leaderboards from")
+    results.check_comparable()
     scenarios = scenario_order(results.scenarios())
     files: dict[str, str] = {}
     ranked = {scenario: ranked_summaries(results, scenario) for scenario in scenarios}
@@ -361,7 +379,9 @@ def build_leaderboards(results: Results, notes: str | None = None) -> dict[str, 
     return files
 
 
-def write_leaderboards(results: Results, out_dir: str | Path, notes: str | None = None) -> list[Path]:
-    """Build and write every leaderboard file (atomically) under ``out_dir``; returns the paths."""
-    out = Path(out_dir)
-    return [write_text_atomic(out / name, text) for name, text in sorted(build_leaderboards(results, notes).items())]
+def write_leaderboards(results: Results, out_dir: str | Path, notes: str | None = None, *,
+                       force: bool = False) -> list[Path]:
+    """Build and write every leaderboard file (atomically) under ``out_dir``, replacing only
+    files fkn-bench wrote there unless ``force`` (module docstring); returns the paths. Raises
+    :class:`~fkn_bench.harness.manifest.ForeignFileError` (nothing written) for a file in the way."""
+    return write_files(out_dir, build_leaderboards(results, notes), force=force, what="leaderboards")

@@ -1,10 +1,19 @@
 """Cell records (a cell's outcome in plain data: no estimator, no source object) and their
 collection (:class:`Results`): what the store reads and writes and what summaries, leaderboards
-and plots consume."""
+and plots consume.
+
+Results are grouped by the estimator's *label* (:func:`fkn_bench.harness.grid.estimator_label`:
+its name, with the factory options it ran with, ``"manual-ekf (gate=0.5)"``), so that a run with
+options is a row of its own; the tidy rows' ``estimator`` column holds the label too. Records of
+one scenario that were scored on different data or with different settings (split, scenario
+configuration, ``cut``, ...) cannot be ranked together: :meth:`Results.check_comparable` refuses
+them in one line.
+"""
 
 from __future__ import annotations
 
 import functools
+import json
 import operator
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -12,6 +21,7 @@ from typing import Any
 
 import pandas as pd
 
+from fkn_bench.harness.grid import estimator_label
 from fkn_bench.harness.rows import COLUMNS, sort_rows
 from fkn_bench.metrics import MetricSettings, StatisticSums
 
@@ -49,9 +59,15 @@ class CellRecord:
     provenance: dict[str, Any] = field(default_factory=dict)
 
     @property
+    def label(self) -> str:
+        """The estimator with the options it ran with (module docstring)."""
+        return estimator_label(self.estimator, self.key.get("estimator_options") or ())
+
+    @property
     def name(self) -> str:
-        """Human-readable cell name, e.g. ``manual-ekf/ds1/seeds-0-9``."""
-        return f"{self.estimator}/{self.scenario}/seeds-{self.seeds[0]}-{self.seeds[-1]}"
+        """Human-readable cell name, e.g. ``manual-ekf/ds1/seeds-0-9``
+        (:attr:`fkn_bench.harness.grid.CellSpec.name`)."""
+        return f"{self.label}/{self.scenario}/seeds-{self.seeds[0]}-{self.seeds[-1]}"
 
     @property
     def settings(self) -> MetricSettings:
@@ -63,12 +79,22 @@ def _pool(parts: Sequence[StatisticSums | None]) -> StatisticSums | None:
     return functools.reduce(operator.add, present) if present else None
 
 
+def _differences(a: Any, b: Any) -> tuple[str, str]:
+    """Two differing key parts in a message: source keys as they are; settings by the fields
+    that differ (``cut=300`` and ``cut=100``)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        fields = [k for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        return tuple(", ".join(f"{k}={json.dumps(d.get(k))}" for k in fields) for d in (a, b))  # type: ignore[return-value]
+    return str(a), str(b)
+
+
 class Results:
     """Records of many cells (any order in, canonical order inside: pooled sums are identical
-    whatever order cells finished in)."""
+    whatever order cells finished in). "Estimator" in the methods below means the label
+    (module docstring)."""
 
     def __init__(self, records: Iterable[CellRecord]) -> None:
-        self.records: list[CellRecord] = sorted(records, key=lambda r: (r.estimator, r.scenario, r.seeds))
+        self.records: list[CellRecord] = sorted(records, key=lambda r: (r.label, r.scenario, r.seeds))
 
     def __len__(self) -> int:
         return len(self.records)
@@ -81,18 +107,19 @@ class Results:
         return sort_rows(pd.concat([r.rows for r in self.records], ignore_index=True))
 
     def pairs(self) -> list[tuple[str, str]]:
-        """Distinct ``(estimator, scenario)`` pairs, sorted."""
-        return sorted({(r.estimator, r.scenario) for r in self.records})
+        """Distinct ``(estimator label, scenario)`` pairs, sorted."""
+        return sorted({(r.label, r.scenario) for r in self.records})
 
     def estimators(self) -> list[str]:
-        return sorted({r.estimator for r in self.records})
+        """Distinct estimator labels, sorted."""
+        return sorted({r.label for r in self.records})
 
     def scenarios(self) -> list[str]:
         return sorted({r.scenario for r in self.records})
 
     def cells(self, estimator: str, scenario: str) -> list[CellRecord]:
-        """The records of one pair, in seed order."""
-        return [r for r in self.records if r.estimator == estimator and r.scenario == scenario]
+        """The records of one pair (``estimator``: a label), in seed order."""
+        return [r for r in self.records if r.label == estimator and r.scenario == scenario]
 
     def seeds(self, estimator: str, scenario: str) -> list[int]:
         return [s for r in self.cells(estimator, scenario) for s in r.seeds]
@@ -116,6 +143,22 @@ class Results:
                     f"{records[0].estimator}/{records[0].scenario}); rerun them with the same settings"
                 )
         return MetricSettings.from_dict(first)
+
+    def check_comparable(self) -> None:
+        """Raise ``ValueError`` (one line) when the records of one scenario were scored on
+        different data or with different metric settings (a split, a ``cut``, a scenario
+        configuration of their own): their numbers cannot share a ranking."""
+        first: dict[str, CellRecord] = {}
+        for record in self.records:
+            seen = first.setdefault(record.scenario, record)
+            for part, what in (("source", "data (split or scenario configuration)"), ("settings", "metric settings")):
+                if record.key.get(part) != seen.key.get(part):
+                    mine, theirs = _differences(record.key.get(part), seen.key.get(part))
+                    raise ValueError(
+                        f"results mix {what} for scenario {record.scenario}: {mine} (cell {record.name}) and {theirs} "
+                        f"(cell {seen.name}); keep one split, cut and scenario configuration per results directory "
+                        f"(fkn-bench run --out another directory)"
+                    )
 
     def source(self, scenario: str) -> dict[str, Any]:
         """The source description of ``scenario``'s records (the first one's)."""

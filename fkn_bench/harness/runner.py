@@ -5,13 +5,18 @@ every cell is written atomically the moment it completes, so an interrupted grid
 stopped (finished cells are read back, not recomputed; a finished cell whose data no longer
 matches its recorded checksums is recomputed, with a line on stderr); without one, results stay
 in memory. The store must be fkn-bench's (:meth:`~fkn_bench.harness.store.ResultStore.prepare`,
-checked before anything runs).
+checked before anything runs), and the run holds its lock throughout
+(:meth:`~fkn_bench.harness.store.ResultStore.session`: a second run into the same directory is
+refused with :class:`fkn_bench.io.LockedError`). A failed write (a full disk:
+:class:`fkn_bench.io.DiskFullError`) stops the run with that error; the cells finished before it
+are kept and the one being written is not finished, so rerunning resumes.
 """
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,7 +54,7 @@ def grid_provenance(cells: Sequence[CellSpec], backend: Backend) -> dict[str, An
         "environment": environment(),
         "backend": {"name": backend.name, "workers": getattr(backend, "workers", 1),
                     "scheduler": getattr(backend, "scheduler", None)},
-        "estimators": list(dict.fromkeys(c.estimator for c in cells)),
+        "estimators": list(dict.fromkeys(c.label for c in cells)),
         "sources": sources,
         "seeds": sorted({s for c in cells for s in c.seeds}),
         "settings": cells[0].settings.to_dict() if cells else None,
@@ -64,13 +69,19 @@ def run_grid(
     backend: Backend | None = None,
     progress: bool = True,
     rerun: bool = False,
+    force: bool = False,
 ) -> GridRun:
     """Run ``cells`` (module docstring). ``rerun`` recomputes finished cells too; ``progress``
-    shows a tqdm bar on stderr. Raises :class:`~fkn_bench.harness.store.StoreError` before
-    running anything when ``store`` is not fkn-bench's or cannot be written."""
+    shows a tqdm bar on stderr; ``force`` writes into a ``store`` that fkn-bench did not create.
+    Raises :class:`~fkn_bench.harness.store.StoreError` before running anything when ``store``
+    is not fkn-bench's, :class:`fkn_bench.io.WriteError` when it cannot be written and
+    :class:`fkn_bench.io.LockedError` when another process is writing there."""
     backend = backend or LocalBackend()
-    if store is not None:
-        store.prepare()
+    with store.session(force=force) if store is not None else nullcontext():
+        return _run(cells, store, backend, progress, rerun)
+
+
+def _run(cells: Sequence[CellSpec], store: ResultStore | None, backend: Backend, progress: bool, rerun: bool) -> GridRun:
     records: list[CellRecord] = []
     todo: list[CellSpec] = []
     mismatched: list[str] = []

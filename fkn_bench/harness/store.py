@@ -2,19 +2,33 @@
 
 Layout under the store's root::
 
-    cells/<estimator>/<scenario>/seeds-<first>-<last>.csv    tidy rows (exact float repr)
-    cells/<estimator>/<scenario>/seeds-<first>-<last>.npz    per-step NEES/NIS sums
-    cells/<estimator>/<scenario>/seeds-<first>-<last>.json   key, status, error, provenance
+    cells/<estimator>/<scenario>/<variant>/seeds-<first>-<last>.csv    tidy rows (exact float repr)
+    cells/<estimator>/<scenario>/<variant>/seeds-<first>-<last>.npz    per-step NEES/NIS sums
+    cells/<estimator>/<scenario>/<variant>/seeds-<first>-<last>.json   key, status, error, provenance
     results.csv                                              rows of the last grid run, sorted
     results.json                                             provenance of the last grid run
 
     .fkn-bench-results                                       marker: fkn-bench writes here
+    .fkn-bench.lock                                          held while a run writes here
 
-Each file is written atomically (:mod:`fkn_bench.io`) and the cell's JSON last, so a cell is
-finished exactly when its JSON exists. Resume: a cell whose JSON records the same key (estimator
-and its configuration fingerprint, source and its configuration hash, seeds, metric settings,
-format version) is not computed again; failed cells count as finished (their failure is the
-result; use ``rerun`` to try again).
+``<estimator>`` and ``<scenario>`` are the names encoded by
+:func:`~fkn_bench.harness.grid.path_name` (one component each, distinct names never share one,
+nothing escapes ``cells/``); ``<variant>`` is :func:`~fkn_bench.harness.grid.variant_id`, 12 hex
+digits over the source key (scenario configuration hash, split), the metric settings (``cut``)
+and the estimator options, so that runs differing there keep their own cells, while a retrained
+estimator replaces its cell. Cells of the earlier layout without ``<variant>`` are read, and moved
+into the new one when a run writes to the directory (:meth:`ResultStore.migrate`).
+
+Each file is written atomically (:mod:`fkn_bench.io`) and the cell's JSON last (a replaced cell's
+JSON is removed first), so a cell is finished exactly when its JSON exists: a kill or a full disk
+at any point leaves no cell that resume trusts with data it did not record. Resume: a cell whose
+JSON records the same key (estimator and its configuration fingerprint, source and its
+configuration hash, seeds, metric settings, estimator options, format version) is not computed
+again; failed cells count as finished (their failure is the result; use ``rerun`` to try again).
+
+Concurrency: :meth:`ResultStore.session` holds :func:`fkn_bench.io.directory_lock` on the root
+while a run writes there (a second run into it is refused with :class:`fkn_bench.io.LockedError`)
+and removes the temporary files that killed writers left behind.
 
 Integrity: a cell's JSON records the SHA-256 of its CSV and NPZ files (``sha256``), and reading
 the cell checks them: a cell whose data was edited or corrupted raises :class:`CellChecksumError`
@@ -25,23 +39,29 @@ Ownership: :meth:`ResultStore.prepare` runs before anything is written and makes
 root is fkn-bench's: a new or empty directory gets the marker file; a directory with the marker,
 or with the ``results.json`` of an earlier run (``format: fkn-bench-results``; written before the
 marker existed), is ours; any other directory is refused (:class:`ForeignDirectoryError`) unless
-``force`` is given, so that nobody's ``results.csv`` is overwritten by surprise.
+``force`` is given, so that nobody's ``results.csv`` is overwritten by surprise. fkn-bench's lock
+file and stray temporary files do not count (a directory holding only what a run killed while
+writing the marker left behind is empty).
 """
 
 from __future__ import annotations
 
+import fnmatch
 import hashlib
 import io
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
 import pandas as pd
 
-from fkn_bench.harness.grid import CellSpec, safe_name
+from fkn_bench.harness.grid import CellSpec, path_name, variant_id
 from fkn_bench.harness.records import CellRecord, Results
-from fkn_bench.io import read_json, to_jsonable, write_bytes_atomic, write_json_atomic, write_text_atomic
+from fkn_bench.io import (TEMPORARY_PATTERN, WriteError, directory_lock, read_json, remove_temporaries, to_jsonable,
+                          write_bytes_atomic, write_json_atomic, write_text_atomic)
 from fkn_bench.metrics import StatisticSums
 
 __all__ = [
@@ -49,6 +69,7 @@ __all__ = [
     "MARKER",
     "CellChecksumError",
     "ForeignDirectoryError",
+    "LOCK_FILE",
     "ResultStore",
     "StoreError",
     "read_rows_csv",
@@ -59,6 +80,8 @@ CELL_FORMAT = "fkn-bench-cell"
 RESULTS_FORMAT = "fkn-bench-results"
 MARKER = ".fkn-bench-results"
 """The file that marks a directory as fkn-bench's results directory (module docstring)."""
+LOCK_FILE = ".fkn-bench.lock"
+"""The file :func:`fkn_bench.io.directory_lock` locks."""
 
 _DTYPES = {"estimator": str, "scenario": str, "seed": np.int64, "group": str, "metric": str, "value": np.float64, "unit": str}
 
@@ -73,6 +96,19 @@ class ForeignDirectoryError(StoreError):
 
 class CellChecksumError(StoreError):
     """A cell whose CSV or NPZ file does not match the SHA-256 recorded in its JSON."""
+
+
+def _ignorable(name: str) -> bool:
+    """fkn-bench's lock file and the temporary files of killed atomic writes."""
+    return name == LOCK_FILE or fnmatch.fnmatchcase(name, TEMPORARY_PATTERN)
+
+
+class _Named:
+    """The estimator, scenario, seeds and key of a cell document (for :meth:`ResultStore._paths`)."""
+
+    def __init__(self, document: dict[str, Any]) -> None:
+        self.estimator, self.scenario = str(document["estimator"]), str(document["scenario"])
+        self.seeds, self.key = [int(s) for s in document["seeds"]], dict(document["key"])
 
 
 def _sha256(data: bytes) -> str:
@@ -102,22 +138,14 @@ class ResultStore:
         self.root = Path(root)
 
     # ------------------------------------------------------------------ ownership
-    def prepare(self, *, force: bool = False) -> None:
-        """Make the root a results directory of fkn-bench's before anything is written there.
-
-        A missing or empty directory is created and marked (:data:`MARKER`); one with the marker
-        or with an earlier run's ``results.json`` is ours (and marked); any other directory is
-        refused with :class:`ForeignDirectoryError` naming some of its entries, unless ``force``
-        (it is marked and written into; files other than ``cells/``, ``results.csv`` and
-        ``results.json`` are never touched). A root that is a file, or that cannot be created
-        or written, raises :class:`StoreError`.
-        """
+    def check(self, *, force: bool = False) -> None:
+        """Refuse a root that is not fkn-bench's, writing nothing (:meth:`prepare`'s checks)."""
         root = self.root
         if root.exists() and not root.is_dir():
             raise StoreError(f"{root} is a file, not a directory")
         if root.is_dir() and not force and not self._is_ours():
             try:
-                entries = sorted(p.name + ("/" if p.is_dir() else "") for p in root.iterdir())
+                entries = sorted(p.name + ("/" if p.is_dir() else "") for p in root.iterdir() if not _ignorable(p.name))
             except OSError as exc:
                 raise StoreError(f"cannot read directory {root}: {exc.strerror or exc}") from None
             if entries:
@@ -125,14 +153,39 @@ class ResultStore:
                 raise ForeignDirectoryError(
                     f"{root} is not an fkn-bench results directory: it holds {shown} and no {MARKER} marker"
                 )
+
+    def prepare(self, *, force: bool = False) -> None:
+        """Make the root a results directory of fkn-bench's before anything is written there.
+
+        A missing or empty directory (fkn-bench's lock file and stray temporary files aside) is
+        created and marked (:data:`MARKER`); one with the marker or with an earlier run's
+        ``results.json`` is ours (and marked); any other directory is refused with
+        :class:`ForeignDirectoryError` naming some of its entries, unless ``force`` (it is marked
+        and written into; files other than ``cells/``, ``results.csv`` and ``results.json`` are
+        never touched). A root that is a file raises :class:`StoreError`; one that cannot be
+        created or written raises :class:`fkn_bench.io.WriteError` (``DiskFullError`` when the
+        disk is full), one line naming the path.
+        """
+        self.check(force=force)
+        root = self.root
         if (root / MARKER).is_file():  # marked already: only check that it can be written (a rerun leaves no change)
             if not os.access(root, os.W_OK):
                 raise StoreError(f"cannot write to {root}: permission denied")
             return
-        try:
-            write_json_atomic(root / MARKER, {"format": RESULTS_FORMAT, "note": "fkn-bench run --out writes here"})
-        except OSError as exc:
-            raise StoreError(f"cannot write to {root}: {exc.strerror or exc}") from None
+        write_json_atomic(root / MARKER, {"format": RESULTS_FORMAT, "note": "fkn-bench run --out writes here"})
+
+    @contextmanager
+    def session(self, *, force: bool = False) -> Iterator[ResultStore]:
+        """Hold the root for writing: :meth:`check`, take the directory's lock
+        (:func:`fkn_bench.io.directory_lock`; another process holding it raises
+        :class:`fkn_bench.io.LockedError` at once), :meth:`prepare`, remove stray temporary files
+        and :meth:`migrate` cells of the earlier layout; the lock is held until the block ends."""
+        self.check(force=force)  # before the lock file is created in somebody else's directory
+        with directory_lock(self.root, "results (fkn-bench run --out)"):
+            self.prepare(force=force)
+            remove_temporaries(self.root)
+            self.migrate()
+            yield self
 
     def _is_ours(self) -> bool:
         """The root holds the marker, or an earlier run's ``results.json``."""
@@ -146,10 +199,40 @@ class ResultStore:
 
     # ------------------------------------------------------------------ paths
     def _paths(self, cell: CellSpec | CellRecord) -> tuple[Path, Path, Path]:
-        """The cell's CSV, NPZ and JSON files."""
-        stem = self.root / "cells" / safe_name(cell.estimator) / safe_name(cell.scenario)
+        """The cell's CSV, NPZ and JSON files (module docstring)."""
+        key = cell.key() if callable(cell.key) else cell.key
+        stem = self.root / "cells" / path_name(cell.estimator) / path_name(cell.scenario) / variant_id(key)
         stem /= f"seeds-{cell.seeds[0]}-{cell.seeds[-1]}"
         return stem.with_suffix(".csv"), stem.with_suffix(".npz"), stem.with_suffix(".json")
+
+    def migrate(self) -> list[Path]:
+        """Move the cells of the earlier layout (``cells/<estimator>/<scenario>/seeds-*``) to
+        their place in this one, unchanged; returns their new JSON paths. Each file is renamed
+        (atomic), the JSON last, so an interrupted migration goes on where it stopped. A legacy
+        cell whose place already holds a finished cell (written there since) is the same cell
+        computed earlier: its files are removed. A legacy JSON that is not a readable cell is left
+        where it is. Call while holding the lock; a failure raises :class:`fkn_bench.io.WriteError`."""
+        moved = []
+        for old_json in sorted((self.root / "cells").glob("*/*/seeds-*.json")):
+            try:
+                document = read_json(old_json)
+                new_csv, new_npz, new_json = self._paths(_Named(document))
+            except (OSError, ValueError, KeyError, TypeError, IndexError):
+                continue
+            superseded = new_json.is_file()
+            for old, new in ((old_json.with_suffix(".csv"), new_csv), (old_json.with_suffix(".npz"), new_npz),
+                             (old_json, new_json)):
+                try:
+                    if superseded:
+                        old.unlink(missing_ok=True)
+                    elif old.is_file():
+                        new.parent.mkdir(parents=True, exist_ok=True)
+                        os.replace(old, new)
+                except OSError as exc:
+                    raise WriteError(f"cannot move the cell file {old} to {new}: {exc.strerror or exc}", new) from None
+            if not superseded:
+                moved.append(new_json)
+        return moved
 
     # ------------------------------------------------------------------ resume
     def finished(self, spec: CellSpec) -> CellRecord | None:
@@ -167,8 +250,10 @@ class ResultStore:
 
     # ------------------------------------------------------------------ write
     def write_cell(self, record: CellRecord) -> Path:
-        """Write the record's rows, sums and JSON (last) atomically; returns the JSON path."""
+        """Write the record's rows, sums and JSON (last) atomically, after removing the JSON of
+        the cell it replaces (module docstring); returns the JSON path."""
         csv_path, npz_path, json_path = self._paths(record)
+        json_path.unlink(missing_ok=True)
         rows = rows_to_csv(record.rows).encode("utf-8")
         write_bytes_atomic(csv_path, rows)
         arrays: dict[str, np.ndarray] = {}
@@ -239,8 +324,9 @@ class ResultStore:
         )
 
     def cell_files(self) -> list[Path]:
-        """JSON files of the stored cells, sorted."""
-        return sorted((self.root / "cells").glob("*/*/seeds-*.json"))
+        """JSON files of the stored cells (the earlier layout's too), sorted."""
+        cells = self.root / "cells"
+        return sorted([*cells.glob("*/*/*/seeds-*.json"), *cells.glob("*/*/seeds-*.json")])
 
     def load(self) -> Results:
         """Every stored cell (raises :class:`StoreError` when there are none or one is broken)."""
@@ -248,7 +334,8 @@ class ResultStore:
             raise StoreError(f"results directory not found: {self.root}")
         files = self.cell_files()
         if not files:
-            raise StoreError(f"no cell results under {self.root} (expected cells/<estimator>/<scenario>/seeds-*.json)")
+            raise StoreError(f"no cell results under {self.root} (expected cells/<estimator>/<scenario>/<variant>/"
+                             f"seeds-*.json)")
         return Results(self.read_cell(path) for path in files)
 
     def write_summary(self, results: Results, provenance: dict[str, Any], *, computed: int | None = None) -> None:

@@ -169,7 +169,7 @@ def test_out_resumes_and_is_deterministic(capsys: pytest.CaptureFixture, tiny: s
             "--out", str(tmp_path), "--no-progress")
     first = _run_json(capsys, *args)
     assert first["cells"] == {"total": 2, "computed": 2, "reused": 0, "failed": 0}
-    assert len(list((tmp_path / "cells" / "manual-ekf" / "tiny").glob("*.json"))) == 2
+    assert len(list((tmp_path / "cells" / "manual-ekf" / "tiny").glob("*/*.json"))) == 2
     assert (tmp_path / "results.csv").exists() and json.loads((tmp_path / "results.json").read_text())["cells"] == 2
     second = _run_json(capsys, *args)
     assert second["cells"]["reused"] == 2 and second["results"] == first["results"]
@@ -214,7 +214,8 @@ def test_out_naming_a_file_or_an_unwritable_path_is_a_one_line_error(capsys: pyt
     file.write_text("mine\n")
     args = ("--estimator", "manual-ekf", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "2")
     assert f"--out: {file} is a file, not a directory" in _one_line_error(capsys, *args, "--out", str(file), "--force")
-    assert f"--out: cannot write to {file}/sub: Not a directory" in _one_line_error(capsys, *args, "--out", str(file / "sub"))
+    assert f"error: cannot write {file}/sub/.fkn-bench.lock: Not a directory" in _one_line_error(capsys, *args, "--out",
+                                                                                                  str(file / "sub"))
     assert file.read_text() == "mine\n"
 
 
@@ -224,3 +225,51 @@ def test_a_scenario_file_that_is_not_utf8_is_one_line_not_a_traceback(tmp_path: 
     assert main(["run", "--scenario-file", str(path), "--no-progress"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "latin1.toml is not UTF-8 text" in err[0] and "Traceback" not in err[0]
+
+
+def test_split_cut_and_options_keep_their_own_cells_in_one_out(capsys: pytest.CaptureFixture, tiny: str,
+                                                               tmp_path: Path) -> None:
+    """Issue 34, finding 3: each rerun into the same --out adds its cells, none replaces another's;
+    a run with options is named by them."""
+    args = ("--estimator", "manual-ekf", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "2",
+            "--out", str(tmp_path), "--no-progress")
+    variants = [(), ("--split", "val"), ("--cut", "150"), ("--estimator-option", "gate=0.5")]
+    documents = [_run_json(capsys, *args, *variant) for variant in variants]
+    assert [d["cells"]["computed"] for d in documents] == [1, 1, 1, 1]
+    assert documents[3]["results"][0]["estimator"] == "manual-ekf (gate=0.5)"
+    assert len(list((tmp_path / "cells").rglob("seeds-0-1.json"))) == 4
+    again = _run_json(capsys, *args)  # the first cell is still there, untouched
+    assert again["cells"]["reused"] == 1 and again["results"] == documents[0]["results"]
+
+
+def test_a_full_disk_is_one_line_exit_2_and_leaves_no_cell_a_rerun_trusts(capsys: pytest.CaptureFixture, tiny: str,
+                                                                         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 34, finding 4 (run): ENOSPC while writing a cell's sums."""
+    import errno
+
+    from fkn_bench import io
+
+    real_replace = io.os.replace
+
+    def full(src: str, dst: str) -> None:
+        if str(dst).endswith(".npz"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_replace(src, dst)
+
+    args = ("--estimator", "manual-ekf", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "2",
+            "--out", str(tmp_path))
+    monkeypatch.setattr(io.os, "replace", full)
+    err = _one_line_error(capsys, *args)
+    assert "fkn-bench run: error: no space left on the device to write " in err and "seeds-0-1.npz" in err
+    assert not list(tmp_path.rglob("*.json"))[1:]  # only the marker: no cell, no summary
+    monkeypatch.setattr(io.os, "replace", real_replace)
+    assert _run_json(capsys, *args, "--no-progress")["cells"] == {"total": 1, "computed": 1, "reused": 0, "failed": 0}
+
+
+def test_a_second_run_into_one_out_is_refused_in_one_line(capsys: pytest.CaptureFixture, tiny: str, tmp_path: Path) -> None:
+    from fkn_bench.io import directory_lock
+
+    with directory_lock(tmp_path, "results"):
+        err = _one_line_error(capsys, "--estimator", "manual-ekf", "--scenario", "tiny", "--scenario-file", tiny,
+                              "--seeds", "1", "--out", str(tmp_path))
+    assert f"fkn-bench run: error: {tmp_path} is in use by another fkn-bench process" in err

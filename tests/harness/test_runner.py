@@ -91,7 +91,7 @@ def test_resume_recomputes_an_edited_cell_and_says_so(tmp_path: Path, short_ds1:
     cells = build_grid(["manual-ekf"], [short_ds1], range(15))  # 2 cells
     store = ResultStore(tmp_path)
     first = run_grid(cells, store=store, progress=False)
-    csv_path = tmp_path / "cells" / "manual-ekf" / "ds1" / "seeds-10-14.csv"
+    (csv_path,) = (tmp_path / "cells" / "manual-ekf" / "ds1").glob("*/seeds-10-14.csv")
     text, original = csv_path.read_text(), read_rows_csv(csv_path)
     start = text.index(",state,rmse,") + len(",state,rmse,")
     csv_path.write_text(text[:start] + "16.67" + text[text.index(",", start):])
@@ -132,3 +132,55 @@ def test_a_run_that_computes_nothing_leaves_the_summary_files_untouched(tmp_path
     assert {name: (tmp_path / "out" / name).read_bytes() for name in before} == before
     run_grid(cells[:1], store=store, progress=False)  # another grid (one cell): a new summary
     assert b"elsewhere" in (tmp_path / "out" / "results.json").read_bytes()
+
+
+def _stored(root: Path) -> dict[str, object]:
+    """What a run leaves in ``root``, timings aside: the file names, results.csv's and each cell's
+    deterministic rows, each cell's sums and its record (key, status, checksummed files)."""
+    import json
+
+    import numpy as np
+
+    names = sorted(str(p.relative_to(root)) for p in root.rglob("*") if p.is_file())
+    stored: dict[str, object] = {"files": names}
+    for name in names:
+        path = root / name
+        if name.endswith(".csv"):
+            stored[name] = deterministic_rows(read_rows_csv(path)).to_csv()
+        elif name.endswith(".npz"):
+            with np.load(path) as npz:
+                stored[name] = {k: npz[k].tolist() for k in npz.files}
+        elif name.startswith("cells/"):
+            document = json.loads(path.read_text())
+            stored[name] = {k: document[k] for k in ("key", "status", "seeds", "files")}
+    return stored
+
+
+def test_a_run_killed_at_any_write_resumes_to_what_an_uninterrupted_run_gives(
+        tmp_path: Path, short_ds1: SimulatedSource, kill_at_write) -> None:  # noqa: ANN001
+    """Issue 34, finding 6: the marker (write 1), each cell's CSV, NPZ and JSON (2-7), results.csv
+    and results.json (8, 9); a killed write leaves a stray temporary file, which the resumed run
+    removes."""
+    from fkn_bench.metrics import MetricSettings
+
+    cells = build_grid(["manual-ekf"], [short_ds1], [0, 1], chunk_size=1, settings=MetricSettings(cut=150), online_steps=5)
+    run_grid(cells, store=ResultStore(tmp_path / "whole"), progress=False)
+    expected = _stored(tmp_path / "whole")
+    for n in (1, 3, 4, 8, 9):
+        out = tmp_path / f"killed-{n}"
+        with kill_at_write(n) as written:
+            run_grid(cells, store=ResultStore(out), progress=False)
+        assert len(written) == n - 1 and list(out.rglob("*.tmp")), n  # killed there, a temporary left behind
+        run_grid(cells, store=ResultStore(out), progress=False)
+        assert _stored(out) == expected, n
+
+
+def test_a_second_run_into_the_same_directory_is_refused(tmp_path: Path, short_ds1: SimulatedSource) -> None:
+    from fkn_bench.io import LockedError, directory_lock
+
+    backend = CountingBackend()
+    with directory_lock(tmp_path, "results"):
+        with pytest.raises(LockedError, match="in use by another fkn-bench process"):
+            run_grid(build_grid(["manual-ekf"], [short_ds1], [0]), store=ResultStore(tmp_path), backend=backend,
+                     progress=False)
+    assert backend.ran == [] and not (tmp_path / "cells").exists()

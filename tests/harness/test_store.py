@@ -23,8 +23,10 @@ from fkn_bench.harness import (
     resolve_estimator,
     run_cell,
 )
+from fkn_bench.harness.grid import variant_id
 from fkn_bench.harness.sources import SimulatedSource
 from fkn_bench.harness.store import MARKER, read_rows_csv, rows_to_csv
+from fkn_bench.io import WriteError
 from fkn_bench.metrics import MetricSettings
 
 
@@ -39,7 +41,7 @@ def test_round_trip_is_exact(tmp_path: Path, short_ds1: SimulatedSource) -> None
     record = run_cell(_spec(short_ds1))
     store = ResultStore(tmp_path)
     json_path = store.write_cell(record)
-    assert json_path == tmp_path / "cells" / "manual-ekf" / "ds1" / "seeds-3-4.json"
+    assert json_path == tmp_path / "cells" / "manual-ekf" / "ds1" / variant_id(record.key) / "seeds-3-4.json"
     back = store.read_cell(json_path)
     pd.testing.assert_frame_equal(back.rows, record.rows, check_exact=True)
     # exact: a lossless write/read round trip of the cell (float64 values, integer counts)
@@ -169,6 +171,111 @@ def test_prepare_refuses_a_file_or_a_path_it_cannot_write(tmp_path: Path) -> Non
     file.write_text("mine\n")
     with pytest.raises(StoreError, match=rf"{file} is a file, not a directory"):
         ResultStore(file).prepare(force=True)
-    with pytest.raises(StoreError, match=rf"cannot write to {file}/sub: Not a directory"):
+    with pytest.raises(WriteError, match=rf"cannot write {file}/sub/\{MARKER}: Not a directory"):
         ResultStore(file / "sub").prepare()
     assert file.read_text() == "mine\n"
+
+
+# ---------------------------------------------------------------------------- cell identity (issue 34, finding 3)
+@pytest.fixture(scope="module")
+def one_cell(short_ds1: SimulatedSource):  # noqa: ANN201
+    """One computed cell of manual-ekf on short ds1 (seeds 3, 4), shared by the tests below."""
+    return run_cell(_spec(short_ds1))
+
+
+def _variant_specs(source: SimulatedSource) -> dict[str, CellSpec]:
+    """The same estimator, scenario and seeds, differing in what changes the numbers."""
+    gated = replace(resolve_estimator("manual-ekf", source.scenario), fingerprint="abc", options=(("gate", 0.5),))
+    return {
+        "plain": _spec(source),
+        "val": _spec(SimulatedSource(source.scenario, "val")),
+        "cut": _spec(source, settings=MetricSettings(cut=30)),
+        "option": _spec(source, resolved=gated),
+        "config": _spec(SimulatedSource(source.scenario.replace(noise_scale=2.0))),
+    }
+
+
+def test_cells_differing_in_split_cut_options_or_configuration_keep_their_own_files(
+        tmp_path: Path, short_ds1: SimulatedSource, one_cell) -> None:  # noqa: ANN001
+    store = ResultStore(tmp_path)
+    specs = _variant_specs(short_ds1)
+    paths = {name: store.write_cell(replace(one_cell, key=spec.key())) for name, spec in specs.items()}
+    assert len(set(paths.values())) == len(specs)  # one file each: nothing overwritten
+    assert {p.parent.parent for p in paths.values()} == {tmp_path / "cells" / "manual-ekf" / "ds1"}
+    for name, spec in specs.items():
+        assert store.finished(spec).key == spec.key(), name
+    assert len(store.load()) == len(specs)
+    # a retrained estimator (another fingerprint) replaces its cell, as before
+    retrained = _spec(short_ds1, fingerprint="retrained")
+    assert store.write_cell(replace(one_cell, key=retrained.key())) == paths["plain"]
+    assert store.finished(specs["plain"]) is None and store.finished(retrained) is not None
+
+
+def test_names_that_looked_alike_or_escape_get_their_own_cells_inside_cells(tmp_path: Path, one_cell) -> None:  # noqa: ANN001
+    store = ResultStore(tmp_path)
+    names = ["my fast", "my_fast", "my/fast", "..", ".", "../../outside"]
+    paths = [store.write_cell(replace(one_cell, scenario=name)) for name in names]
+    assert len(set(paths)) == len(names)
+    for path in paths:
+        assert path.resolve().is_relative_to((tmp_path / "cells" / "manual-ekf").resolve())
+    assert sorted(r.scenario for r in store.load().records) == sorted(names)
+    assert not (tmp_path.parent / "outside").exists()
+
+
+# ---------------------------------------------------------------------------- kills, locks, old layout (finding 6)
+def test_a_directory_holding_only_a_killed_runs_temporaries_and_lock_is_empty(tmp_path: Path) -> None:
+    (tmp_path / f"{MARKER}.x1y2.tmp").write_text('{"format": "fkn-')  # a kill while writing the first marker
+    (tmp_path / ".fkn-bench.lock").write_text("")
+    with ResultStore(tmp_path).session():
+        assert (tmp_path / MARKER).is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".fkn-bench-results", ".fkn-bench.lock"]  # stray file removed
+
+
+def test_a_second_writer_is_refused_by_the_lock(tmp_path: Path) -> None:
+    from fkn_bench.io import LockedError
+
+    with ResultStore(tmp_path).session():
+        with pytest.raises(LockedError, match=rf"{tmp_path} is in use by another fkn-bench process"):
+            with ResultStore(tmp_path).session():
+                pass
+
+
+def test_cells_of_the_earlier_layout_are_read_and_moved_unchanged(tmp_path: Path, short_ds1: SimulatedSource,
+                                                                 one_cell) -> None:  # noqa: ANN001
+    store = ResultStore(tmp_path)
+    store.prepare()
+    json_path = store.write_cell(one_cell)
+    legacy = tmp_path / "cells" / "manual-ekf" / "ds1"
+    contents = {}
+    for path in sorted(json_path.parent.iterdir()):
+        contents[path.name] = path.read_bytes()
+        path.rename(legacy / path.name)
+    json_path.parent.rmdir()
+    assert store.cell_files() == [legacy / "seeds-3-4.json"] and len(store.load()) == 1  # read where it is
+    with store.session():
+        pass
+    assert store.cell_files() == [json_path] and store.finished(_spec(short_ds1)) is not None
+    assert {p.name: p.read_bytes() for p in json_path.parent.iterdir()} == contents
+
+
+def test_a_failed_rewrite_leaves_no_cell_that_resume_trusts(tmp_path: Path, short_ds1: SimulatedSource, one_cell,  # noqa: ANN001
+                                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    import errno
+
+    from fkn_bench import io as fio
+    from fkn_bench.io import DiskFullError
+
+    store = ResultStore(tmp_path)
+    spec = _spec(short_ds1)
+    json_path = store.write_cell(one_cell)
+    real_replace = fio.os.replace
+
+    def full(src: str, dst: str) -> None:
+        if str(dst).endswith(".npz"):
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_replace(src, dst)
+
+    monkeypatch.setattr(fio.os, "replace", full)
+    with pytest.raises(DiskFullError, match=r"no space left on the device to write .*seeds-3-4\.npz"):
+        store.write_cell(one_cell)  # the CSV is replaced, the sums are not
+    assert not json_path.exists() and store.finished(spec) is None  # recomputed, not trusted
