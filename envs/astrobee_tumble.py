@@ -11,8 +11,9 @@ import numpy as np
 
 from fkn_bench.envs.episodes import EpisodeStream
 from fkn_bench.envs.rendering import HISTORY_STEPS
-from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, attitude_error_angle, estimate_cost_scalar
+from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, WEIGHT_LIMIT, attitude_error_angle, estimate_cost_scalar
 from fkn_bench.envs.spaces import MeasuredPose, action_space, action_values, observation_space
+from fkn_bench.inputs import check_seed, real_array
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.types import ArrayF
 
@@ -23,13 +24,12 @@ EPISODE_SEED_BOUND = 2**31
 
 
 def episode_seed_for_reset(seed: int | None, np_random: np.random.Generator) -> int:
-    """The episode seed of ``reset(seed=...)``: ``seed`` itself (a non-negative integer), else one
-    drawn from the environment's ``np_random`` (seeded by Gymnasium on the first reset)."""
+    """The episode seed of ``reset(seed=...)``: ``seed`` itself (an integer in ``[0, 2**63)``,
+    :func:`fkn_bench.inputs.check_seed`), else one drawn from the environment's ``np_random``
+    (seeded by Gymnasium on the first reset)."""
     if seed is None:
         return int(np_random.integers(EPISODE_SEED_BOUND))
-    if seed < 0:
-        raise ValueError(f"seed must be a non-negative integer (got {seed})")
-    return int(seed)
+    return check_seed(seed)
 
 
 class _EpisodeWalk:
@@ -110,15 +110,29 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
 
     ``Box(13,)`` float64: the estimate ``[qw, qx, qy, qz, rx, ry, rz, wx, wy, wz, vx, vy, vz]``
     of the state at the time of the current observation (attitude body-to-world, position m,
-    world-frame angular velocity rad/s, velocity m/s). The quaternion is normalised for scoring;
-    a wrong shape, a NaN or infinite entry or a zero quaternion raises ``ValueError``.
+    world-frame angular velocity rad/s, velocity m/s). The quaternion is normalised for scoring.
+    ``step`` refuses with a one-line ``ValueError`` naming the argument
+    (:func:`~fkn_bench.envs.spaces.validate_actions`; the vector environment and the estimators'
+    ``step`` follow the same rules, :mod:`fkn_bench.inputs`):
+
+    | Action                                                      | Rule                                                     |
+    |-------------------------------------------------------------|----------------------------------------------------------|
+    | a real integer or floating dtype (int, float32, float64...) | converted to float64                                     |
+    | strings (also `"1.0"`), bools, complex numbers, objects     | refused, naming the dtype                                |
+    | a shape other than `(13,)` (0-d, `(1, 13)`, ragged lists)   | refused, naming the shape                                |
+    | a value float64 cannot hold (`10**400`, a long double)      | refused, naming the entry                                |
+    | a NaN or +-inf entry                                        | refused, naming the component                            |
+    | `abs(entry) > ACTION_LIMIT` (1e150)                         | refused, naming the component: its reward would overflow |
+    | a quaternion of squared norm < 1e-12                        | refused (its attitude cannot be scored)                  |
 
     ## Rewards
 
     ``-(theta + 1 |dr| + 10 |dw| + 10 |dv|)`` with ``theta`` the sign-safe attitude error angle
     (rad) and ``|.|`` Euclidean norms (m, rad/s, m/s) of the estimate's error at the scored time;
     weights set by ``reward_weights`` (see :mod:`fkn_bench.envs.rewards`). The estimate passed
-    to ``step`` is scored against the truth at the time of the observation it answers.
+    to ``step`` is scored against the truth at the time of the observation it answers. The
+    reward is always finite: actions are bounded by ``ACTION_LIMIT`` and weights by
+    ``WEIGHT_LIMIT`` (1e6).
 
     ## Starting State
 
@@ -142,7 +156,8 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
     * ``**overrides``: any scenario field, e.g. ``noise_scale=5.0``, ``measurement_every=10``,
       ``dropout=0.2``, ``sign_flip_probability=0.5``, ``dynamics="free"``.
     * ``expose_truth``: put the true 13-dim state in ``info["truth"]`` (never in the observation).
-    * ``reward_weights``: mapping with keys ``attitude``, ``position``, ``omega``, ``velocity``.
+    * ``reward_weights``: mapping with keys ``attitude``, ``position``, ``omega``, ``velocity``,
+      each a real number in ``[0, 1e6]`` (not a string or a bool).
     * ``render_mode``: ``None``, ``"ansi"`` (a one-line text summary), ``"rgb_array"`` (frames,
       ``uint8 (H, W, 3)``: the body axes of the true, estimated and measured attitude and the
       attitude error; see :mod:`fkn_bench.envs.rendering`) or ``"human"`` (the same in a window,
@@ -153,7 +168,11 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
 
     ``reset(seed=s)`` generates exactly episode ``s`` of the scenario (the same data as
     ``fkn_bench.envs.generate_episodes(scenario, [s])``); an unseeded ``reset`` draws the next
-    episode seed from ``self.np_random``.
+    episode seed from ``self.np_random``. A seed is an integer in ``[0, 2**63)``: a Python
+    ``int`` or a numpy integer (Gymnasium's rule, "a non-negative int", bounded because episode
+    seeds are stored as int64; :func:`fkn_bench.inputs.check_seed`). Anything else (a bool, a
+    float, NaN, a string, an array, a negative seed or one of 2**63 or more) raises a one-line
+    ``ValueError`` naming ``seed``, as the vector environment does.
     """
 
     metadata = {"render_modes": ["ansi", "rgb_array", "human"], "render_fps": 10}
@@ -245,6 +264,7 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, Any]]:
+        seed = None if seed is None else check_seed(seed)  # before Gymnasium's own check: the same rule as the vector env
         super().reset(seed=seed)
         self.episode_seed = episode_seed_for_reset(seed, self.np_random)
         self._start(self._new_stream(self.episode_seed))
@@ -308,12 +328,15 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
 
 
 def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:
+    """The reward weights: :data:`~fkn_bench.envs.rewards.DEFAULT_WEIGHTS` updated with
+    ``weights``, each a real number (the rules of :func:`fkn_bench.inputs.real_array`: not a
+    string or a bool) in ``[0, WEIGHT_LIMIT]``; ``ValueError`` naming the key otherwise."""
     weights = weights or {}
     unknown = set(weights) - set(DEFAULT_WEIGHTS)
     if unknown:
         raise ValueError(f"unknown reward weight(s) {sorted(unknown)}; valid keys: {sorted(DEFAULT_WEIGHTS)}")
-    merged = {**DEFAULT_WEIGHTS, **{k: float(v) for k, v in weights.items()}}
+    merged = {**DEFAULT_WEIGHTS, **{k: float(real_array(v, f"reward weight '{k}'", ())) for k, v in weights.items()}}
     for key, value in merged.items():
-        if not np.isfinite(value) or value < 0:
-            raise ValueError(f"reward weight '{key}' must be a finite number >= 0 (got {value})")
+        if not 0 <= value <= WEIGHT_LIMIT:
+            raise ValueError(f"reward weight '{key}' must be a finite number >= 0 and at most WEIGHT_LIMIT = {WEIGHT_LIMIT:g} (got {value})")
     return merged

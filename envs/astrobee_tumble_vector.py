@@ -14,7 +14,8 @@ from gymnasium.vector.utils import batch_space
 from fkn_bench.envs.astrobee_tumble import _EpisodeWalk, episode_seed_for_reset
 from fkn_bench.envs.episodes import EpisodeStream
 from fkn_bench.envs.rewards import cost_and_quaternion_norm, unit_quaternions
-from fkn_bench.envs.spaces import QUATERNION_NORM_MIN, MeasuredPose, action_space, observation_space, pose_space, validate_actions
+from fkn_bench.envs.spaces import ACTION_LIMIT, QUATERNION_NORM_MIN, MeasuredPose, action_space, observation_space, pose_space, validate_actions
+from fkn_bench.inputs import check_seed
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
 
@@ -33,7 +34,8 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
     :class:`~fkn_bench.envs.astrobee_tumble.AstrobeeTumbleEnv` with a leading ``num_envs`` axis
     (``pose (N, 7)``, ``valid (N,)``, ``time (N,)``; actions ``(N, 13)``). Sub-environment ``i``
     of ``reset(seed=s)`` is exactly ``AstrobeeTumbleEnv`` reset with ``seed=s + i`` (or the
-    ``i``-th seed of a list), including the episodes that follow through autoreset, which use
+    ``i``-th seed of a list; seeds follow the single environment's rule, integers in
+    ``[0, 2**63)``, :func:`fkn_bench.inputs.check_seed`), including the episodes that follow through autoreset, which use
     Gymnasium's next-step mode: the step after a truncation ignores its actions and returns the
     first observation of the next episode with reward 0. All sub-environments share the
     scenario, so their episodes end together. ``info`` carries ``step``, ``episode_seed`` and,
@@ -117,22 +119,29 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
             raise NotImplementedError(
                 "AstrobeeTumbleVectorEnv resets all sub-environments together (their episodes end together)"
             )
-        if isinstance(seed, (int, np.integer)):
-            seeds: list[int | None] = [int(seed) + i for i in range(self.num_envs)]
-        elif seed is None:
-            seeds = [None] * self.num_envs
-        else:
-            seeds = [None if s is None else int(s) for s in seed]
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"expected {self.num_envs} seeds (got {len(seeds)})")
-        if any(s is not None and s < 0 for s in seeds):
-            raise ValueError(f"seeds must be non-negative integers (got {seed!r})")
+        seeds = self._reset_seeds(seed)
         super().reset(seed=seeds[0])
         if seed is not None or not self._rngs:
             self._rngs = [seeding.np_random(s)[0] for s in seeds]
         self._start_episodes([episode_seed_for_reset(s, rng) for s, rng in zip(seeds, self._rngs)])
         self._needs_autoreset = False
         return self._observation(), self._info()
+
+    def _reset_seeds(self, seed: Any) -> list[int | None]:
+        """The sub-environments' seeds of ``reset(seed=...)``: ``seed + i`` for an integer, the
+        entries of a list, tuple or 1-d array of ``num_envs`` (None entries draw), or all None;
+        each under :func:`fkn_bench.inputs.check_seed`'s rule, the single environment's
+        (``ValueError`` naming the seed otherwise)."""
+        n = self.num_envs
+        if seed is None:
+            return [None] * n
+        if isinstance(seed, (list, tuple)) or (isinstance(seed, np.ndarray) and seed.ndim == 1):
+            if len(seed) != n:
+                raise ValueError(f"expected {n} seeds (got {len(seed)})")
+            return [None if s is None else check_seed(s, f"seed[{i}]") for i, s in enumerate(seed)]
+        first = check_seed(seed)  # anything else is refused here, as the single environment does
+        check_seed(first + n - 1, f"seed + {n - 1} (the seed of sub-environment {n - 1})")
+        return [first + i for i in range(n)]
 
     def step(self, actions: ArrayF) -> tuple[dict[str, Any], ArrayF, ArrayF, ArrayF, dict[str, Any]]:
         if self._stream is None:
@@ -150,16 +159,19 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
     def _rewards(self, actions: ArrayF) -> ArrayF:
         """Rewards of ``actions (N, 13)`` at the current step, validated as
         :func:`~fkn_bench.envs.spaces.validate_actions` does (same errors). The usual float64
-        ``(N, 13)`` array is scored first and checked through its result: a NaN or infinite
-        entry makes its reward non-finite, and then the full validation names the entry."""
+        ``(N, 13)`` array is checked through two reductions and the quaternion norms the reward
+        computes anyway: an entry that is NaN or beyond ``+-ACTION_LIMIT`` (inf included) fails
+        the first (NaN propagates through ``min`` and ``max``), a zero quaternion the second, and
+        then the full validation names the entry. Within the limits every reward is finite."""
         n = self.num_envs
-        if not (type(actions) is np.ndarray and actions.dtype == np.float64 and actions.shape == (n, 13)):
+        if not (type(actions) is np.ndarray and actions.dtype == np.float64 and actions.shape == (n, 13)
+                and actions.min() >= -ACTION_LIMIT and actions.max() <= ACTION_LIMIT):
             actions = validate_actions(actions, batch=n)
         estimate = np.ascontiguousarray(actions.T)
         i = self._index - self._chunk_start
-        with np.errstate(all="ignore"):  # a bad action's NaN is caught below, and named
+        with np.errstate(all="ignore"):  # a zero quaternion's NaN is caught below, and named
             cost, norm2 = cost_and_quaternion_norm(self._truth_steps[i], estimate, self.reward_weights,
                                                    unit_truth=self._unit_truth[:, i])
-        if not (np.isfinite(cost).all() and norm2.min() >= QUATERNION_NORM_MIN):
-            validate_actions(actions, batch=n)  # raises, naming the entry (else: finite actions whose error overflows)
+        if not norm2.min() >= QUATERNION_NORM_MIN:
+            validate_actions(actions, batch=n)  # raises, naming the entry
         return -cost

@@ -27,9 +27,13 @@ import numpy as np
 
 from fkn_bench.types import ArrayF
 
-__all__ = ["DEFAULT_WEIGHTS", "estimate_cost", "estimate_cost_components", "estimate_cost_scalar", "attitude_error_angle", "unit_quaternions", "cost_and_quaternion_norm"]
+__all__ = ["DEFAULT_WEIGHTS", "WEIGHT_LIMIT", "estimate_cost", "estimate_cost_components", "estimate_cost_scalar", "attitude_error_angle", "unit_quaternions", "cost_and_quaternion_norm"]
 
 DEFAULT_WEIGHTS: Mapping[str, float] = {"attitude": 1.0, "position": 1.0, "omega": 10.0, "velocity": 10.0}
+
+WEIGHT_LIMIT = 1e6
+"""Largest reward weight the environments accept: with it and actions within
+:data:`~fkn_bench.envs.spaces.ACTION_LIMIT`, the cost stays below about 1e157, always finite."""
 
 
 def _chords(e: Sequence, t: Sequence, sqrt: Callable) -> tuple:

@@ -19,9 +19,11 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
+from fkn_bench.inputs import real_array
 from fkn_bench.types import STATE_DIM, STATE_NAMES, ArrayF
 
 __all__ = [
+    "ACTION_LIMIT",
     "action_values",
     "MeasuredPose",
     "QUATERNION_NORM_MIN",
@@ -101,12 +103,19 @@ def observation_space(n_steps: int, dt: float) -> spaces.Dict:
 QUATERNION_NORM_MIN = 1e-12
 """Smallest squared norm of an action's quaternion that can be scored (normalised)."""
 
+ACTION_LIMIT = 1e150
+"""Largest magnitude of an action's component that is scored: beyond it, the squares that the
+reward takes (the quaternion's norm, the error norms) could overflow float64. Refused with a
+``ValueError`` (an estimate of 1e150 m is a bug, not an estimate); within it, and with reward
+weights of at most :data:`~fkn_bench.envs.rewards.WEIGHT_LIMIT`, every reward is finite."""
+
 
 def action_space() -> spaces.Box:
     """The single-environment action space: a 13-dim state estimate in SI units.
 
     The quaternion need not be unit (it is normalised for scoring); bounds are descriptive
-    (1 for quaternion components, :data:`POSITION_LIMIT` m, :data:`RATE_LIMIT` rad/s and m/s).
+    (1 for quaternion components, :data:`POSITION_LIMIT` m, :data:`RATE_LIMIT` rad/s and m/s):
+    what ``step`` refuses is :func:`validate_actions`'s rule (beyond :data:`ACTION_LIMIT`).
     """
     high = np.array([1.0] * 4 + [POSITION_LIMIT] * 3 + [RATE_LIMIT] * 6)
     return spaces.Box(low=-high, high=high, dtype=np.float64)
@@ -118,7 +127,8 @@ def action_values(action: Any) -> list[float]:
     environment's step costs a few microseconds, and numpy's checks would dominate it."""
     if type(action) is np.ndarray and action.shape == (STATE_DIM,) and action.dtype == np.float64:
         values = action.tolist()
-        if all(map(math.isfinite, values)) and sum(v * v for v in values[:4]) >= QUATERNION_NORM_MIN:
+        if (all(map(math.isfinite, values)) and max(map(abs, values)) <= ACTION_LIMIT
+                and sum(v * v for v in values[:4]) >= QUATERNION_NORM_MIN):
             return values
     return validate_actions(action).tolist()
 
@@ -126,22 +136,32 @@ def action_values(action: Any) -> list[float]:
 def validate_actions(actions: Any, batch: int | None = None) -> ArrayF:
     """Return ``actions`` as float64 ``(13,)`` (or ``(batch, 13)``) or raise ``ValueError``.
 
-    Rejects wrong shapes, NaN or infinite entries and quaternions of (near) zero norm, naming
-    the offending component.
+    The rules, in this order (the first broken one is named):
+
+    * numbers of a real integer or floating dtype, exactly of that shape
+      (:func:`fkn_bench.inputs.real_array`: strings, bools, complex numbers, objects, values
+      beyond float64's range, ragged nestings, 0-d arrays and extra axes are refused);
+    * every entry finite, and within ``+-ACTION_LIMIT`` (:data:`ACTION_LIMIT`), naming the
+      offending component;
+    * a quaternion of squared norm at least :data:`QUATERNION_NORM_MIN` (it is normalised for
+      scoring; its scale is otherwise free).
     """
     expected = (STATE_DIM,) if batch is None else (batch, STATE_DIM)
-    try:
-        array = np.asarray(actions, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError(f"action must be a float array of shape {expected}") from None
-    if array.shape != expected:
-        raise ValueError(f"action must have shape {expected} (got {array.shape})")
+    array = real_array(actions, "action", expected)
     finite = np.isfinite(array)
     if not finite.all():
         bad = np.argwhere(~finite)[0]
         where = f"action[{', '.join(str(int(i)) for i in bad)}]"
         raise ValueError(
             f"action must be finite: {where} ({STATE_NAMES[int(bad[-1])]}) is {array[tuple(bad)]}"
+        )
+    beyond = np.abs(array) > ACTION_LIMIT
+    if beyond.any():
+        bad = np.argwhere(beyond)[0]
+        where = f"action[{', '.join(str(int(i)) for i in bad)}]"
+        raise ValueError(
+            f"action must be within +-ACTION_LIMIT = {ACTION_LIMIT:g}: {where} ({STATE_NAMES[int(bad[-1])]}) is "
+            f"{array[tuple(bad)]:g} (its reward would overflow float64)"
         )
     norm2 = np.sum(array[..., :4] ** 2, axis=-1)
     if np.any(norm2 < QUATERNION_NORM_MIN):

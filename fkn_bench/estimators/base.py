@@ -44,6 +44,7 @@ import numpy as np
 
 from fkn_bench.filters.base import GATE_REINITIALISE_AFTER, check_dt
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
+from fkn_bench.inputs import real_array
 from fkn_bench.io import read_json, write_json_atomic
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -208,14 +209,12 @@ def check_batch_inputs(measurements: Any, mask: Any, dt: Any) -> tuple[ArrayF, A
     """Validate ``estimate()`` inputs: ``(B, T, 7)`` float measurements, ``(B, T)`` mask, ``dt > 0``.
 
     Returns float64 measurements, a bool mask and ``dt`` as float; raises ``ValueError`` naming
-    the problem (wrong shapes, empty sequences, a non-finite or non-positive ``dt``). Entries
+    the problem (measurements of another dtype than a real integer or floating one, as
+    :func:`parse_observation`'s pose; wrong shapes, empty sequences, a non-finite or non-positive ``dt``). Entries
     outside the mask may hold anything (NaN included); non-finite entries inside it are handled
     by the documented rule of the filters (the update is skipped).
     """
-    try:
-        z = np.asarray(measurements, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise ValueError("measurements must be a float array of shape (B, T, 7)") from None
+    z = real_array(measurements, "measurements", shape_text="(B, T, 7)")
     if z.ndim != 3 or z.shape[-1] != 7:
         hint = " (use measurements[None] for a single sequence)" if z.ndim == 2 else ""
         raise ValueError(f"measurements must have shape (B, T, 7) (got {z.shape}){hint}")
@@ -236,7 +235,11 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
 
     Accepts a Gymnasium observation dict (``pose``, ``valid``, ``time``) or a ``(7,)`` array
     (all NaN when missing). The dict's fields are checked where they enter (``ValueError`` naming
-    the field): ``time``, when present, must be a finite real number of seconds (a number, not a
+    the field): the pose must be 7 numbers of a real integer or floating dtype, of shape exactly
+    ``(7,)`` (the environments' action rules, :func:`fkn_bench.inputs.real_array`: strings,
+    bools, complex numbers, objects, values float64 cannot hold such as ``10**400``, 0-d arrays
+    and nested lists are refused; NaN and inf pass, and the filters skip such a measurement by
+    their documented rule), ``time``, when present, must be a finite real number of seconds (a number, not a
     string; see :func:`observation_time`) and ``valid``, when present, a bool or 0/1 (see
     :func:`observation_valid`; ``"False"`` or NaN are refused, not counted valid). Anything else
     is refused with a ``ValueError`` too.
@@ -255,13 +258,8 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
         return parse_observation(dict(observation))
     else:
         pose, valid, time = observation, True, None
-    if type(pose) is not np.ndarray or pose.dtype != np.float64:
-        try:
-            pose = np.asarray(pose, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise ValueError(f"observation 'pose' must be 7 numbers (got {pose!r})") from None
-    if pose.shape != (7,):
-        raise ValueError(f"a pose observation must have shape (7,) (got {pose.shape})")
+    if type(pose) is not np.ndarray or pose.dtype != np.float64 or pose.shape != (7,):
+        pose = real_array(pose, "observation 'pose'", (7,), entry="pose")
     if not valid or (math.isnan(pose[0]) and np.isnan(pose).all()):
         return None, time
     return pose, time

@@ -105,7 +105,7 @@ def test_parse_observation_forms() -> None:
     assert got is not None and np.isnan(got[3])
     with pytest.raises(ValueError, match=r"observation dict needs a 'pose' entry \(has \['time', 'valid'\]\)"):
         parse_observation({"valid": 1, "time": 0.0})
-    with pytest.raises(ValueError, match=r"a pose observation must have shape \(7,\) \(got \(13,\)\)"):
+    with pytest.raises(ValueError, match=r"observation 'pose' must have shape \(7,\) \(got \(13,\)\)"):
         parse_observation(np.zeros(13))
     with pytest.raises(ValueError, match=r"shape \(7,\) \(got \(1, 7\)\)"):
         parse_observation({"pose": np.zeros((1, 7))})
@@ -259,7 +259,7 @@ def test_a_refused_step_leaves_the_estimator_as_it_was(name: str, bad_time: floa
         ("valid", 2, r"observation 'valid'"),
         ("valid", None, r"observation 'valid'"),
         ("valid", [1], r"observation 'valid'"),
-        ("pose", "abcdefg", r"observation 'pose' must be 7 numbers"),
+        ("pose", "abcdefg", r"observation 'pose' must be a float array of shape \(7,\) \(a real integer or floating dtype; got dtype <U7\)"),
     ],
 )
 def test_parse_observation_refuses_a_bad_field_by_name(field: str, value: Any, message: str) -> None:
