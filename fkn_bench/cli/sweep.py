@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import typing
 from pathlib import Path
 from typing import Any
 
@@ -89,9 +90,14 @@ def run(args: argparse.Namespace) -> int:
     sampler = option("sampler", "random-grid")
     with usage_errors(UnknownEstimatorError, SpaceError, ValueError, TypeError):
         if is_trainable(estimator):
-            fields = {"device": "cpu", **trainable(estimator).config({}).to_dict()}  # (to_dict leaves the CPU out)
+            defaults = trainable(estimator).config({})
+            fields = {"device": "cpu", **defaults.to_dict()}  # (to_dict leaves the CPU out)
             space.check_fields(fields, f"{estimator} training config")
-            fixed = trial_config(estimator, space, {})  # the fixed values on their own must be valid
+            space.check_kinds(typing.get_type_hints(type(defaults)))
+            try:
+                fixed = trial_config(estimator, space, {})  # the fixed values on their own must be valid
+            except (ValueError, TypeError) as exc:
+                raise UsageError(f"{space.source}: [fixed]: {exc}") from None
             resolve_device(fixed.train_config().device)  # (a GPU the space names must be here)
         else:  # its options: every knob's first value with the fixed ones must build it
             try:

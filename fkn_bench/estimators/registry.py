@@ -19,6 +19,11 @@ it) and returns an :class:`~fkn_bench.estimators.base.Estimator`. An estimator t
 trained also passes ``trainable=`` (a :class:`~fkn_bench.training.Trainable`: how to read its
 training options and which module to train); ``fkn-bench train`` and ``fkn-bench sweep`` then
 train it through :func:`fkn_bench.training.fit`.
+
+A saved estimator file (:meth:`Estimator.save <fkn_bench.estimators.base.Estimator.save>`,
+read by :func:`load_estimator`) is data: the class it records must be one the registry has
+loaded (:func:`estimator_classes`: the built-ins, the plugins, classes defined in code), never a
+module the file names, and its configuration values are checked against the class's constructor.
 """
 
 from __future__ import annotations
@@ -44,6 +49,7 @@ __all__ = [
     "estimator_spec",
     "estimator_specs",
     "load_estimator",
+    "estimator_classes",
     "ENTRY_POINT_GROUP",
 ]
 
@@ -150,19 +156,44 @@ def make_estimator(name: str, /, *, scenario: Scenario | None = None, **options:
     return estimator
 
 
+def estimator_classes() -> dict[str, type[Estimator]]:
+    """The estimator classes a saved estimator file may name, by ``"module:QualifiedName"``: every
+    :class:`~fkn_bench.estimators.base.Estimator` subclass loaded once the registry is (the
+    built-in estimators, the plugins of the entry-point group :data:`ENTRY_POINT_GROUP`, and any
+    class defined or imported by code before the call)."""
+    _ensure_loaded()
+    found: dict[str, type[Estimator]] = {}
+    stack: list[type] = [Estimator]
+    while stack:
+        for sub in stack.pop().__subclasses__():
+            found.setdefault(f"{sub.__module__}:{sub.__qualname__}", sub)
+            stack.append(sub)
+    return found
+
+
 def load_estimator(path: str | Path) -> Estimator:
-    """Load an estimator saved with :meth:`Estimator.save` (its class is recorded in the file)."""
+    """Load an estimator saved with :meth:`Estimator.save` (its class is recorded in the file).
+
+    The file is data: its ``class`` is looked up among :func:`estimator_classes` (no module that a
+    file names is imported), and its ``config`` is checked against the annotations of the class's
+    constructor (:mod:`fkn_bench.config_values`: a standard deviation is a finite JSON number, not
+    ``true`` or ``"0.1"``) before the class builds from it. Every refusal is an
+    :class:`~fkn_bench.estimators.base.EstimatorFileError` naming the file."""
+    from fkn_bench.config_values import check_arguments, init_annotations
+
     document = read_estimator_document(path)
     target = document.get("class")
     if not isinstance(target, str) or ":" not in target:
         raise EstimatorFileError(f"{path} does not record the estimator class ('class': 'module:Name')")
-    module_name, _, qualname = target.partition(":")
+    known = estimator_classes()
+    cls = known.get(target)
+    if cls is None:
+        raise EstimatorFileError(
+            f"{path}: cannot import estimator class {target}: an estimator file may name only the class of a built-in "
+            f"estimator or of an installed plugin (entry points '{ENTRY_POINT_GROUP}'), no module is imported for it, and "
+            f"{target} is not an Estimator class of those; known: {', '.join(sorted(known))}")
     try:
-        obj: Any = importlib.import_module(module_name)
-        for part in qualname.split("."):
-            obj = getattr(obj, part)
-    except (ImportError, AttributeError) as exc:
-        raise EstimatorFileError(f"{path}: cannot import estimator class {target} ({exc})") from None
-    if not (isinstance(obj, type) and issubclass(obj, Estimator)):
-        raise EstimatorFileError(f"{path}: {target} is not an Estimator class")
-    return obj.load(path)
+        check_arguments(init_annotations(cls), document["config"], f"invalid {cls.__name__} config")
+    except ValueError as exc:
+        raise EstimatorFileError(f"{path}: {exc}") from None
+    return cls.load(path)

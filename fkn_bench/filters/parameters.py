@@ -19,10 +19,12 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+import numpy as np
 import torch
 import torch.nn.functional as functional
 from torch import Tensor
 
+from fkn_bench.config_values import accepts, describe_kind
 from fkn_bench.linalg import symmetrize
 
 __all__ = [
@@ -175,7 +177,10 @@ class ParameterSet:
             raise ValueError(f"positivity must be 'log' or 'softplus' (got {self.positivity!r})")
         fixed = {}
         for name in ("q_std", "r_std", "p0_std"):
-            values = tuple(float(v) for v in self.fixed.get(name, self.layout.default(name)))
+            given = self.fixed.get(name, self.layout.default(name))
+            if isinstance(given, (str, bytes)) or any(isinstance(v, (bool, np.bool_, str, bytes)) for v in given):
+                raise ValueError(f"fixed '{name}' must be numbers, not booleans or strings (got {list(given)!r})")
+            values = tuple(float(v) for v in given)
             if len(values) != len(self.layout.default(name)):
                 raise ValueError(f"fixed '{name}' needs {len(self.layout.default(name))} values (got {len(values)})")
             if not all(math.isfinite(v) and v > 0 for v in values):
@@ -277,7 +282,8 @@ class ParameterSet:
 
     def from_dict(self, data: Mapping[str, Any], dtype: torch.dtype = torch.float64) -> Tensor:
         """Unconstrained vector for a dict written by :meth:`to_dict` (labels, and units where
-        the dict records them, are checked)."""
+        the dict records them, are checked; values must be finite numbers, never booleans or
+        numeric strings: :mod:`fkn_bench.config_values`)."""
         entries = data.get("entries", {})
         parts = []
         for e in self._entries:
@@ -288,6 +294,10 @@ class ParameterSet:
                 raise ValueError(f"entry '{e.name}' labels {entry.get('labels')} do not match {list(self.layout.labels(e.name))}")
             if "units" in entry and list(entry["units"]) != list(self.layout.units(e.name)):
                 raise ValueError(f"entry '{e.name}' units {entry['units']} do not match {list(self.layout.units(e.name))}")
+            key, kind = ("std", list[float]) if e.name.endswith("_std") else ("cholesky", list[list[float]])
+            if not accepts(kind, entry.get(key)):
+                raise ValueError(f"entry '{e.name}': '{key}' must be {describe_kind(kind)}, not booleans or strings "
+                                 f"(got {entry.get(key)!r})")
             if e.name.endswith("_std"):
                 values = torch.as_tensor(entry["std"], dtype=dtype)
                 if values.shape != (e.dim,) or not bool(torch.all((values > 0) & torch.isfinite(values))):

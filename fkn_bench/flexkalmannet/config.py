@@ -10,6 +10,7 @@ record the commands).
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +18,7 @@ from typing import Any
 
 from fkn_bench.filters.parameters import LEARNABLE_ENTRIES
 from fkn_bench.training import TrainConfig
-from fkn_bench.training.options import check_option_types
+from fkn_bench.training.options import check_option_types, naming_the_file
 from fkn_bench.training.pipeline import options_with_file
 
 __all__ = ["FlexKalmanNetConfig", "DEVIATIONS", "PAPER_TABLE"]
@@ -122,6 +123,13 @@ class FlexKalmanNetConfig(TrainConfig):
             raise ValueError(f"network_dtype must be 'float32' or 'float64' (got {self.network_dtype!r})")
         if self.samples_per_window is not None and self.samples_per_window < 1:
             raise ValueError(f"samples_per_window must be >= 1 or None (got {self.samples_per_window})")
+        for name in ("hidden", "layers", "history"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1 (got {getattr(self, name)!r})")
+        if not 0.0 <= self.dropout < 1.0:
+            raise ValueError(f"dropout must be a number in [0, 1) (got {self.dropout!r})")
+        if not (math.isfinite(self.output_scale) and self.output_scale > 0):
+            raise ValueError(f"output_scale must be a finite number > 0 (got {self.output_scale!r})")
         super().__post_init__()  # the variant, data protocol and optimisation fields
 
     def to_dict(self) -> dict[str, Any]:
@@ -135,9 +143,14 @@ class FlexKalmanNetConfig(TrainConfig):
         known = {f.name for f in dataclasses.fields(cls)} - set(_NOT_OPTIONS)
         unknown = sorted(set(data) - known)
         if unknown:
-            raise ValueError(f"unknown FlexKalmanNet config keys {unknown}; valid: {sorted(known)}")
+            files = sorted({source for key, source in getattr(data, "sources", {}).items() if key in unknown})
+            raise ValueError("".join(f"{f}: " for f in files) + f"unknown FlexKalmanNet config keys {unknown}; "
+                             f"valid: {sorted(known)}")
         check_option_types(cls, data, "FlexKalmanNet")
-        return cls(**dict(data))
+        try:
+            return cls(**dict(data))
+        except ValueError as exc:  # a value out of range: name its file, when it came from one
+            raise naming_the_file(exc, data) from None
 
     @classmethod
     def from_toml(cls, path: str | Path) -> FlexKalmanNetConfig:

@@ -44,7 +44,10 @@ sampler either an explicit ``grid`` list or ``grid_points = N`` (evenly spaced, 
 :data:`MAX_ENUMERATED` values. Tuple-valued fields (``learn``) take comma-separated strings
 (``values = ["q_std,r_std", "q_chol,r_std"]``).
 
-Errors (:class:`SpaceError`) name the file, the knob and what is wrong.
+Numbers are TOML numbers: a bound, a grid point or a ``[sweep]`` count given as a string or a
+boolean is refused, and so is a ``[fixed]`` value or a knob's value that is not of the kind of the
+configuration field it sets (:meth:`SearchSpace.check_kinds`, e.g. ``lr = "0.1"``, ``hidden =
+8.5``). Errors (:class:`SpaceError`) name the file, the knob and what is wrong.
 """
 
 from __future__ import annotations
@@ -243,6 +246,24 @@ class SearchSpace:
         unknown = [n for n in self.names if n not in valid] + [n for n in self.fixed if n not in valid]
         _require(not unknown, f"{self.source}: unknown {what} field(s) {', '.join(unknown)}; "
                               f"valid: {', '.join(sorted(valid))}")
+
+    def check_kinds(self, annotations: Mapping[str, Any]) -> None:
+        """Raise :class:`SpaceError` naming the file and the table unless every ``[fixed]`` value
+        and every value a knob can take (its ``values``, bounds and ``grid``) is of the kind of the
+        configuration field it sets (``annotations``: field name to type;
+        :mod:`fkn_bench.config_values`: e.g. a number, never ``true`` or ``"0.1"``)."""
+        from fkn_bench.config_values import accepts, describe_kind
+
+        for key, value in self.fixed.items():
+            kind = annotations.get(key)
+            _require(kind is None or accepts(kind, value),
+                     f"{self.source}: [fixed] {key} must be {describe_kind(kind)} (got {value!r})")
+        for knob in self.knobs:
+            kind = annotations.get(knob.name)
+            for value in knob.values or (knob.low, knob.high, *knob.grid):
+                _require(kind is None or accepts(kind, value),
+                         f"{self.source}: [params.{knob.name}] value {value!r} is not {describe_kind(kind)}, the kind of "
+                         f"{knob.name}")
 
     def to_dict(self) -> dict[str, Any]:
         return {

@@ -27,6 +27,7 @@ from typing import Any, ClassVar
 import numpy as np
 import torch
 
+from fkn_bench.config_values import check_arguments, init_annotations
 from fkn_bench.estimators.kalman import KalmanEstimator
 from fkn_bench.io import read_json, write_json_atomic
 from fkn_bench.scenarios import Scenario
@@ -238,9 +239,10 @@ class TrainedKalmanEstimator(KalmanEstimator):
         name being built; ``gate``: a chi-square innovation gate level over the artefact's, see
         :class:`~fkn_bench.estimators.KalmanEstimator`). Complete or rejected: an artefact of
         another estimator, one whose ``estimator_config`` lacks the variant or any of ``Q``,
-        ``R``, ``P0`` (as ``*_std`` or ``*_cov``), or one whose values do not build a filter (e.g.
-        a standard deviation out of range) raises :class:`ArtifactError` naming the file and the
-        key."""
+        ``R``, ``P0`` (as ``*_std`` or ``*_cov``), one whose values are not of the kinds the
+        estimator takes (:mod:`fkn_bench.config_values`: a standard deviation is a finite JSON
+        number, never ``true`` or ``"0.1"``) or do not build a filter (e.g. a standard deviation
+        out of range) raises :class:`ArtifactError` naming the file and the key."""
         document = read_artifact(path)
         if name is not None and document["estimator"] != name:
             raise ArtifactError(f"{path} holds {document['estimator']!r} parameters, not {name}'s")
@@ -254,6 +256,10 @@ class TrainedKalmanEstimator(KalmanEstimator):
             keys = ", ".join(k if k == "variant" else f"{k}_std (or {k}_cov)" for k in missing)
             raise ArtifactError(f"{path}: 'estimator_config' lacks {keys}: an incomplete parameter file is not "
                                 "completed with defaults")
+        try:  # numbers are JSON numbers: `true` or "0.1" is no standard deviation
+            check_arguments(init_annotations(cls), config, "'estimator_config'")
+        except ValueError as exc:
+            raise ArtifactError(f"{path}: {exc}") from None
         metadata = {k: document.get(k) for k in ("family", "scenario", "training", "provenance")}
         metadata["artifact"] = artifact_label(path)
         gated = {} if gate is None else {"gate": gate}

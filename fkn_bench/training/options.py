@@ -1,66 +1,53 @@
 """Typed configuration options: a value from ``--set KEY=VALUE``, a TOML file or a sweep is checked
-against the config field's annotation where it enters, so that ``--set hidden=abc`` reads
-"config key 'hidden' must be an integer (got 'abc')" rather than a comparison error deep inside."""
+against the config field's annotation where it enters (:mod:`fkn_bench.config_values`: numbers are
+finite numbers, never booleans or numeric strings), so that ``--set hidden=abc`` reads
+"config key 'hidden' must be an integer (got 'abc')" rather than a comparison error deep inside,
+and ``lr = nan`` in a TOML file reads "best.toml: FlexKalmanNet config key 'lr' must be a finite
+number (got nan)": a key that came from a configuration file (:class:`FileOptions`) is reported
+with the file's name."""
 
 from __future__ import annotations
 
 import dataclasses
-import types
 import typing
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["check_option_types"]
+from fkn_bench.config_values import accepts, describe_kind
 
-_NAMES = {int: "an integer", float: "a number", str: "a string", bool: "true or false", type(None): "none"}
-
-
-def _accepts(kind: Any, value: Any) -> bool:
-    origin = typing.get_origin(kind)
-    if origin in (typing.Union, types.UnionType):
-        return any(_accepts(k, value) for k in typing.get_args(kind))
-    if kind is Any:
-        return True
-    if kind is type(None):
-        return value is None
-    if kind is bool:
-        return isinstance(value, bool)
-    if kind is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    if kind is float:
-        return isinstance(value, (int, float)) and not isinstance(value, bool)
-    if kind is str:
-        return isinstance(value, str)
-    if origin is tuple or kind is tuple:
-        if not isinstance(value, (tuple, list)):
-            return False
-        args = typing.get_args(kind)
-        if not args:
-            return True
-        if len(args) == 2 and args[1] is Ellipsis:
-            return all(_accepts(args[0], v) for v in value)
-        return len(args) == len(value) and all(_accepts(a, v) for a, v in zip(args, value))
-    return True  # a type this check does not know: the config's own validation decides
+__all__ = ["FileOptions", "check_option_types", "naming_the_file"]
 
 
-def _describe(kind: Any) -> str:
-    origin = typing.get_origin(kind)
-    if origin in (typing.Union, types.UnionType):
-        return " or ".join(_describe(k) for k in typing.get_args(kind))
-    if origin is tuple or kind is tuple:
-        args = typing.get_args(kind)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return f"a list of {_describe(args[0]).split(' ', 1)[-1]}s"
-        return f"a list of {len(args)} values" if args else "a list"
-    return _NAMES.get(kind, getattr(kind, "__name__", str(kind)))
+class FileOptions(dict):  # type: ignore[type-arg]
+    """Options some of which were read from a configuration file: ``sources`` maps those keys to
+    the file (what error messages name)."""
+
+    def __init__(self, values: Mapping[str, Any], sources: Mapping[str, str]) -> None:
+        super().__init__(values)
+        self.sources = dict(sources)
+
+
+def _source(data: Mapping[str, Any], key: str) -> str:
+    """``"<file>: "`` when ``key`` of ``data`` came from a configuration file, else ``""``."""
+    source = getattr(data, "sources", {}).get(key)
+    return f"{source}: " if source else ""
 
 
 def check_option_types(cls: type, data: Mapping[str, Any], label: str) -> None:
     """Raise ``ValueError`` naming the first key of ``data`` whose value does not fit the type of
     dataclass ``cls``'s field of that name, with what is valid (``label`` names the config,
-    e.g. "FlexKalmanNet"). Keys that are not fields are left to the caller's unknown-key check."""
+    e.g. "FlexKalmanNet"; a key read from a file: the file too). Keys that are not fields are
+    left to the caller's unknown-key check."""
     hints = typing.get_type_hints(cls)
     fields = {f.name for f in dataclasses.fields(cls)}
     for key, value in data.items():
-        if key in fields and key in hints and not _accepts(hints[key], value):
-            raise ValueError(f"{label} config key {key!r} must be {_describe(hints[key])} (got {value!r})")
+        if key in fields and key in hints and not accepts(hints[key], value):
+            raise ValueError(f"{_source(data, key)}{label} config key {key!r} must be {describe_kind(hints[key])} "
+                             f"(got {value!r})")
+
+
+def naming_the_file(exc: Exception, data: Mapping[str, Any]) -> ValueError:
+    """``exc`` (a config's own refusal, "<key> must be ...") as a ``ValueError`` that names the
+    configuration file ``<key>`` came from, when it came from one."""
+    key = str(exc).split(" ", 1)[0].strip("'\":")
+    return ValueError(f"{_source(data, key)}{exc}")

@@ -57,6 +57,7 @@ from fkn_bench.training.artifacts import deployed_estimator_config, run_provenan
 from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
 from fkn_bench.training.data import TrainingData, training_data
 from fkn_bench.training.objectives import OBJECTIVE_LABELS, aligned_state_error, state_mse
+from fkn_bench.training.options import FileOptions
 from fkn_bench.training.trainer import NoiseModel, OnEpoch, SequenceModel, TrainConfig, Trainer
 
 __all__ = ["CHECKPOINT_INTERVAL_S", "Trainable", "TrainingOutcome", "fit", "options_with_file", "split_metrics", "trainable"]
@@ -104,14 +105,18 @@ def trainable(estimator: str) -> Trainable:
 
 def options_with_file(options: Mapping[str, Any], *tables: str) -> dict[str, Any]:
     """``options`` over the values of the TOML file named by option ``config`` (its first table
-    of ``tables`` that exists, else its top level); ``options`` without ``config`` as they are."""
+    of ``tables`` that exists, else its top level), as :class:`~fkn_bench.training.options.FileOptions`
+    that remember which keys the file gave (errors name it); ``options`` without ``config`` as
+    they are."""
     options = dict(options)
     path = options.pop("config", None)
     if not path:
         return options
     document = read_toml(path)
     table = next((document[t] for t in tables if t in document), document)
-    return {**table, **options}
+    if not isinstance(table, dict):
+        raise ValueError(f"{path}: [{next(t for t in tables if t in document)}] must be a table of configuration values")
+    return FileOptions({**table, **options}, {key: str(path) for key in table if key not in options})
 
 
 @dataclass

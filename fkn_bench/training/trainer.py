@@ -229,6 +229,18 @@ class TrainConfig:
             raise ValueError(f"lr must be a finite number > 0 (got {self.lr!r})")
         if self.loss_cut < 0:
             raise ValueError(f"loss_cut must be >= 0 (got {self.loss_cut!r})")
+        for name in ("weight_decay", "min_improvement"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0 (got {getattr(self, name)!r})")
+        if not 0 < self.scheduler_factor < 1:
+            raise ValueError(f"scheduler_factor must be a number in (0, 1) (got {self.scheduler_factor!r})")
+        if self.scheduler_patience < 0:
+            raise ValueError(f"scheduler_patience must be >= 0 (got {self.scheduler_patience!r})")
+        if self.max_grad_norm is not None and not (math.isfinite(self.max_grad_norm) and self.max_grad_norm > 0):
+            raise ValueError(f"max_grad_norm must be a finite number > 0 or none (got {self.max_grad_norm!r})")
+        for name in ("stride", "train_measurement_every"):
+            if getattr(self, name) is not None and getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1 or none (got {getattr(self, name)!r})")
         parse_device(self.device)  # (whether this machine has it is checked when training starts)
 
     def to_dict(self) -> dict[str, Any]:

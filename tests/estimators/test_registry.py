@@ -8,6 +8,7 @@ import sys
 import types
 import warnings
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -170,3 +171,34 @@ def test_a_broken_entry_point_warns_and_the_rest_loads(monkeypatch: pytest.Monke
         names = estimator_names()
     assert any("could not load estimator entry point 'broken'" in str(w.message) for w in caught)
     assert "broken" not in names and "plugin-constant" in names and names[:4] == BUILTIN
+
+
+def test_an_estimator_file_is_data_naming_only_known_classes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 34, finding 5: the file's "class" imported any module before any check ("this:X"
+    printed the Zen of Python; a module in the working directory ran); now it must be the class of
+    a loaded estimator, and its numbers JSON numbers."""
+    import json
+
+    from fkn_bench.estimators import EstimatorFileError, load_estimator, make_estimator
+
+    good = json.loads(make_estimator("manual-ekf").save(tmp_path / "good.json").read_text())
+    (tmp_path / "planted.py").write_text("import pathlib\npathlib.Path(__file__).with_name('ran').touch()\nclass X: pass\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "this", raising=False)
+    cases = {
+        "zen.json": ({"class": "this:X"}, r"zen\.json: cannot import estimator class this:X: an estimator file may name only "
+                                          r".*known: .*fkn_bench\.estimators\.kalman:KalmanEstimator"),
+        "planted.json": ({"class": "planted:X"}, r"planted\.json: cannot import estimator class planted:X"),
+        "true.json": ({"config": {**good["config"], "r_std": [True] * 7}},
+                      r"true\.json: invalid KalmanEstimator config: 'r_std' must be a list of finite numbers or none"),
+        "text.json": ({"config": {**good["config"], "q_std": ["0.1"] * 13}}, r"text\.json: invalid KalmanEstimator config: 'q_std'"),
+        "gate.json": ({"config": {**good["config"], "gate": float("nan")}}, r"gate\.json: .*'gate' must be a finite number or none"),
+    }
+    for name, (change, message) in cases.items():
+        (tmp_path / name).write_text(json.dumps({**good, **change}))
+        with pytest.raises(EstimatorFileError, match=message):
+            load_estimator(tmp_path / name)
+    assert "this" not in sys.modules and "planted" not in sys.modules and not (tmp_path / "ran").exists()
+    assert "Beautiful is better" not in capsys.readouterr().out
+    assert load_estimator(tmp_path / "good.json").to_config() == good["config"]

@@ -151,7 +151,11 @@ def test_from_dict_checks_labels_units_and_values() -> None:
         (lambda d: d["entries"]["q_std"].__setitem__("labels", list(reversed(STATE_NAMES))), r"entry 'q_std' labels .* do not match"),
         (lambda d: d["entries"]["q_std"]["units"].__setitem__(4, "mm"), r"entry 'q_std' units .* do not match"),
         (lambda d: d["entries"]["q_std"]["std"].__setitem__(2, -0.1), r"entry 'q_std' needs 13 positive finite"),
-        (lambda d: d["entries"]["q_std"]["std"].__setitem__(2, float("inf")), r"entry 'q_std' needs 13 positive finite"),
+        (lambda d: d["entries"]["q_std"]["std"].__setitem__(2, float("inf")), r"entry 'q_std': 'std' must be a list of finite"),
+        # issue 34, finding 5: numbers are JSON numbers (true was read as 1.0, "0.1" as 0.1)
+        (lambda d: d["entries"]["q_std"]["std"].__setitem__(2, True), r"entry 'q_std': 'std' must be .*not booleans or strings"),
+        (lambda d: d["entries"]["q_std"].__setitem__("std", ["0.1"] * 13), r"entry 'q_std': 'std' must be a list of finite"),
+        (lambda d: d["entries"]["r_chol"]["cholesky"][3].__setitem__(3, "1"), r"'cholesky' must be a list of lists of finite"),
         (lambda d: d["entries"]["q_std"]["std"].pop(), r"entry 'q_std' needs 13 positive finite"),
         (lambda d: d["entries"]["r_chol"]["cholesky"][3].__setitem__(3, 0.0), r"entry 'r_chol' needs a positive Cholesky diagonal"),
         (lambda d: d["entries"]["r_chol"].__setitem__("cholesky", [[1.0]]), r"entry 'r_chol' needs a 7x7"),
@@ -167,6 +171,10 @@ def test_from_dict_checks_labels_units_and_values() -> None:
 
 def test_bad_parameter_sets_are_refused() -> None:
     layout = PAPER_MANUAL_LAYOUT
+    with pytest.raises(ValueError, match=r"fixed 'p0_std' must be numbers, not booleans or strings"):
+        ParameterSet(layout, fixed={"p0_std": [True] * len(layout.p0_default)})
+    with pytest.raises(ValueError, match=r"fixed 'r_std' must be numbers"):
+        ParameterSet(layout, fixed={"r_std": ["0.1"] * len(layout.r_default)})
     with pytest.raises(ValueError, match=r"unknown learnable entries \['w_std'\]; valid: \["):
         ParameterSet(layout, learn=("w_std",))
     with pytest.raises(ValueError, match="learnable entries repeated"):

@@ -115,6 +115,24 @@ def test_field_and_grid_errors() -> None:
         wide.grid()
 
 
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('[fixed]\nepochs = true\n[params.lr]\nvalues = [0.1]', r"test.toml: \[fixed\] epochs must be an integer \(got True\)"),
+        ('[params.lr]\nvalues = ["0.1", 0.2]', r"test.toml: \[params.lr\] value '0.1' is not a finite number, the kind of lr"),
+        ("[params.hidden]\nlow = 8.0\nhigh = 16.0", r"\[params.hidden\] value 8.0 is not an integer"),
+        ("[params.lr]\nvalues = [nan]", r"\[params.lr\] value nan is not a finite number"),
+    ],
+)
+def test_values_of_the_wrong_kind_for_their_field_are_refused(text: str, message: str) -> None:
+    """Issue 34, finding 5: a space's numbers are numbers of the field's kind, checked before any
+    trial (a trial with lr = "0.1" failed only when it ran)."""
+    import typing
+
+    with pytest.raises(SpaceError, match=message):
+        _space(text).check_kinds(typing.get_type_hints(FlexKalmanNetConfig))
+
+
 def test_files_and_packaged_spaces(tmp_path: Path) -> None:
     assert {"paper", "quick"} <= set(packaged_spaces())
     for name in ("paper", "quick"):

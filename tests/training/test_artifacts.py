@@ -50,6 +50,11 @@ def test_parameter_files_are_complete_or_rejected_naming_file_and_key(tmp_path) 
         "no-r.json": (lambda d: d["estimator_config"].pop("r_std"), r"no-r\.json: 'estimator_config' lacks r_std \(or r_cov\)"),
         "other.json": (lambda d: d.update(estimator="nll-tuned-ekf"), r"other\.json holds 'nll-tuned-ekf' parameters, not flexkalmannet's"),
         "huge.json": (lambda d: d["estimator_config"]["r_std"].__setitem__(2, 1e160), r"huge\.json: .*r_std\[2\] = 1e\+160 is outside"),
+        # issue 34, finding 5: numbers are JSON numbers (true was read as 1, "0.1" as 0.1)
+        "true.json": (lambda d: d["estimator_config"]["r_std"].__setitem__(0, True),
+                      r"true\.json: 'estimator_config': 'r_std' must be a list of finite numbers or none \(got \[True"),
+        "text.json": (lambda d: d["estimator_config"]["q_std"].__setitem__(1, "0.1"), r"text\.json: .*'q_std' must be a list of"),
+        "nan.json": (lambda d: d["estimator_config"]["p0_std"].__setitem__(1, float("nan")), r"nan\.json: .*'p0_std' must be"),
     }
     for name, (change, message) in cases.items():
         with pytest.raises(ArtifactError, match=message):
@@ -67,11 +72,11 @@ def test_parameter_files_are_complete_or_rejected_naming_file_and_key(tmp_path) 
     ("estimator", "options", "message"),
     [
         ("flexkalmannet", {"hidden": "abc"}, "FlexKalmanNet config key 'hidden' must be an integer (got 'abc')"),
-        ("flexkalmannet", {"lr": "fast"}, "FlexKalmanNet config key 'lr' must be a number (got 'fast')"),
+        ("flexkalmannet", {"lr": "fast"}, "FlexKalmanNet config key 'lr' must be a finite number (got 'fast')"),
         ("flexkalmannet", {"epochs": 2.5}, "FlexKalmanNet config key 'epochs' must be an integer (got 2.5)"),
         ("flexkalmannet", {"inertia": 1}, "FlexKalmanNet config key 'inertia' must be a list of 3 values or none (got 1)"),
         ("kalmannet", {"window": True}, "KalmanNet config key 'window' must be an integer (got True)"),
-        ("nll-tuned-ekf", {"lr": "abc"}, "nll-tuned-ekf config key 'lr' must be a number (got 'abc')"),
+        ("nll-tuned-ekf", {"lr": "abc"}, "nll-tuned-ekf config key 'lr' must be a finite number (got 'abc')"),
     ],
 )
 def test_training_options_of_the_wrong_type_name_the_key_and_what_is_valid(estimator: str, options: dict, message: str) -> None:
