@@ -8,6 +8,14 @@ provenance in the dataset's metadata (``fkn_bench.harness.datasets``). Score any
 with ``fkn-bench run --dataset DIR/ID`` (the same scores as on the scenario), or load it with
 Minari: ``MINARI_DATASETS_PATH=DIR`` and ``minari.load_dataset(ID)``.
 
+The dataset is built in a hidden scratch directory inside DIR and moved into place when complete,
+with the SHA-256 checksums of its files, which ``run --dataset`` checks before scoring. Exit code 2,
+with one line naming the problem: an ID that is not Minari's ``NAME-vN`` or ``NAMESPACE/NAME-vN``
+(refused before anything is written), an existing dataset of that ID (replace it with ``--force``),
+DIR in use by another ``fkn-bench dataset``, too little free space for the dataset (checked up
+front, from its estimated size) or a failed write. An interrupted command leaves no dataset
+behind; run it again.
+
 Examples::
 
     fkn-bench dataset --scenario ds1 --seeds 20 --out datasets          # datasets/fkn-bench/ds1-full-v0
@@ -39,7 +47,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="behaviour estimator whose estimates are the actions (default: manual-ekf)")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR",
                         help="datasets directory (Minari's MINARI_DATASETS_PATH); the dataset is DIR/ID")
-    parser.add_argument("--dataset-id", metavar="ID", help="Minari dataset id (default: fkn-bench/<scenario>-<split>-v0)")
+    parser.add_argument("--dataset-id", metavar="ID",
+                        help="Minari dataset id, NAME-vN or NAMESPACE/NAME-vN (default: fkn-bench/<scenario>-<split>-v0)")
     parser.add_argument("--force", action="store_true", help="replace an existing dataset of that id")
     add_scenario_file_option(parser)
     parser.set_defaults(handler=run)

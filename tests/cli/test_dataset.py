@@ -27,3 +27,45 @@ def test_run_on_a_dataset_scores_as_the_direct_run(tmp_path: Path, capsys: pytes
     assert strip(on_dataset[0]) == strip(direct[0]) and on_dataset[0]["runs"] == 2
     assert main(["dataset", "--scenario", "ds1", "--seeds", "2", "--split", "test", "--out", str(tmp_path)]) == 2
     assert "exists" in capsys.readouterr().err
+
+
+def _one_error(capsys: pytest.CaptureFixture[str]) -> str:
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("fkn-bench dataset: error: "), err
+    return err
+
+
+def test_a_full_disk_is_one_line_before_any_work(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 34, finding 4: on a 2 MB file system ``dataset`` segfaulted (exit 139) and left 2 MB
+    of scratch; now the free space is checked against the dataset's estimated size first."""
+    import collections
+    import shutil
+
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda _: usage(2_000_000, 0, 2_000_000))
+    out = tmp_path / "tiny"
+    assert main(["dataset", "--scenario", "ds1", "--seeds", "2", "--out", str(out)]) == 2
+    err = _one_error(capsys)
+    assert "no space left on the device to write the dataset fkn-bench/ds1-full-v0" in err
+    assert "(2 MB free, about 10.8 MB needed)" in err
+    assert [p.name for p in out.iterdir()] == [".fkn-bench.lock"]
+
+
+@pytest.mark.parametrize("dataset_id", ["mydata", "../escaped-v0", "/absolute/escaped-v0"])
+def test_a_bad_dataset_id_is_a_named_error_before_any_directory(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                dataset_id: str) -> None:
+    """Issue 34, finding 7: ``--dataset-id mydata`` was a minari traceback; ``..`` and absolute
+    ids made directories outside --out first."""
+    assert main(["dataset", "--out", str(tmp_path / "out"), "--dataset-id", dataset_id]) == 2
+    assert "is not a Minari dataset id: it must be NAME-vN or NAMESPACE/NAME-vN" in _one_error(capsys)
+    assert list(tmp_path.iterdir()) == [] and not Path("/absolute").exists()
+
+
+def test_a_dataset_directory_in_use_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 34, finding 6: two ``dataset`` runs of one id both reported success."""
+    from fkn_bench.io import directory_lock
+
+    with directory_lock(tmp_path):
+        assert main(["dataset", "--seeds", "2", "--out", str(tmp_path)]) == 2
+    assert "in use by another fkn-bench process writing the dataset fkn-bench/ds1-full-v0" in _one_error(capsys)
