@@ -3,7 +3,8 @@
 The file is a ROS 2 MCAP (profile "ros2", CDR messages of standard geometry_msgs types) for ROS 2
 tools with rosbag2's MCAP storage plugin (``ros2 bag info run.mcap``) and for Foxglove (3-D panel,
 display frame "world"); topics, frames and conventions are listed in
-:mod:`fkn_bench.recordings.writer`. Example::
+:mod:`fkn_bench.recordings.writer`. The file is written atomically; an existing ``--out`` file is
+never replaced without ``--force``. Example::
 
     fkn-bench record --scenario ds1 --estimator manual-ekf --seed 0 --out run.mcap
 """
@@ -29,7 +30,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="episode seed (default: 0)")
     parser.add_argument("--split", default="full", choices=("full", "train", "val", "test"))
     parser.add_argument("--steps", type=int, default=None, metavar="N", help="record only the first N steps")
-    parser.add_argument("--out", required=True, type=Path, metavar="FILE.mcap", help="output file")
+    parser.add_argument("--out", required=True, type=Path, metavar="FILE.mcap",
+                        help="output file (an existing file is refused unless --force)")
+    parser.add_argument("--force", action="store_true", help="replace an existing --out file")
     parser.add_argument("--namespace", default="", help="topic namespace, e.g. /honey (default: none)")
     parser.add_argument("--no-foxglove", action="store_true", help="omit the foxglove.PoseInFrame channels")
     parser.add_argument("--compression", default="zstd", choices=("zstd", "lz4", "none"), help="chunk compression")
@@ -41,6 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.estimators import EstimatorFileError, UnknownEstimatorError
     from fkn_bench.harness.recording import record
+    from fkn_bench.io import WriteError
     from fkn_bench.scenarios import get_scenario
 
     check_minimum(args, seed=0, steps=1)
@@ -48,6 +52,8 @@ def run(args: argparse.Namespace) -> int:
     scenario = get_scenario(args.scenario)  # unknown names exit with code 2 and the list
     if args.out.exists() and args.out.is_dir():
         raise UsageError(f"--out {args.out} is a directory; give a file name such as run.mcap")
+    if (args.out.exists() or args.out.is_symlink()) and not args.force:
+        raise UsageError(f"--out {args.out} exists; choose another file name, or pass --force to replace it")
     if any(c.isspace() for c in args.namespace):
         raise UsageError(f"--namespace must not contain spaces (got {args.namespace!r})")
     estimator = None if args.estimator.lower() == "none" else args.estimator
@@ -59,7 +65,9 @@ def run(args: argparse.Namespace) -> int:
                          compression=args.compression)
     except (UnknownEstimatorError, EstimatorFileError) as exc:
         raise UsageError(str(exc)) from None
-    except OSError as exc:  # an unwritable place, a missing parent directory, a full disk
+    except WriteError:  # one line naming the file (and the free space, when the disk is full)
+        raise
+    except OSError as exc:  # an unwritable place, a missing parent directory
         raise UsageError(f"cannot write {args.out}: {exc.strerror or exc}") from None
     if args.json:
         print(json.dumps({

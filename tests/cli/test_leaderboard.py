@@ -60,3 +60,39 @@ def test_the_default_results_are_found_from_any_directory(tmp_path, monkeypatch)
     assert default_leaderboards() == checkout
     (tmp_path / "leaderboards").mkdir()
     assert default_leaderboards() == Path("leaderboards")
+
+
+def test_the_committed_manifest_lists_every_generated_file(capsys: pytest.CaptureFixture) -> None:
+    """`fkn-bench leaderboard` (in place) replaces the committed files without --force."""
+    import hashlib
+    import json
+
+    from fkn_bench.harness.manifest import MANIFEST
+
+    listed = json.loads((LEADERBOARDS / MANIFEST).read_text())["files"]
+    for name, data in _files(LEADERBOARDS).items():
+        assert listed.get(name) == hashlib.sha256(data).hexdigest(), name
+
+
+def test_a_file_fkn_bench_did_not_write_is_never_replaced(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """Issue 34, finding 1: `echo MINE > lb/README.md; fkn-bench run ... --out lb/ov; fkn-bench
+    leaderboard --results lb/ov` replaced lb/README.md and lb/results.csv."""
+    from fkn_bench.harness import ResultStore, SimulatedSource, build_grid, run_grid
+    from fkn_bench.scenarios import get_scenario
+
+    source = SimulatedSource(get_scenario("ds1", n_steps=2000))
+    run_grid(build_grid(["manual-ekf"], [source], [0, 1], online_steps=5), store=ResultStore(tmp_path / "ov"),
+             progress=False)
+    (tmp_path / "README.md").write_text("MINE\n")
+    (tmp_path / "results.csv").write_text("MINE too\n")
+    before = sorted(p.name for p in tmp_path.iterdir())
+    assert main(["leaderboard", "--results", str(tmp_path / "ov")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"fkn-bench leaderboard: error: {tmp_path}/README.md exists and fkn-bench did not " \
+                                    f"write it" in err and "--force" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == before and (tmp_path / "README.md").read_text() == "MINE\n"
+    assert main(["leaderboard", "--results", str(tmp_path / "ov"), "--force"]) == 0
+    assert (tmp_path / "README.md").read_text().startswith("# fkn-bench leaderboards")
+    (tmp_path / "ds1.md").write_text("edited\n")
+    assert main(["leaderboard", "--results", str(tmp_path / "ov")]) == 2
+    assert f"{tmp_path}/ds1.md exists and fkn-bench did not write it (or it was edited since" in capsys.readouterr().err

@@ -88,3 +88,16 @@ def test_out_is_required(capsys: pytest.CaptureFixture) -> None:
         main(["record"])
     assert info.value.code == 2
     assert "--out" in capsys.readouterr().err
+
+
+def test_an_existing_out_file_is_replaced_only_with_force(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """Issue 34, finding 1: `fkn-bench record --out thesis.txt` replaced an existing file."""
+    out = tmp_path / "thesis.txt"
+    out.write_text("MINE\n")
+    args = ["record", "--estimator", "none", "--steps", "10", "--out", str(out)]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert err == f"fkn-bench record: error: --out {out} exists; choose another file name, or pass --force to replace it\n"
+    assert out.read_text() == "MINE\n" and sorted(p.name for p in tmp_path.iterdir()) == ["thesis.txt"]
+    assert main([*args, "--force"]) == 0
+    assert list_topics(out)  # an MCAP now

@@ -237,9 +237,10 @@ def test_split_cut_and_options_keep_their_own_cells_in_one_out(capsys: pytest.Ca
     documents = [_run_json(capsys, *args, *variant) for variant in variants]
     assert [d["cells"]["computed"] for d in documents] == [1, 1, 1, 1]
     assert documents[3]["results"][0]["estimator"] == "manual-ekf (gate=0.5)"
-    assert len(list((tmp_path / "cells").rglob("seeds-0-1.json"))) == 4
-    again = _run_json(capsys, *args)  # the first cell is still there, untouched
-    assert again["cells"]["reused"] == 1 and again["results"] == documents[0]["results"]
+    keys = [json.loads(p.read_text())["key"] for p in (tmp_path / "cells").rglob("seeds-0-1.json")]
+    variants_kept = {(k["source"].rsplit(":", 1)[1], k["settings"]["cut"], str(k.get("estimator_options"))) for k in keys}
+    assert variants_kept == {("test", 100, "None"), ("val", 100, "None"), ("test", 150, "None"),
+                             ("test", 100, "[['gate', 0.5]]")}  # four cells: none replaced another
 
 
 def test_a_full_disk_is_one_line_exit_2_and_leaves_no_cell_a_rerun_trusts(capsys: pytest.CaptureFixture, tiny: str,
