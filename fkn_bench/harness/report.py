@@ -58,6 +58,13 @@ def _column_groups(header: Sequence[str], rows: Sequence[Sequence[str]], width: 
     return groups
 
 
+def _seeds(summary: dict[str, Any]) -> str:
+    """The seeds column: ``"2"``, or ``"2 (1 not finite)"`` when seeds have a non-finite 13-state
+    RMSE (they are left out of the means: the count says so)."""
+    bad = int(summary.get("non_finite_runs") or 0)
+    return f"{summary['runs']}" + (f" ({bad} not finite)" if bad else "")
+
+
 def summary_text(summaries: Sequence[dict[str, Any]], width: int | None = None) -> str:
     """The run table: one line per (estimator, scenario), then a legend. With ``width`` (a
     terminal's columns), a table wider than that is printed as two stacked tables (accuracy;
@@ -73,7 +80,7 @@ def summary_text(summaries: Sequence[dict[str, Any]], width: int | None = None) 
         lo, hi = s["anees_bounds"]
         rows.append([
             f"{s['estimator']} / {s['scenario']}",
-            str(s["runs"]),
+            _seeds(s),
             format_number(s["state_rmse"]),
             f"{format_number(stats['q25'], 3)}-{format_number(stats['q75'], 3)}",
             format_number(s["attitude_rmse_deg"], 3),
@@ -95,6 +102,9 @@ def summary_text(summaries: Sequence[dict[str, Any]], width: int | None = None) 
         "ANEES: average NEES (12-dim error) over seeds and steps; in: share of steps whose average over seeds "
         "lies in the 95% chi-square bounds. us/step: online step latency."
     )
+    if any(s.get("non_finite_runs") for s in summaries):
+        legend += ("\nseeds \"N (K not finite)\": the 13-state RMSE of K of the N seeds is NaN or infinite (diverged "
+                   "or failed); the means and IQRs are over the other seeds.")
     errors = [f"{s['estimator']} / {s['scenario']}: {e}" for s in summaries for e in s["errors"]]
     table = text_table(header, rows)
     if width is not None and max(map(len, table.splitlines())) > width:

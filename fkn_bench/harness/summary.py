@@ -2,9 +2,12 @@
 leaderboards rank.
 
 Scalars are means over runs (seeds) of the per-run values, taken over the runs where the value is
-finite (:func:`fkn_bench.metrics.summarize`); ``statistics`` adds median and interquartile range.
-Divergence is reported apart (``diverged_fraction``, over all runs, failed runs included) and
-never folded into the RMSEs. ANEES/ANIS pool every run's per-step NEES/NIS (Bar-Shalom, Li &
+finite (:func:`fkn_bench.metrics.summarize`); ``statistics`` adds median and interquartile range,
+and how many runs each left out (``missing``). A run whose primary score (the 13-state RMSE) is
+not finite, NaN or infinity (an estimate that diverged to NaN or overflowed, a failed run), is
+never dropped without a word: ``non_finite_runs`` counts them, and the run table shows the count
+beside the seeds. Divergence is reported apart (``diverged_fraction``, over all runs, failed runs
+included) and never folded into the RMSEs. ANEES/ANIS pool every run's per-step NEES/NIS (Bar-Shalom, Li &
 Kirubarajan 2001, sec. 5.4): ``anees`` is the average over runs and steps,
 ``nees_in_bounds_fraction`` the share of steps whose average over the runs lies in the two-sided
 95% chi-square interval for that many runs (``anees_bounds``, given for all runs).
@@ -81,6 +84,7 @@ def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str,
     nis_runs = int(np.max(nis.count)) if nis is not None and nis.count.size else 0
     nis_lower, nis_upper = chi2_interval(NIS_DOF, nis_runs) if nis_runs else (np.nan, np.nan)
     diverged = _column(table, "stability", "diverged", runs)
+    primary = _column(table, *PRIMARY_SCORE, runs)
     failed = _column(table, "stability", "failed", runs)
     source = cells[0].source
     return {
@@ -91,7 +95,8 @@ def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str,
         "config_hash": source.get("config_hash"),
         "runs": runs,
         "failed_runs": int(np.nansum(failed)),
-        "state_rmse": mean(*PRIMARY_SCORE),
+        "non_finite_runs": int(np.count_nonzero(~np.isfinite(primary))),
+        "state_rmse": summarize(primary).mean,
         "rmse": {name: mean("state", f"rmse_{name}") for name in STATE_NAMES},
         **{GROUP_RMSE_KEYS[g]: mean(g, "rmse") for g in GROUPS},
         "settling_time_s": mean("settling", "time"),

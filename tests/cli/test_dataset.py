@@ -25,6 +25,7 @@ def test_run_on_a_dataset_scores_as_the_direct_run(tmp_path: Path, capsys: pytes
     assert len(on_dataset) == len(direct) == 1
     strip = lambda r: {k: v for k, v in r.items() if k not in TIMING}  # noqa: E731
     assert strip(on_dataset[0]) == strip(direct[0]) and on_dataset[0]["runs"] == 2
+    assert on_dataset[0]["non_finite_runs"] == 0  # (issue 34: counted in --json)
     assert main(["dataset", "--scenario", "ds1", "--seeds", "2", "--split", "test", "--out", str(tmp_path)]) == 2
     assert "exists" in capsys.readouterr().err
 

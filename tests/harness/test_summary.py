@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -86,3 +87,29 @@ def test_format_number() -> None:
 def test_text_table_alignment() -> None:
     table = text_table(["name", "x"], [["a", "1"], ["long", "22"]])
     assert table.splitlines() == ["name   x", "----  --", "a      1", "long  22"]
+
+
+def test_a_seed_whose_score_is_not_finite_is_counted_not_dropped(short_ds1: SimulatedSource, test_estimators: None,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    """Issue 34, finding 2: a seed with a NaN score left the mean silently; "2 seeds" was seed 1
+    alone. The mean is still over the finite seeds (as for diverged ones), and the count shows."""
+    from fkn_bench.estimators import Estimates, make_estimator, registry
+
+    class FirstSeedNaN(type(make_estimator("nan"))):  # NaN estimates for the first seed of the batch only
+        name = "first-nan"
+
+        def estimate(self, measurements, mask, dt):  # noqa: ANN001, ANN202
+            inner = make_estimator("manual-ekf").estimate(measurements, mask, dt)
+            means = np.array(inner.means)
+            means[0, 150:] = np.nan
+            return Estimates(means=means, error_covariances=inner.error_covariances)
+
+    registry.register_estimator("first-nan", lambda scenario=None, **_: FirstSeedNaN())
+    outcome = run_grid(build_grid(["first-nan"], [short_ds1], range(2)), progress=False)
+    (summary,) = summarize_results(outcome.results, [("first-nan", "ds1")])
+    assert summary["runs"] == 2 and summary["non_finite_runs"] == 1 and summary["statistics"]["state_rmse"]["runs"] == 1
+    assert np.isfinite(summary["state_rmse"]) and summary["diverged_fraction"] == 0.5
+    text = summary_text([summary])
+    assert re.search(r"first-nan / ds1 +2 \(1 not finite\) ", text)
+    assert 'seeds "N (K not finite)": the 13-state RMSE of K of the N seeds is NaN or infinite' in text
+    assert "not finite" not in summary_text([{**summary, "non_finite_runs": 0}])
