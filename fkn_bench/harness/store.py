@@ -329,14 +329,22 @@ class ResultStore:
         return sorted([*cells.glob("*/*/*/seeds-*.json"), *cells.glob("*/*/seeds-*.json")])
 
     def load(self) -> Results:
-        """Every stored cell (raises :class:`StoreError` when there are none or one is broken)."""
+        """Every stored cell (raises :class:`StoreError` when there are none or one is broken); a
+        cell of the earlier layout that was also written in this one (not yet :meth:`migrate` d)
+        counts once, as the newer layout's."""
         if not self.root.is_dir():
             raise StoreError(f"results directory not found: {self.root}")
         files = self.cell_files()
         if not files:
             raise StoreError(f"no cell results under {self.root} (expected cells/<estimator>/<scenario>/<variant>/"
                              f"seeds-*.json)")
-        return Results(self.read_cell(path) for path in files)
+        records: dict[Path, CellRecord] = {}
+        for path in files:
+            record = self.read_cell(path)
+            place = self._paths(record)[2]
+            if path == place or place not in records:
+                records[place] = record
+        return Results(records.values())
 
     def write_summary(self, results: Results, provenance: dict[str, Any], *, computed: int | None = None) -> None:
         """Write ``results.csv`` (all rows, exact floats) and ``results.json`` (provenance).

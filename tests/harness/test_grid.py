@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from fkn_bench.harness import SEED_CHUNK, ResolvedEstimator, SimulatedSource, build_grid, chunk_seeds
-from fkn_bench.harness.grid import safe_name
+from fkn_bench.harness.grid import estimator_label, path_name, safe_name, variant_id
 from fkn_bench.metrics import MetricSettings
 from fkn_bench.scenarios import get_scenario
 
@@ -49,6 +49,32 @@ def test_source_key_follows_the_configuration() -> None:
 def test_safe_name() -> None:
     assert safe_name("manual-ekf") == "manual-ekf"
     assert safe_name("my filter/v2") == "my_filter_v2"
+
+
+def test_path_names_are_injective_and_stay_in_their_directory() -> None:
+    """Issue 34, finding 3: ``my fast``, ``my_fast`` and ``my/fast`` shared a cell; ``..`` escaped."""
+    names = ["my fast", "my_fast", "my/fast", "my%2Ffast", "..", ".", ".hidden", "v1.2", "é", "manual-ekf", "A", "a"]
+    encoded = [path_name(name) for name in names]
+    assert len(set(encoded)) == len(names)
+    assert encoded[:3] == ["my%20fast", "my_fast", "my%2Ffast"] and encoded[3] == "my%252Ffast"
+    assert encoded[4:8] == ["%2E.", "%2E", "%2Ehidden", "v1.2"] and encoded[8] == "%C3%A9"
+    assert path_name("ds1-noise5x") == "ds1-noise5x"  # the named scenarios keep their names
+    for text in encoded:
+        assert "/" not in text and not text.startswith(".")
+    with pytest.raises(ValueError, match="empty name"):
+        path_name("")
+
+
+def test_the_variant_is_what_changes_the_numbers_but_the_estimator() -> None:
+    cell = build_grid([ResolvedEstimator("a", "ds1")], [SimulatedSource(get_scenario("ds1"))], range(3))[0]
+    key = cell.key()
+    same = [{**key, "estimator_fingerprint": "retrained"}, {**key, "seeds": [7]}, {**key, "format_version": 9}]
+    other = [{**key, "source": key["source"].replace(":test", ":val")}, {**key, "settings": {**key["settings"], "cut": 300}},
+             {**key, "estimator_options": [["gate", 0.5]]}]
+    assert {variant_id(k) for k in same} == {variant_id(key)}
+    assert len({variant_id(k) for k in [key, *other]}) == 4 and len(variant_id(key)) == 12
+    assert estimator_label("manual-ekf", [("gate", 0.5), ("parameters", "a.json")]) == \
+        "manual-ekf (gate=0.5, parameters=a.json)"
 
 
 def test_simulated_source_is_an_episode_source() -> None:

@@ -256,6 +256,12 @@ def test_cells_of_the_earlier_layout_are_read_and_moved_unchanged(tmp_path: Path
         pass
     assert store.cell_files() == [json_path] and store.finished(_spec(short_ds1)) is not None
     assert {p.name: p.read_bytes() for p in json_path.parent.iterdir()} == contents
+    for name, data in contents.items():  # the same cell in both layouts (an older fkn-bench wrote it again)
+        (legacy / name).write_bytes(data)
+    assert len(store.cell_files()) == 2 and len(store.load()) == 1  # counted once
+    with store.session():
+        pass
+    assert store.cell_files() == [json_path] and not list(legacy.glob("seeds-*"))
 
 
 def test_a_failed_rewrite_leaves_no_cell_that_resume_trusts(tmp_path: Path, short_ds1: SimulatedSource, one_cell,  # noqa: ANN001
