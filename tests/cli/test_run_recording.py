@@ -49,3 +49,19 @@ def test_recording_usage_errors_exit_2(recording, tmp_path: Path, capsys: pytest
     assert "--dt" in capsys.readouterr().err
     assert main(["run", "--recording", str(path), "--truth-topic", "/nope", "--no-progress"]) == 2
     assert "/nope" in capsys.readouterr().err
+
+
+def test_an_implausible_recorded_truth_is_exit_2_not_a_divergence(recording, tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 34, finding 2: a truth position of 1e300 in an MCAP file was accepted, and its
+    overflow reported as the estimator diverging."""
+    _, episodes = recording
+    truth = episodes.truth.copy()
+    truth[0, 700, 4] = 1e300
+    path = tmp_path / "implausible.mcap"
+    record_episode(path, type(episodes)(episodes.scenario, episodes.seeds, episodes.start, episodes.times, truth,
+                                        episodes.measurements, episodes.valid))
+    assert main(["run", "--recording", str(path), "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(path) in err
+    assert "message #700 has an implausible value (rx = 1e+300 m is beyond +-1e+06 m)" in err
