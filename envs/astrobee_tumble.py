@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from collections import deque
 from collections.abc import Mapping
 from typing import Any
@@ -13,7 +15,7 @@ from fkn_bench.envs.episodes import EpisodeStream
 from fkn_bench.envs.rendering import HISTORY_STEPS
 from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, WEIGHT_LIMIT, attitude_error_angle, estimate_cost_scalar
 from fkn_bench.envs.spaces import MeasuredPose, action_space, action_values, observation_space
-from fkn_bench.inputs import check_seed, real_array
+from fkn_bench.inputs import check_seed, describe
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.types import ArrayF
 
@@ -329,14 +331,21 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
 
 def _check_weights(weights: Mapping[str, float] | None) -> dict[str, float]:
     """The reward weights: :data:`~fkn_bench.envs.rewards.DEFAULT_WEIGHTS` updated with
-    ``weights``, each a real number (the rules of :func:`fkn_bench.inputs.real_array`: not a
-    string or a bool) in ``[0, WEIGHT_LIMIT]``; ``ValueError`` naming the key otherwise."""
+    ``weights``, each a real number (an ``int``, a ``float`` or a numpy one; not a string, a bool
+    or a complex number) in ``[0, WEIGHT_LIMIT]``; ``ValueError`` naming the key otherwise."""
     weights = weights or {}
     unknown = set(weights) - set(DEFAULT_WEIGHTS)
     if unknown:
         raise ValueError(f"unknown reward weight(s) {sorted(unknown)}; valid keys: {sorted(DEFAULT_WEIGHTS)}")
-    merged = {**DEFAULT_WEIGHTS, **{k: float(real_array(v, f"reward weight '{k}'", ())) for k, v in weights.items()}}
+    merged = dict(DEFAULT_WEIGHTS)
+    for key, value in weights.items():
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+            raise ValueError(f"reward weight '{key}' must be a real number (got {describe(value)})")
+        merged[key] = float(value) if abs(value) <= WEIGHT_LIMIT else math.inf  # (10**400: no OverflowError)
     for key, value in merged.items():
         if not 0 <= value <= WEIGHT_LIMIT:
-            raise ValueError(f"reward weight '{key}' must be a finite number >= 0 and at most WEIGHT_LIMIT = {WEIGHT_LIMIT:g} (got {value})")
+            raise ValueError(
+                f"reward weight '{key}' must be a finite number >= 0 and at most WEIGHT_LIMIT = {WEIGHT_LIMIT:g} "
+                f"(got {describe(weights.get(key, value))})"
+            )
     return merged

@@ -15,6 +15,7 @@ import numpy as np
 from fkn_bench.envs.dynamics import ForcedRotation, FreeTumble, PerturbedRotation
 from fkn_bench.envs.measurements import BLOCK, MeasurementGenerator, stream
 from fkn_bench.geometry import quaternion as quat
+from fkn_bench.inputs import check_seed, describe
 from fkn_bench.limits import check_memory
 from fkn_bench.scenarios import SPLITS, Scenario, get_scenario
 from fkn_bench.types import ArrayB, ArrayF
@@ -166,7 +167,7 @@ class EpisodeStream:
 
     def __init__(self, scenario: Scenario, seeds: Sequence[int]) -> None:
         self.scenario = scenario
-        self.seeds = tuple(int(s) for s in seeds)
+        self.seeds = tuple(check_seed(s, f"seeds[{i}]") for i, s in enumerate(seeds))
         self._q0, self._r0, self._v0 = initial_states(scenario, self.seeds)
         self._rotation = self._make_rotation()
         self._measurements = MeasurementGenerator(scenario, self.seeds)
@@ -244,11 +245,17 @@ def generate_episodes(
     scenario: str | Scenario, seeds: int | Sequence[int], *, split: str = "full"
 ) -> Episodes:
     """:class:`Episodes` (batch axis first) of ``scenario`` (a registered name or a
-    :class:`Scenario`) for ``seeds`` (an int ``N`` means seeds ``0 .. N-1``), whole or one
+    :class:`Scenario`) for ``seeds`` (an int ``N`` means seeds ``0 .. N-1``; else a list of
+    seeds, each an integer in ``[0, 2**63)``, :func:`fkn_bench.inputs.check_seed`), whole or one
     ``split`` (``full``, ``train``, ``val`` or ``test``)."""
     scenario = get_scenario(scenario)
     start, stop = _split_bounds(scenario, split)
-    seed_list = list(range(seeds)) if isinstance(seeds, (int, np.integer)) else [int(s) for s in seeds]
+    if isinstance(seeds, (int, np.integer)) and not isinstance(seeds, (bool, np.bool_)):
+        seed_list = list(range(seeds))
+    elif isinstance(seeds, (str, bytes, bool, np.bool_)) or not hasattr(seeds, "__iter__") or (isinstance(seeds, np.ndarray) and seeds.ndim == 0):
+        raise ValueError(f"seeds must be a number of episodes or a list of seeds (got {describe(seeds)})")
+    else:
+        seed_list = [check_seed(s, f"seeds[{i}]") for i, s in enumerate(seeds)]
     if not seed_list:
         raise ValueError("at least one seed is required")
     source = EpisodeStream(scenario, seed_list)

@@ -28,6 +28,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from fkn_bench.geometry import quaternion as quat
+from fkn_bench.inputs import check_seed
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -56,11 +57,10 @@ BLOCK = 4096
 
 
 def stream(seed: int, name: str, block: int = 0) -> np.random.Generator:
-    """The random generator of stream ``name``, block ``block``, of episode ``seed`` (>= 0)."""
-    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
-        raise ValueError(f"episode seed must be a non-negative integer (got {seed!r})")
+    """The random generator of stream ``name``, block ``block``, of episode ``seed`` (an integer
+    in ``[0, 2**63)``, :func:`fkn_bench.inputs.check_seed`)."""
     key = STREAMS.index(name)
-    return np.random.default_rng(np.random.SeedSequence(entropy=int(seed), spawn_key=(key, int(block))))
+    return np.random.default_rng(np.random.SeedSequence(entropy=check_seed(seed, "episode seed"), spawn_key=(key, int(block))))
 
 
 class MeasurementGenerator:

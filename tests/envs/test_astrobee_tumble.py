@@ -3,6 +3,7 @@ truncation, reward, Gymnasium's checker and input errors."""
 
 from __future__ import annotations
 
+import math
 import subprocess
 import sys
 import textwrap
@@ -308,3 +309,54 @@ def test_negative_seed() -> None:
 def test_expose_truth_must_be_a_bool(value: object) -> None:
     with pytest.raises(ValueError, match=r"expose_truth must be True or False \(got"):
         gym.make("AstrobeeTumble-v0", expose_truth=value)
+
+
+# ---------------------------------------------------------------------------- issue 34, finding 7: loose inputs
+@pytest.mark.parametrize("dtype", [str, bool, complex])
+def test_actions_of_string_bool_or_complex_dtype_are_refused(dtype: type) -> None:
+    """They were accepted: strings parsed as numbers, bools read as 0/1, and complex numbers
+    lost their imaginary part with a warning."""
+    env = AstrobeeTumbleEnv(n_steps=20)
+    env.reset(seed=0)
+    action = np.eye(1, 13)[0].astype(dtype)
+    pattern = rf"^action must be a float array of shape \(13,\) \(a real integer or floating dtype; got dtype {action.dtype}\)$"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(ValueError, match=pattern):
+            env.step(action)
+
+
+def test_an_action_beyond_float64_is_a_value_error() -> None:
+    """It was an OverflowError from numpy's conversion."""
+    env = AstrobeeTumbleEnv(n_steps=20)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"^action\[4\] is an integer of 401 digits, beyond float64's range"):
+        env.step([1, 0, 0, 0, 10**400] + [0] * 8)
+
+
+@pytest.mark.parametrize("component", [0, 4, 12])
+def test_actions_beyond_action_limit_are_refused_not_scored_minus_inf(component: int) -> None:
+    """1e308 gave the reward -inf (and a quaternion of 1e200 was scored as pi rad off)."""
+    env = AstrobeeTumbleEnv(n_steps=20)
+    env.reset(seed=0)
+    action = np.eye(1, 13)[0]
+    action[component] = 1e308 if component else 1e200
+    with pytest.raises(ValueError, match=r"^action must be within \+-ACTION_LIMIT = 1e\+150: action\["):
+        env.step(action)
+
+
+def test_rewards_are_finite_at_the_limits() -> None:
+    """With every weight at WEIGHT_LIMIT and every component at +-ACTION_LIMIT, the reward is
+    finite; a weight beyond the limit, or not a real number, is refused."""
+    from fkn_bench.envs.rewards import WEIGHT_LIMIT
+    from fkn_bench.envs.spaces import ACTION_LIMIT
+
+    weights = dict.fromkeys(("attitude", "position", "omega", "velocity"), WEIGHT_LIMIT)
+    env = AstrobeeTumbleEnv(n_steps=20, reward_weights=weights)
+    env.reset(seed=0)
+    reward = env.step(np.where(np.arange(13) % 2, ACTION_LIMIT, -ACTION_LIMIT))[1]
+    assert math.isfinite(reward) and reward < -1e150
+    for bad, words in ((1e7, "at most WEIGHT_LIMIT = 1e\\+06 \\(got 10000000.0\\)"), (10**400, "at most WEIGHT_LIMIT"),
+                       ("1.0", "a real number \\(got '1.0'\\)"), (True, "a real number \\(got True\\)")):
+        with pytest.raises(ValueError, match=rf"^reward weight 'omega' must be (a finite number >= 0 and )?{words}"):
+            AstrobeeTumbleEnv(n_steps=20, reward_weights={"omega": bad})

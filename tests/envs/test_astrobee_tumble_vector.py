@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -204,3 +206,33 @@ def test_usage_errors() -> None:
             AstrobeeTumbleVectorEnv(num_envs=bad)
     with pytest.raises(ValueError, match="'dropout'"):
         gym.make_vec(ENV_ID, num_envs=2, dropout=-0.5)
+
+
+def test_seeds_follow_the_single_environments_rule() -> None:
+    """Issue 34, finding 7: ``reset(seed=2**70)`` was a raw OverflowError here while the single
+    environment accepted it; both now refuse seeds of 2**63 or more (stored as int64) with the
+    same message, and take numpy integers alike."""
+    vector = AstrobeeTumbleVectorEnv(num_envs=2, n_steps=20)
+    single = gym.make(ENV_ID, n_steps=20)
+    for seed in (2**70, 2**63):
+        with pytest.raises(ValueError, match=r"^seed must be below 2\*\*63, seeds are stored as int64") as caught:
+            vector.reset(seed=seed)
+        with pytest.raises(ValueError, match=re.escape(str(caught.value))):
+            single.reset(seed=seed)
+    with pytest.raises(ValueError, match=r"^seed \+ 1 \(the seed of sub-environment 1\) must be below 2\*\*63"):
+        vector.reset(seed=2**63 - 1)
+    with pytest.raises(ValueError, match=r"^seed\[1\] must be a non-negative integer \(got 1.0\)"):
+        vector.reset(seed=[0, 1.0])
+    _, info = vector.reset(seed=np.array([2**63 - 1, 5], dtype=np.uint64))
+    np.testing.assert_array_equal(info["episode_seed"], [2**63 - 1, 5])
+    assert single.reset(seed=np.int64(5))[1]["episode_seed"] == 5
+
+
+def test_actions_beyond_action_limit_are_refused() -> None:
+    """1e308 gave the reward -inf (issue 34, finding 7), as in the single environment."""
+    vector = AstrobeeTumbleVectorEnv(num_envs=2, n_steps=20)
+    vector.reset(seed=0)
+    actions = np.tile(np.eye(1, 13)[0], (2, 1))
+    actions[1, 5] = -1e308
+    with pytest.raises(ValueError, match=r"^action must be within \+-ACTION_LIMIT = 1e\+150: action\[1, 5\] \(ry\) is -1e\+308"):
+        vector.step(actions)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -266,6 +267,28 @@ def test_parse_observation_refuses_a_bad_field_by_name(field: str, value: Any, m
     observation = {"pose": np.array([1.0, 0, 0, 0, 0, 0, 0]), "valid": 1, "time": 0.5, field: value}
     with pytest.raises(ValueError, match=message):
         parse_observation(observation)
+
+
+@pytest.mark.parametrize("dtype", [str, bool, complex])
+def test_poses_of_string_bool_or_complex_dtype_are_refused(dtype: type) -> None:
+    """Issue 34, finding 7: they were accepted (complex lost its imaginary part with a warning),
+    and the online step used them; the rule is the environments' action rule."""
+    pose = np.array([1.0, 0, 0, 0, 0.5, 0, 0]).astype(dtype)
+    dtype_name = r"<U\d+" if dtype is str else pose.dtype  # (a list of strings: <U3)
+    pattern = rf"^observation 'pose' must be a float array of shape \(7,\) \(a real integer or floating dtype; got dtype {dtype_name}\)$"
+    for observation in (pose, {"pose": pose, "valid": 1}, pose.tolist()):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            with pytest.raises(ValueError, match=pattern):
+                parse_observation(observation)
+
+
+def test_a_pose_beyond_float64_is_a_value_error() -> None:
+    """Issue 34, finding 7: ``10**400`` was an OverflowError, not the documented ValueError."""
+    with pytest.raises(ValueError, match=r"^pose\[4\] is an integer of 401 digits, beyond float64's range"):
+        parse_observation({"pose": [1, 0, 0, 0, 10**400, 0, 0], "valid": 1})
+    got, _ = parse_observation({"pose": [1, 0, 0, 0, 10**300, 0, 0.5]})  # a large, representable integer
+    assert got is not None and got.dtype == np.float64 and got[4] == 1e300
 
 
 def test_parse_observation_accepts_the_numeric_forms_of_time_and_valid() -> None:
