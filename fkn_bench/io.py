@@ -94,8 +94,8 @@ class LockedError(OSError):
 
 
 def _is_disk_full(exc: BaseException, directory: Path) -> bool:
-    if isinstance(exc, OSError) and exc.errno in _DISK_FULL:
-        return True
+    if isinstance(exc, OSError) and exc.errno is not None:  # the system said why (/proc: ENOENT, 0 B "free")
+        return exc.errno in _DISK_FULL
     # torch and h5py turn ENOSPC into their own errors ("unexpected pos ...", "file write failed"):
     # a failure while the file system has (almost) nothing left is a full disk
     free = _free_bytes(directory)
