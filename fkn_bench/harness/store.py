@@ -5,11 +5,11 @@ Layout under the store's root::
     cells/<estimator>/<scenario>/<variant>/seeds-<first>-<last>.csv    tidy rows (exact float repr)
     cells/<estimator>/<scenario>/<variant>/seeds-<first>-<last>.npz    per-step NEES/NIS sums
     cells/<estimator>/<scenario>/<variant>/seeds-<first>-<last>.json   key, status, error, provenance
-    results.csv                                              rows of the last grid run, sorted
-    results.json                                             provenance of the last grid run
+    results.csv                                                        rows of the last grid run, sorted
+    results.json                                                       provenance of the last grid run
 
-    .fkn-bench-results                                       marker: fkn-bench writes here
-    .fkn-bench.lock                                          held while a run writes here
+    .fkn-bench-results                                                 marker: fkn-bench writes here
+    .fkn-bench.lock                                                    held while a run writes here
 
 ``<estimator>`` and ``<scenario>`` are the names encoded by
 :func:`~fkn_bench.harness.grid.path_name` (one component each, distinct names never share one,
