@@ -9,7 +9,10 @@ after every epoch and are pruned by the space's pruner (median by default). The 
 journal file (``--storage``, default ``OUT/study.journal``) or any RDB URL
 (``sqlite:///sweep.db``, ``postgresql://...``), so that several processes or machines share it:
 ``--workers N`` runs N processes here; run the same command elsewhere with the same
-``--storage`` and ``--study-name`` to add machines.
+``--storage`` and ``--study-name`` to add machines. A sweep killed or interrupted goes on where it
+stopped when the same command runs again, to the trials an uninterrupted sweep gives (its
+interrupted trials are retried, not counted against ``--trials``); two sweeps into one ``--out``
+at once are refused.
 
 Outputs in ``--out`` (default ``runs/sweep-<study name>``): ``best.toml`` (for ``fkn-bench train
 --config`` and ``fkn-bench reproduce --config``), ``trials.csv``, ``parallel_coordinates.png``
@@ -29,7 +32,7 @@ import typing
 from pathlib import Path
 from typing import Any
 
-from fkn_bench.cli import UsageError, usage_errors
+from fkn_bench.cli import Interrupted, UsageError, usage_errors
 from fkn_bench.cli.options import add_command, add_scenario_file_option, check_minimum, load_scenario_files, output_directory
 
 __all__ = ["add_parser", "run"]
@@ -73,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.sweep import trial_config
     from fkn_bench.runtime import resolve_device
     from fkn_bench.sweep.objective import is_trainable
+    from fkn_bench.sweep.study import storage_label
     from fkn_bench.training import trainable
 
     check_minimum(args, trials=1, grid_trials=1, top_k=1, workers=1, seed=0)
@@ -136,6 +140,9 @@ def run(args: argparse.Namespace) -> int:
     except SweepError as exc:
         print(f"fkn-bench sweep: error: {exc}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt:
+        raise Interrupted(f"the study in {storage_label(settings.storage_spec)} keeps every finished trial: run the same "
+                          "command again to go on (the interrupted trials are retried, not counted)") from None
     print(f"best validation RMSE {result.best_value:.6g} ({result.best_stage} trial {result.best_number}): "
           + ", ".join(f"{k}={v}" for k, v in result.best_params.items()))
     for stage, counts in result.counts.items():

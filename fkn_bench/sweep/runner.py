@@ -7,6 +7,15 @@ through the storage only: more processes (or machines, with an RDB URL) can join
 with the same command. ``trials`` is the number of trials a stage aims for, counting the trials
 already in the study, so rerunning a finished sweep only rewrites the outputs.
 
+Interrupted sweeps: ``out`` is locked while a sweep runs (:func:`fkn_bench.io.directory_lock`; a
+second sweep into it is refused). A trial whose sweep was killed (optuna leaves it RUNNING) or
+stopped by Ctrl-C is failed, not counted against ``trials`` and retried first with its parameters
+(:func:`~fkn_bench.sweep.study.retry_interrupted`), and the samplers draw by trial index
+(:class:`~fkn_bench.sweep.study.SweepSampler`): run again with the same command, a killed sweep
+gives the trials, values and best configuration of the uninterrupted one (with one worker; with
+more, which worker takes which trial is the scheduler's in any run). ``trials.csv`` lists an
+interrupted trial as failed (``error`` "interrupted ..."), ``sweep.json`` counts it apart.
+
 Outputs in ``out``:
 
 * ``best.toml``: the best trial's full training configuration (``[<estimator>]`` table), for
@@ -23,6 +32,7 @@ Outputs in ``out``:
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import multiprocessing
@@ -39,12 +49,13 @@ from typing import Any
 import optuna
 from optuna.trial import FrozenTrial, TrialState
 
-from fkn_bench.io import atomic_path, write_json_atomic, write_text_atomic
+from fkn_bench.io import DiskFullError, atomic_path, directory_lock, remove_temporaries, write_json_atomic, write_text_atomic
 from fkn_bench.scenarios import Scenario
 from fkn_bench.sweep.objective import CATCH, SweepTask, is_trainable, make_objective, trial_config
 from fkn_bench.wording import worker_initializer
 from fkn_bench.sweep.space import SearchSpace, check_sweep_options
-from fkn_bench.sweep.study import completed, make_sampler, open_storage, reduced_grid, stage_names, storage_label
+from fkn_bench.sweep.study import (INTERRUPTED, completed, make_sampler, open_storage, reduced_grid, retry_interrupted,
+                                   stage_names, storage_label, sweep_owner)
 
 __all__ = ["SweepError", "SweepSettings", "SweepResult", "run_sweep", "write_toml", "shares"]
 
@@ -125,7 +136,8 @@ def _worker_main(job: _WorkerJob) -> None:
     study = optuna.load_study(
         study_name=job.study_name,
         storage=open_storage(job.settings.storage_spec),
-        sampler=make_sampler(job.stage, seed=job.settings.seed, worker=job.worker, grid=job.grid),
+        sampler=make_sampler(job.stage, seed=job.settings.seed, worker=job.worker, grid=job.grid,
+                             order=job.settings.space.names, owner=sweep_owner(job.settings.out)),
         pruner=job.settings.space.pruner.make(),
     )
 
@@ -140,8 +152,16 @@ def _worker_main(job: _WorkerJob) -> None:
         print(f"[sweep] {job.stage} trial {trial.number} (worker {job.worker}): {outcome}; {params}",
               file=sys.stderr, flush=True)
 
-    task = SweepTask(job.settings.estimator, job.settings.scenario, job.settings.space)
-    study.optimize(make_objective(task), n_trials=job.n_trials, catch=CATCH,
+    objective = make_objective(SweepTask(job.settings.estimator, job.settings.scenario, job.settings.space))
+
+    def interruptible(trial: optuna.Trial) -> float:
+        try:
+            return objective(trial)
+        except KeyboardInterrupt:  # (Ctrl-C, SIGTERM) optuna fails the trial; it is retried on resume
+            trial.study._storage.set_trial_system_attr(trial._trial_id, INTERRUPTED, True)
+            raise
+
+    study.optimize(interruptible, n_trials=job.n_trials, catch=CATCH,
                    callbacks=[report] if job.verbose else [], gc_after_trial=False, show_progress_bar=False)
 
 
@@ -210,7 +230,12 @@ def _stage(settings: SweepSettings, stage: str, name: str, first: str, verbose: 
             study.set_user_attr("fkn_bench_grid", grid)
         elif stored != grid:
             raise SweepError(f"study {name!r} already runs another grid ({stored}); choose another --study-name")
-    remaining = target - sum(1 for t in study.get_trials(deepcopy=False) if t.state != TrialState.WAITING)
+    interrupted = retry_interrupted(study, settings.out, own_storage=settings.storage is None)
+    if interrupted:
+        log(f"[sweep] stage {stage}: trial(s) {', '.join(map(str, interrupted))} interrupted (the sweep running them "
+            "was killed or stopped): retried, not counted")
+    remaining = target - sum(1 for t in study.get_trials(deepcopy=False)
+                             if t.state != TrialState.WAITING and not t.system_attrs.get(INTERRUPTED))
     split = shares(remaining, settings.workers)
     log(f"[sweep] stage {stage} ({name}): {target} trials, {max(remaining, 0)} to run on {len(split)} worker(s)")
     _run_jobs([_WorkerJob(settings, name, stage, i, n, grid, verbose) for i, n in enumerate(split)], workers)
@@ -218,11 +243,23 @@ def _stage(settings: SweepSettings, stage: str, name: str, first: str, verbose: 
 
 
 def run_sweep(settings: SweepSettings, *, progress: bool = True, log: Log | None = None) -> SweepResult:
-    """Run (or resume) the sweep and write its outputs (module docstring)."""
+    """Run (or resume) the sweep and write its outputs (module docstring), holding the lock of
+    ``settings.out`` (:func:`fkn_bench.io.directory_lock`: a second sweep into it raises
+    :class:`~fkn_bench.io.LockedError`)."""
+    with directory_lock(settings.out, "a sweep"):
+        remove_temporaries(settings.out, recursive=False)
+        try:
+            return _run_sweep(settings, progress, log)
+        except OSError as exc:  # the journal (an append-only log, not an atomic file) on a full disk
+            if exc.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC)) and "://" not in settings.storage_spec:
+                raise DiskFullError(settings.storage_spec) from None
+            raise
+
+
+def _run_sweep(settings: SweepSettings, progress: bool, log: Log | None) -> SweepResult:
     say = log or (lambda message: None)
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     out = Path(settings.out)
-    out.mkdir(parents=True, exist_ok=True)
     stages = stage_names(settings.name, settings.sampler)
     spawn = multiprocessing.get_context("spawn")
     initializer, initargs = worker_initializer()  # the command line's one-line warnings, in workers too
@@ -283,8 +320,9 @@ def write_outputs(settings: SweepSettings, stages: list[tuple[str, str]], grid: 
         study = optuna.load_study(study_name=name, storage=storage)
         trials = study.get_trials(deepcopy=False)
         everything += trials
-        counts[stage] = {state.name.lower(): sum(1 for t in trials if t.state == state)
+        counts[stage] = {state.name.lower(): sum(1 for t in trials if t.state == state and not t.system_attrs.get(INTERRUPTED))
                          for state in (TrialState.COMPLETE, TrialState.PRUNED, TrialState.FAIL, TrialState.RUNNING)}
+        counts[stage]["interrupted"] = sum(1 for t in trials if t.system_attrs.get(INTERRUPTED))
         if trials:
             frame = study.trials_dataframe(attrs=("number", "value", "state", "params", "user_attrs", "duration"))
             frame.insert(0, "stage", stage)

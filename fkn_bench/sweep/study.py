@@ -26,11 +26,14 @@ machine sharing the storage) runs the same grid rather than deriving a new one.
 
 from __future__ import annotations
 
+import copy
 import math
+import socket
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import optuna
 from optuna.storages import BaseStorage, JournalStorage, RDBStorage
 from optuna.storages.journal import JournalFileBackend
@@ -39,6 +42,10 @@ from optuna.trial import FrozenTrial, TrialState
 from fkn_bench.sweep.space import SearchSpace
 
 __all__ = [
+    "INTERRUPTED",
+    "SweepSampler",
+    "retry_interrupted",
+    "sweep_owner",
     "open_storage",
     "storage_label",
     "make_sampler",
@@ -73,20 +80,157 @@ def stage_names(study_name: str, sampler: str) -> list[tuple[str, str]]:
     return [(sampler, study_name)]
 
 
-def make_sampler(
-    kind: str, *, seed: int, worker: int = 0, grid: dict[str, list[Any]] | None = None
-) -> optuna.samplers.BaseSampler:
-    """The sampler of a stage for worker ``worker`` (random and TPE samplers get ``seed + worker``
-    so that parallel workers draw different points; the grid sampler gets the same seed in every
-    worker, as optuna recommends, and picks grid points by trial number)."""
-    if kind in ("random", "tpe"):
-        sampler = optuna.samplers.RandomSampler if kind == "random" else optuna.samplers.TPESampler
-        return sampler(seed=seed + worker)
-    if kind == "grid":
-        if grid is None:
+INTERRUPTED = "fkn_bench_interrupted"
+"""System attribute of a trial whose sweep was killed or interrupted while it ran (it is failed,
+not counted, and retried: :func:`retry_interrupted`)."""
+RETRY_OF = "fkn_bench_retry_of"
+"""System attribute of the retry of an interrupted trial: the interrupted trial's number."""
+PRESET = "fkn_bench_preset"
+"""System attribute of a retry: the parameters it took from the interrupted trial (not drawn)."""
+WORKER = "fkn_bench_worker"
+"""System attribute: the worker (``0 .. workers - 1``) whose sampler drew the trial."""
+OWNER = "fkn_bench_owner"
+"""System attribute: ``{"host", "directory"}`` of the sweep that ran the trial (its locked output
+directory: :func:`sweep_owner`)."""
+
+
+def sweep_owner(out: str | Path) -> dict[str, str]:
+    """What a trial records of the sweep that runs it: this machine and the sweep's output
+    directory, which that sweep holds locked (:func:`fkn_bench.io.directory_lock`) while it runs."""
+    return {"host": socket.gethostname(), "directory": str(Path(out).resolve())}
+
+
+def _interrupted_before(trials: Sequence[FrozenTrial], number: int) -> int:
+    return sum(1 for t in trials if t.number < number and t.system_attrs.get(INTERRUPTED))
+
+
+class SweepSampler(optuna.samplers.BaseSampler):
+    """A stage's sampler whose draws do not depend on the process that makes them, so that a sweep
+    killed and run again gives the trials an uninterrupted sweep gives.
+
+    A trial's *draw index* is its number less the interrupted trials before it (their retries take
+    their place). ``random`` (one ``RandomSampler(seed + worker)`` per worker, optuna's own) replays
+    the draws of the worker's earlier trials before drawing, so its sequence continues across
+    invocations (a second invocation no longer repeats the first one's points); ``tpe`` seeds a
+    fresh ``TPESampler`` with ``(seed, draw index)`` for every trial; ``grid`` (optuna's
+    ``GridSampler``, the same seed in every worker) assigns grid point ``draw index`` while any is
+    left. Every trial records its worker and :func:`sweep_owner` (``owner``)."""
+
+    def __init__(self, kind: str, *, seed: int, worker: int = 0, grid: dict[str, list[Any]] | None = None,
+                 order: Sequence[str] = (), owner: dict[str, str] | None = None) -> None:
+        if kind not in ("random", "tpe", "grid"):
+            raise ValueError(f"unknown sampler {kind!r}")
+        if kind == "grid" and grid is None:
             raise ValueError("the grid sampler needs a grid")
-        return optuna.samplers.GridSampler(grid, seed=seed)
-    raise ValueError(f"unknown sampler {kind!r}")
+        self.kind, self.seed, self.worker, self.order, self.owner = kind, seed, worker, tuple(order), owner
+        self._grid = optuna.samplers.GridSampler(grid, seed=seed) if kind == "grid" else None  # type: ignore[arg-type]
+        self._inner: optuna.samplers.BaseSampler = self._grid or optuna.samplers.RandomSampler(seed=seed + worker)
+
+    def _replayed(self, trials: Sequence[FrozenTrial], number: int) -> optuna.samplers.RandomSampler:
+        """``RandomSampler(seed + worker)`` after the draws of this worker's trials before ``number``
+        (each parameter it drew, in the space's order: not those fixed by ``enqueue_trial`` or
+        taken by a retry)."""
+        sampler = optuna.samplers.RandomSampler(seed=self.seed + self.worker)
+        for t in sorted(trials, key=lambda t: t.number):
+            if t.number >= number or t.system_attrs.get(WORKER, 0) != self.worker:
+                continue
+            given = set(t.system_attrs.get("fixed_params", {})) | set(t.system_attrs.get(PRESET, ()))
+            for name in (*self.order, *sorted(set(t.distributions) - set(self.order))):
+                if name in t.distributions and name not in given and not t.distributions[name].single():
+                    sampler.sample_independent(None, t, name, t.distributions[name])  # type: ignore[arg-type]
+        return sampler
+
+    def before_trial(self, study: optuna.Study, trial: FrozenTrial) -> None:
+        storage = study._storage
+        storage.set_trial_system_attr(trial._trial_id, WORKER, self.worker)
+        if self.owner is not None:
+            storage.set_trial_system_attr(trial._trial_id, OWNER, self.owner)
+        trials = storage.get_all_trials(study._study_id, deepcopy=False)
+        index = trial.number - _interrupted_before(trials, trial.number)
+        if self.kind == "random":
+            self._inner = self._replayed(trials, trial.number)
+        elif self.kind == "tpe":
+            self._inner = optuna.samplers.TPESampler(seed=int(np.random.SeedSequence([self.seed, index]).generate_state(1)[0]))
+        else:  # optuna's GridSampler assigns grid point `number` while there is one: give it the index
+            trial = copy.copy(trial)
+            trial.number = index
+        self._inner.before_trial(study, trial)
+
+    def infer_relative_search_space(self, study: optuna.Study, trial: FrozenTrial) -> dict[str, Any]:
+        return self._inner.infer_relative_search_space(study, trial)
+
+    def sample_relative(self, study: optuna.Study, trial: FrozenTrial, search_space: dict[str, Any]) -> dict[str, Any]:
+        return self._inner.sample_relative(study, trial, search_space)
+
+    def sample_independent(self, study: optuna.Study, trial: FrozenTrial, param_name: str, param_distribution: Any) -> Any:
+        return self._inner.sample_independent(study, trial, param_name, param_distribution)
+
+    def after_trial(self, study: optuna.Study, trial: FrozenTrial, state: TrialState, values: Sequence[float] | None) -> None:
+        self._inner.after_trial(study, trial, state, values)
+
+
+def make_sampler(
+    kind: str, *, seed: int, worker: int = 0, grid: dict[str, list[Any]] | None = None, order: Sequence[str] = (),
+    owner: dict[str, str] | None = None,
+) -> optuna.samplers.BaseSampler:
+    """The sampler of a stage for worker ``worker``: a :class:`SweepSampler` (random and TPE draws
+    differ between parallel workers; the grid sampler gets the same seed in every worker, as optuna
+    recommends). ``order``: the space's knob names, in the order a trial suggests them."""
+    return SweepSampler(kind, seed=seed, worker=worker, grid=grid, order=order, owner=owner)
+
+
+def retry_interrupted(study: optuna.Study, out: str | Path, *, own_storage: bool) -> list[int]:
+    """Fail the trials of ``study`` whose sweep is gone while they ran, and enqueue a retry of
+    every interrupted trial without one; returns the interrupted trials' numbers.
+
+    A trial left RUNNING is the sweep's that ran it (:data:`OWNER`); that sweep is gone when its
+    output directory is ``out`` (whose lock the caller holds), lies on this machine and can be
+    locked or no longer exists. A trial of another machine's live sweep is left alone. One without
+    an owner (recorded by an earlier fkn-bench) counts as gone when the storage is this sweep's own
+    (``own_storage``: the journal in ``out``). A trial interrupted by Ctrl-C or SIGTERM was failed
+    by optuna and marked :data:`INTERRUPTED` by the objective. The retry is a waiting trial with the
+    interrupted one's parameters and grid point (:data:`RETRY_OF`, :data:`PRESET`): it runs next, so
+    the sweep's trials, values and best configuration are the uninterrupted sweep's (only
+    ``trials.csv`` also lists the interrupted trial, failed, with ``error`` "interrupted ...")."""
+    storage = study._storage
+    trials = study.get_trials(deepcopy=False)
+    retried = {t.system_attrs.get(RETRY_OF) for t in trials}
+    found = []
+    for t in trials:
+        stale = t.state == TrialState.RUNNING and _owner_is_gone(t.system_attrs.get(OWNER), out, own_storage)
+        if not (stale or (t.system_attrs.get(INTERRUPTED) and t.state.is_finished())):
+            continue
+        found.append(t.number)
+        if t.number not in retried:
+            inherited = {k: t.system_attrs[k] for k in ("fixed_params", "grid_id", "search_space") if k in t.system_attrs}
+            study.add_trial(optuna.trial.create_trial(
+                state=TrialState.WAITING, params=t.params, distributions=t.distributions,
+                system_attrs={**inherited, RETRY_OF: t.number, PRESET: sorted(t.params)},
+            ))
+        if stale:
+            storage.set_trial_user_attr(t._trial_id, "error", "interrupted: the sweep running it was killed; retried")
+            storage.set_trial_system_attr(t._trial_id, INTERRUPTED, True)
+            storage.set_trial_state_values(t._trial_id, TrialState.FAIL)
+    return found
+
+
+def _owner_is_gone(owner: Any, out: str | Path, own_storage: bool) -> bool:
+    """Whether the sweep ``owner`` (:func:`sweep_owner`) of a RUNNING trial no longer runs (see
+    :func:`retry_interrupted`)."""
+    from fkn_bench.io import LockedError, directory_lock
+
+    if not isinstance(owner, dict):
+        return own_storage
+    if owner.get("host") != socket.gethostname():
+        return False
+    directory = Path(str(owner.get("directory")))
+    if directory == Path(out).resolve() or not directory.is_dir():
+        return True
+    try:
+        with directory_lock(directory):
+            return True
+    except LockedError:
+        return False
 
 
 def completed(trials: Sequence[FrozenTrial]) -> list[FrozenTrial]:

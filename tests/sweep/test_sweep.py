@@ -212,3 +212,85 @@ def test_cli_usage_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str]) ->
     space.write_text("[fixed]\nepochs = 0\n[params.lr]\nvalues = [0.01]\n")
     assert main(["sweep", "--space", str(space), "--out", str(tmp_path / "o")]) == 2
     assert "epochs" in capsys.readouterr().err
+
+
+KILL_SCENARIO = '[scenario.sweep-kill]\nbase = "ds1"\nn_steps = 1500\n'  # (1200 train samples, 150 val)
+KILL_SPACE = """
+[sweep]
+estimator = "sage-husa-default"   # not trained: a trial is one filter run over the val split
+scenario = "sweep-kill"
+sampler = "random-grid"
+trials = 2
+grid_trials = 2
+top_k = 2
+
+[params.forgetting]
+low = 0.9
+high = 0.999
+grid_points = 2
+
+[params.warmup]
+values = [0, 20]
+"""
+
+
+def _finished(out: Path) -> list[tuple[str, str, str, str]]:
+    """(stage, forgetting, warmup, value) of the trials of a sweep that ran, in order."""
+    return [(r["stage"], r["params_forgetting"], r["params_warmup"], r["value"]) for r in _rows(out / "trials.csv")
+            if r["state"] == "COMPLETE"]
+
+
+def test_a_killed_sweep_retries_its_interrupted_trials_to_the_uninterrupted_result(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 34, finding 6: a killed sweep left its trial RUNNING, counted against --trials, and a
+    new invocation drew the first invocation's points again. Killed in the random stage, stopped by
+    Ctrl-C in the grid stage, and run again each time, the sweep gives the uninterrupted one's
+    trials and values; a second sweep into the same directory is refused while one runs."""
+    from fkn_bench.io import directory_lock
+    from fkn_bench.sweep import runner
+    from tests.conftest import SimulatedKill
+
+    (tmp_path / "scenarios.toml").write_text(KILL_SCENARIO)
+    (tmp_path / "space.toml").write_text(KILL_SPACE)
+    monkeypatch.setattr(runner, "parallel_coordinates", lambda *args: None)  # (the figure: a second per sweep)
+
+    def sweep(out: str) -> int:
+        return main(["sweep", "--space", str(tmp_path / "space.toml"), "--scenario-file", str(tmp_path / "scenarios.toml"),
+                     "--out", str(tmp_path / out), "--no-progress"])
+
+    assert sweep("straight") == 0
+    real, kills = runner.make_objective, {("random", 1), ("grid", 1)}
+
+    def dying(task: SweepTask):  # noqa: ANN202 - SIGKILL while the trial runs: optuna leaves it RUNNING
+        objective = real(task)
+
+        def run(trial: optuna.Trial) -> float:
+            point = (trial.study.study_name.rpartition(".")[2], trial.number)
+            if point in kills:
+                kills.discard(point)
+                task.space.suggest(trial)
+                raise SimulatedKill(f"killed in {point}") if point[0] == "random" else KeyboardInterrupt
+            return objective(trial)
+
+        return run
+
+    monkeypatch.setattr(runner, "make_objective", dying)
+    with pytest.raises(SimulatedKill):  # SIGKILL in the random stage: optuna leaves the trial RUNNING
+        sweep("killed")
+    storage = JournalStorage(JournalFileBackend(str(tmp_path / "killed" / "study.journal")))
+    study = optuna.load_study(study_name="sage-husa-default-sweep-kill.random", storage=storage)
+    assert [t.number for t in study.trials if t.state == TrialState.RUNNING] == [1]
+    assert sweep("killed") == 130  # Ctrl-C in the grid stage: optuna fails the trial
+    assert "run the same command again to go on" in capsys.readouterr().err
+    with directory_lock(tmp_path / "killed"):
+        assert sweep("killed") == 2
+    assert "in use by another fkn-bench process" in capsys.readouterr().err
+    assert sweep("killed") == 0
+    assert _finished(tmp_path / "killed") == _finished(tmp_path / "straight")
+    counts = json.loads((tmp_path / "killed" / "sweep.json").read_text())["counts"]
+    assert counts == {stage: {"complete": n, "pruned": 0, "fail": 0, "running": 0, "interrupted": 1}
+                      for stage, n in (("random", 2), ("grid", 2))}
+    settings = [[line for line in (tmp_path / out / "best.toml").read_text().splitlines() if not line.startswith("#")]
+                for out in ("killed", "straight")]  # (the header names the best trial's number: the retry's)
+    assert settings[0] == settings[1]
