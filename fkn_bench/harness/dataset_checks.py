@@ -36,20 +36,18 @@ from typing import Any
 
 import numpy as np
 
+from fkn_bench.inputs import check_seed
 from fkn_bench.recordings.plausibility import first_implausible
 from fkn_bench.scenarios import SPLITS, Scenario
 
 __all__ = [
-    "DatasetError", "DatasetWarning", "DATASET_ID_PATTERN", "SEED_LIMIT", "check_dataset_id", "checked_metadata",
+    "DatasetError", "DatasetWarning", "DATASET_ID_PATTERN", "check_dataset_id", "checked_metadata",
     "check_episodes", "file_sha256", "is_seed", "record_checksums", "verify_checksums",
 ]
 
 DATASET_ID_PATTERN = re.compile(r"(?:(?P<namespace>[-\w]+(?:/[-\w]+)*)/)?(?P<name>[-\w]+?)-v(?P<version>\d+)")
 """Dataset ids fkn-bench writes: Minari's ``(namespace/)name-vN`` with a version and no empty,
 ``.`` or ``..`` component (Minari also wants a namespace of two characters or more)."""
-
-SEED_LIMIT = 2**63
-"""Seeds are stored as int64 (``infos["episode_seed"]``): they lie in ``[0, 2**63)``."""
 
 METADATA_KEY = "fkn_bench"
 CHECKSUM_KEY = "sha256"
@@ -118,7 +116,7 @@ def verify_checksums(path: Path, data: Path, ours: Mapping[str, Any]) -> bool:
     recorded = ours.get(CHECKSUM_KEY)
     if recorded is None:
         return False
-    if not isinstance(recorded, dict) or not all(isinstance(v, str) for v in recorded.values()) or METADATA_KEY not in recorded:
+    if not (isinstance(recorded, dict) and METADATA_KEY in recorded and all(isinstance(v, str) for v in recorded.values())):
         raise DatasetError(f"{path}: the recorded checksums (metadata 'fkn_bench' 'sha256') are damaged")
     if recorded[METADATA_KEY] != _metadata_digest(ours):
         raise DatasetError(f"{path}: checksum mismatch: the 'fkn_bench' metadata in {data / 'metadata.json'} were changed "
@@ -137,15 +135,22 @@ def verify_checksums(path: Path, data: Path, ours: Mapping[str, Any]) -> bool:
 
 # ---------------------------------------------------------------------------- metadata
 def _integer(value: Any) -> bool:
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def is_seed(value: Any) -> bool:
-    """Whether ``value`` is an episode seed: an integer (not a bool) in ``[0, SEED_LIMIT)``."""
-    return _integer(value) and 0 <= int(value) < SEED_LIMIT
+    """Whether ``value`` is an episode seed (:func:`fkn_bench.inputs.check_seed`: an integer, not
+    a bool, in ``[0, 2**63)``: seeds are stored as int64)."""
+    try:
+        check_seed(value)
+    except ValueError:
+        return False
+    return True
 
 
-def checked_metadata(path: Path, metadata: Any, format_version: int) -> tuple[dict[str, Any], Scenario, str, int, tuple[int, ...]]:
+def checked_metadata(
+    path: Path, metadata: Any, format_version: int
+) -> tuple[dict[str, Any], Scenario, str, int, tuple[int, ...]]:
     """The ``"fkn_bench"`` metadata of the dataset at ``path`` (from ``metadata.json``) checked
     (module docstring): ``(metadata, scenario, split, start, seeds)``."""
     if not isinstance(metadata, dict):

@@ -66,17 +66,16 @@ import numpy as np
 
 from fkn_bench.envs import Episodes, generate_episodes
 from fkn_bench.harness.dataset_checks import (
-    SEED_LIMIT,
     DatasetError,
     DatasetWarning,
     check_dataset_id,
     check_episodes,
     checked_metadata,
     file_sha256,
-    is_seed,
     record_checksums,
     verify_checksums,
 )
+from fkn_bench.inputs import SEED_LIMIT, check_seed
 from fkn_bench.io import (
     DiskFullError,
     WriteError,
@@ -171,13 +170,14 @@ def estimated_bytes(batch: int, n_steps: int) -> int:
 
 
 def _checked_seeds(seeds: Sequence[int]) -> Sequence[int]:
+    """``seeds``, each checked by :func:`fkn_bench.inputs.check_seed`, distinct and at least one."""
     if isinstance(seeds, range) and seeds.step > 0 and 0 <= seeds.start and len(seeds) and seeds[-1] < SEED_LIMIT:
         return seeds  # (--seeds N: checked without listing N seeds)
-    seeds = list(seeds)
-    if not seeds or not all(map(is_seed, seeds)) or len(set(map(int, seeds))) != len(seeds):
-        shown = repr(seeds) if len(repr(seeds)) <= 60 else repr(seeds)[:57] + "..."
-        raise ValueError(f"seeds must be distinct integers in [0, 2**63) (got {shown})")
-    return [int(s) for s in seeds]
+    checked = [check_seed(seed, "seeds") for seed in seeds]
+    if not checked or len(set(checked)) != len(checked):
+        shown = repr(checked) if len(repr(checked)) <= 60 else repr(checked)[:57] + "..."
+        raise ValueError(f"seeds must be distinct, at least one (got {shown})")
+    return checked
 
 
 def _exists(target: Path) -> FileExistsError:
@@ -303,7 +303,7 @@ def _create(scratch: Path, dataset_id: str, buffers: list[Any], scenario: Scenar
     import gymnasium as gym
     import minari
 
-    os.environ["MINARI_DATASETS_PATH"] = str(scratch.resolve())  # (the child's own environment; Minari needs it absolute)
+    os.environ["MINARI_DATASETS_PATH"] = str(scratch.resolve())  # the child's own environment; Minari wants it absolute
     env_spec = dataclasses.replace(gym.spec("AstrobeeTumble-v0"), kwargs=_environment_kwargs(scenario))
     with warnings.catch_warnings():  # Minari's advice on optional fields (author e-mail, ...)
         warnings.simplefilter("ignore", UserWarning)
@@ -319,7 +319,7 @@ def _in_child(work: Callable[[], None]) -> str | None:
     went wrong (its exception, or its death: h5py crashes its process when the disk fills while it
     writes). The child's output is discarded; its error comes back through a pipe."""
     read_end, write_end = os.pipe()
-    with warnings.catch_warnings():  # Python >= 3.12 warns about fork() beside other threads: the child only writes files
+    with warnings.catch_warnings():  # Python >= 3.12 warns of fork() beside threads: the child only writes files
         warnings.simplefilter("ignore", DeprecationWarning)
         pid = os.fork()
     if pid == 0:  # pragma: no cover - the child (coverage does not follow os.fork)
@@ -359,7 +359,8 @@ def _in_child(work: Callable[[], None]) -> str | None:
 
 def _describe(exc: BaseException) -> str:
     """One line: the exception's type, errno and message (at most 500 characters)."""
-    errno_text = f"[Errno {exc.errno}] " if isinstance(exc, OSError) and exc.errno and f"[Errno {exc.errno}]" not in str(exc) else ""
+    code = exc.errno if isinstance(exc, OSError) else None
+    errno_text = f"[Errno {code}] " if code and f"[Errno {code}]" not in str(exc) else ""
     return f"{type(exc).__name__}: {errno_text}{' '.join(str(exc).split())}"[:500]
 
 

@@ -256,8 +256,10 @@ def test_a_killed_write_leaves_nothing_trusted_and_the_rerun_gives_the_same_data
     real_rmtree = datasets.shutil.rmtree
     monkeypatch.setattr(datasets.shutil, "rmtree", lambda *_, **__: None)  # a killed process cleans nothing up
     if kill == "namespace":
-        with kill_at_write(1):  # the first atomic write: Minari's namespace file in the datasets directory
+        with kill_at_write(2) as replaced:  # after the metadata with checksums, at Minari's namespace file
             write_dataset(SHORT, [0, 2], root)
+        assert [Path(p).name for p in replaced] == ["metadata.json"]
+        assert list((root / "fkn-bench").glob(".namespace_metadata.json.*.killed.tmp"))
     else:
         with pytest.raises(SimulatedKill):
             write_dataset(SHORT, [0, 2], root, force=force)
