@@ -15,7 +15,7 @@ from fkn_bench.envs.episodes import EpisodeStream
 from fkn_bench.envs.rendering import HISTORY_STEPS
 from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, WEIGHT_LIMIT, attitude_error_angle, estimate_cost_scalar
 from fkn_bench.envs.spaces import MeasuredPose, action_space, action_values, observation_space
-from fkn_bench.inputs import check_seed, describe
+from fkn_bench.inputs import check_count, check_seed, describe
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.types import ArrayF
 
@@ -56,14 +56,13 @@ class _EpisodeWalk:
     ) -> None:
         self.scenario: Scenario = get_scenario(scenario, **overrides)
         self._check_render_mode(render_mode)
-        if int(chunk_size) < 1:
-            raise ValueError(f"chunk_size must be an integer >= 1 (got {chunk_size!r})")
+        chunk_size = check_count(chunk_size, "chunk_size")
         self.render_mode = render_mode
         if not isinstance(expose_truth, (bool, np.bool_)):  # bool("no") is True: no truthiness here
             raise ValueError(f"expose_truth must be True or False (got {expose_truth!r})")
         self.expose_truth = bool(expose_truth)
         self.reward_weights = _check_weights(reward_weights)
-        self._chunk_size = int(chunk_size)
+        self._chunk_size = chunk_size
         self._stream: Any = None
         self._index = 0
 

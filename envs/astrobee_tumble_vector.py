@@ -15,7 +15,7 @@ from fkn_bench.envs.astrobee_tumble import _EpisodeWalk, episode_seed_for_reset
 from fkn_bench.envs.episodes import EpisodeStream
 from fkn_bench.envs.rewards import cost_and_quaternion_norm, unit_quaternions
 from fkn_bench.envs.spaces import ACTION_LIMIT, QUATERNION_NORM_MIN, MeasuredPose, action_space, observation_space, pose_space, validate_actions
-from fkn_bench.inputs import check_seed
+from fkn_bench.inputs import check_count, check_seed
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
 
@@ -64,9 +64,7 @@ class AstrobeeTumbleVectorEnv(_EpisodeWalk, VectorEnv):
         chunk_size: int | None = None,
         **overrides: Any,
     ) -> None:
-        if not isinstance(num_envs, int) or num_envs < 1:
-            raise ValueError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
-        self.num_envs = num_envs
+        self.num_envs = num_envs = check_count(num_envs, "num_envs")
         if chunk_size is None:
             chunk_size = min(512, max(16, CHUNK_SAMPLES // num_envs))
         self._configure(scenario, expose_truth, reward_weights, render_mode, chunk_size, overrides)

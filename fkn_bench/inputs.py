@@ -23,6 +23,10 @@ An object array of real numbers (what numpy makes of a list that mixes floats wi
 large for int64) is converted entry by entry under the same rules. Non-finite values (NaN, +-inf)
 pass: what they mean is the caller's rule (a missing measurement; an action refuses them).
 
+One number (:func:`real_number`: ``dt``, an observation's ``time``): the same rules for a
+scalar (a 0-d array of a real dtype is a scalar there). Counts (:func:`check_count`:
+``num_envs``, ``chunk_size``): a Python or numpy integer >= 1, not a bool or a float.
+
 Seeds (:func:`check_seed`): an integer (a Python ``int`` or a numpy integer; not a bool, a
 float, a string or an array) in ``[0, SEED_LIMIT)``. Gymnasium's own rule is "a non-negative
 int"; the upper bound :data:`SEED_LIMIT` = 2**63 is this project's, because episode seeds are
@@ -40,7 +44,7 @@ import numpy as np
 
 from fkn_bench.types import ArrayF
 
-__all__ = ["SEED_LIMIT", "check_seed", "describe", "real_array"]
+__all__ = ["SEED_LIMIT", "check_count", "check_seed", "describe", "real_array", "real_number"]
 
 SEED_LIMIT = 2**63
 """Seeds lie in ``[0, SEED_LIMIT)``: they are stored as int64 (module docstring)."""
@@ -68,6 +72,39 @@ def check_seed(seed: Any, name: str = "seed") -> int:
     if value >= SEED_LIMIT:
         raise ValueError(f"{name} must be below 2**63, seeds are stored as int64 (got {describe(value)})")
     return value
+
+
+def check_count(value: Any, name: str) -> int:
+    """``value`` as a Python ``int`` >= 1 (a Python or numpy integer; not a bool, a float or a
+    string), else a ``ValueError`` naming ``name``: ``num_envs``, ``chunk_size``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name} must be an integer >= 1 (got {describe(value)})")
+    return int(value)
+
+
+def real_number(value: Any, name: str, what: str = "a real number") -> float:
+    """One number as a float under the rules of :func:`real_array` (a Python or numpy integer or
+    float, or a 0-d array of one; not a bool, a string or a complex number; nothing float64
+    cannot hold), else a ``ValueError`` naming ``name`` (``f"{name} must be {what}"``). NaN and
+    +-inf pass: what they mean is the caller's rule."""
+    if type(value) is float:
+        return value
+    if isinstance(value, np.ndarray) and value.shape == ():
+        value = value[()]
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
+        raise ValueError(f"{name} must be {what} (got {describe(value)})")
+    return _as_float(value, name)
+
+
+def _as_float(item: Any, entry: str) -> float:
+    """A real number as a float; ``ValueError`` naming ``entry`` where float64 cannot hold it."""
+    try:
+        out = float(item)
+    except OverflowError:
+        out = math.inf
+    if abs(out) == math.inf and not (item == math.inf or item == -math.inf):  # 10**400, a long double
+        raise ValueError(f"{entry} is {describe(item)}, beyond float64's range (+-1.8e308)")
+    return out
 
 
 def _index(name: str, position: tuple[int, ...]) -> str:
@@ -122,11 +159,6 @@ def _real_objects(array: np.ndarray, name: str, wanted: str, entry: str) -> Arra
                 f"{name} must be {wanted} (a real integer or floating dtype; "
                 f"got dtype object holding {type(item).__name__} {describe(item)} at {_index(entry, position)})"
             )
-        try:
-            out[position] = float(item)
-        except OverflowError:
-            raise ValueError(f"{_index(entry, position)} is {describe(item)}, beyond float64's range (+-1.8e308)") from None
-        if abs(out[position]) == math.inf and not (item == math.inf or item == -math.inf):  # a long double
-            raise ValueError(f"{_index(entry, position)} is {describe(item)}, beyond float64's range (+-1.8e308)")
+        out[position] = _as_float(item, _index(entry, position))
     return out
 

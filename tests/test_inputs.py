@@ -17,7 +17,7 @@ import pytest
 import fkn_bench  # noqa: F401  (registers the environment)
 from fkn_bench.envs.astrobee_tumble_vector import AstrobeeTumbleVectorEnv
 from fkn_bench.estimators import make_estimator
-from fkn_bench.inputs import SEED_LIMIT, check_seed, describe, real_array
+from fkn_bench.inputs import SEED_LIMIT, check_count, check_seed, describe, real_array, real_number
 
 LONG_DOUBLE_EXCEEDS_FLOAT64 = np.finfo(np.longdouble).maxexp > np.finfo(np.float64).maxexp
 
@@ -68,6 +68,21 @@ def test_check_seed() -> None:
         with pytest.raises(ValueError, match=rf"^episode seed must be (a )?{words}"):
             check_seed(bad, "episode seed")
     assert describe(10**400) == "an integer of 401 digits" and describe("x" * 100).endswith("...")
+
+
+def test_real_number_and_check_count() -> None:
+    for value in (2, 2.0, np.float32(2.0), np.int64(2), np.array(2.0), np.array(2, dtype=np.uint8)):
+        assert real_number(value, "dt") == 2.0
+    assert np.isnan(real_number(np.nan, "dt"))  # the caller's rule
+    for bad in (True, np.bool_(False), "0.1", 0.1 + 0j, [0.1], np.array([0.1]), None):
+        with pytest.raises(ValueError, match=r"^dt must be a number \(got "):
+            real_number(bad, "dt", "a number")
+    with pytest.raises(ValueError, match=r"^dt is an integer of 401 digits, beyond float64's range"):
+        real_number(10**400, "dt")
+    assert check_count(np.int64(4), "num_envs") == 4
+    for bad in (0, -1, 2.0, True, "5", None):
+        with pytest.raises(ValueError, match=r"^num_envs must be an integer >= 1 \(got "):
+            check_count(bad, "num_envs")
 
 
 # ---------------------------------------------------------------------------- one rule, three entry points

@@ -44,7 +44,7 @@ import numpy as np
 
 from fkn_bench.filters.base import GATE_REINITIALISE_AFTER, check_dt
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
-from fkn_bench.inputs import real_array
+from fkn_bench.inputs import real_array, real_number
 from fkn_bench.io import read_json, write_json_atomic
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -210,7 +210,8 @@ def check_batch_inputs(measurements: Any, mask: Any, dt: Any) -> tuple[ArrayF, A
 
     Returns float64 measurements, a bool mask and ``dt`` as float; raises ``ValueError`` naming
     the problem (measurements of another dtype than a real integer or floating one, as
-    :func:`parse_observation`'s pose; wrong shapes, empty sequences, a non-finite or non-positive ``dt``). Entries
+    :func:`parse_observation`'s pose; a ``dt`` that is not a real number,
+    :func:`fkn_bench.inputs.real_number`; wrong shapes, empty sequences, a non-finite or non-positive ``dt``). Entries
     outside the mask may hold anything (NaN included); non-finite entries inside it are handled
     by the documented rule of the filters (the update is skipped).
     """
@@ -227,7 +228,7 @@ def check_batch_inputs(measurements: Any, mask: Any, dt: Any) -> tuple[ArrayF, A
         if not np.isin(m, (0, 1)).all():
             raise ValueError("mask must be boolean (or 0/1)")
         m = m.astype(bool)
-    return z, m, check_dt(dt)
+    return z, m, check_dt(real_number(dt, "dt", "a number"))
 
 
 def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
@@ -267,17 +268,11 @@ def parse_observation(observation: Any) -> tuple[ArrayF | None, float | None]:
 
 def observation_time(value: Any) -> float:
     """An observation's ``time`` as a float: a finite real number of seconds (``int``, ``float``,
-    a numpy integer or float, or a 0-d array of one). A string (``"nan"``, ``"0.5"``), a bool, an
-    array of another shape, NaN and +-inf are refused with a ``ValueError`` naming the field."""
+    a numpy integer or float, or a 0-d array of one: :func:`fkn_bench.inputs.real_number`). A
+    string (``"nan"``, ``"0.5"``), a bool, an array of another shape, a value float64 cannot hold
+    (``10**400``), NaN and +-inf are refused with a ``ValueError`` naming the field."""
     if type(value) is not float:
-        if isinstance(value, np.ndarray) and value.shape == ():
-            value = value[()]
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real):
-            raise ValueError(f"observation 'time' must be a real number of seconds (got {value!r})")
-        try:
-            value = float(value)
-        except (OverflowError, TypeError, ValueError):
-            raise ValueError(f"observation 'time' must be a finite number of seconds (got {value!r})") from None
+        value = real_number(value, "observation 'time'", "a real number of seconds")
     if not math.isfinite(value):
         raise ValueError(f"observation 'time' must be a finite number of seconds (got {value})")
     return value
@@ -409,9 +404,10 @@ class RecursiveEstimator(Estimator):
     """Online restarts since :meth:`reset` (module docstring: a state that stopped being finite)."""
 
     def reset(self, *, dt: float) -> None:
-        """Start a new online sequence with time step ``dt`` (s): a finite number in
-        ``(0, MAX_INTERVAL]`` (``ValueError`` naming ``dt`` otherwise)."""
-        step = check_dt(dt)
+        """Start a new online sequence with time step ``dt`` (s): a finite real number in
+        ``(0, MAX_INTERVAL]`` (:func:`fkn_bench.inputs.real_number`: not a bool or a string;
+        ``ValueError`` naming ``dt`` otherwise)."""
+        step = check_dt(real_number(dt, "dt", "a number"))  # (a bool, a string or 10**400: named)
         if step > MAX_INTERVAL:
             raise ValueError(f"dt must be at most MAX_INTERVAL = {MAX_INTERVAL:g} s (got {dt!r})")
         self._dt = step

@@ -254,7 +254,7 @@ def test_a_refused_step_leaves_the_estimator_as_it_was(name: str, bad_time: floa
         ("time", "0.5", r"observation 'time' must be a real number"),
         ("time", True, r"observation 'time' must be a real number"),
         ("time", np.array([0.5]), r"observation 'time' must be a real number"),
-        ("time", 10**400, r"observation 'time' must be a finite number"),
+        ("time", 10**400, r"observation 'time' is an integer of 401 digits, beyond float64's range"),
         ("valid", "False", r"observation 'valid' must be True/False or 0/1 \(got 'False'\)"),
         ("valid", float("nan"), r"observation 'valid' must be True/False or 0/1 \(got nan\)"),
         ("valid", 2, r"observation 'valid'"),
@@ -289,6 +289,17 @@ def test_a_pose_beyond_float64_is_a_value_error() -> None:
         parse_observation({"pose": [1, 0, 0, 0, 10**400, 0, 0], "valid": 1})
     got, _ = parse_observation({"pose": [1, 0, 0, 0, 10**300, 0, 0.5]})  # a large, representable integer
     assert got is not None and got.dtype == np.float64 and got[4] == 1e300
+
+
+@pytest.mark.parametrize("dt", [True, "0.1", 10**400])
+def test_dt_must_be_a_real_number_online_and_in_batch(dt: Any) -> None:
+    """A bool or a string was taken as a number (``True`` as 1 s), ``10**400`` was an
+    OverflowError; the rule of :func:`fkn_bench.inputs.real_number` now, in both APIs."""
+    estimator = build_for_checks("manual-ekf")
+    with pytest.raises(ValueError, match=r"^dt (must be a number|is an integer of 401 digits)"):
+        estimator.reset(dt=dt)
+    with pytest.raises(ValueError, match=r"^dt (must be a number|is an integer of 401 digits)"):
+        check_batch_inputs(np.zeros((1, 2, 7)), np.ones((1, 2), bool), dt)
 
 
 def test_parse_observation_accepts_the_numeric_forms_of_time_and_valid() -> None:
@@ -329,6 +340,11 @@ _POSES = st.lists(st.one_of(st.floats(-10.0, 10.0), st.sampled_from(_POSE_VALUES
 non-finite quaternions; large position outliers are issue 19 item 2, not input validation)."""
 
 
+_BAD_POSES = tuple(np.eye(1, 7)[0].astype(dtype) for dtype in (str, bool, complex)) + (
+    [1, 0, 0, 0, 10**400, 0, 0], np.zeros((1, 7)), np.array(1.0), "pose")
+"""Poses of the wrong kind (dtype, magnitude, shape): refused by name, whatever the other fields."""
+
+
 @pytest.fixture(scope="module")
 def estimator_pairs() -> dict[str, tuple[Estimator, Estimator]]:
     from fkn_bench.scenarios import get_scenario
@@ -363,7 +379,7 @@ def test_every_registered_estimator_is_paired(estimator_pairs: dict[str, tuple[E
 def test_step_refuses_bad_fields_by_name_or_gives_finite_estimates(name: str, estimator_pairs: dict[str, tuple[Estimator, Estimator]]) -> None:
     """Arbitrary observations (times that are good, absent, not numbers, not finite, going back
     or jumping by more than MAX_INTERVAL; validity flags good, absent or not a bool/0/1; poses with
-    NaN, inf and zero quaternions): each step either raises a ``ValueError`` naming a bad field
+    NaN, inf and zero quaternions, or of the wrong dtype, magnitude or shape): each step either raises a ``ValueError`` naming a bad field
     and leaves the estimator as it was, or gives a finite estimate at the expected time with a
     symmetric positive semi-definite (to rounding) covariance."""
     subject, twin = estimator_pairs[name]
@@ -377,6 +393,9 @@ def test_step_refuses_bad_fields_by_name_or_gives_finite_estimates(name: str, es
         for _ in range(data.draw(st.integers(4, 10), label="steps")):
             observation: dict[str, Any] = {"pose": data.draw(_POSES, label="pose")}
             bad: set[str] = set()
+            if data.draw(st.integers(0, 5), label="pose kind") == 0:  # issue 34: a pose of a wrong kind
+                observation["pose"] = data.draw(st.sampled_from(_BAD_POSES), label="bad pose")
+                bad.add("pose")
             kind = data.draw(st.sampled_from(("next", "next", "gap", "far", "absent", "bad", "back")), label="time kind")
             if kind == "absent":
                 expected = 0.0 if last is None else last + dt
