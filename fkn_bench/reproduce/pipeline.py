@@ -41,7 +41,7 @@ from fkn_bench.flexkalmannet import FlexKalmanNetConfig, FlexKalmanNetEstimator,
 from fkn_bench.training.plots import plot_losses, plot_parameters
 from fkn_bench.harness.plots import save_figure, states_figure
 from fkn_bench.harness.reference import PAPER_TITLE
-from fkn_bench.io import read_json, write_json_atomic
+from fkn_bench.io import directory_lock, read_json, remove_temporaries, write_json_atomic
 from fkn_bench.reproduce import figures as figs
 from fkn_bench.reproduce.differences import Context, differences
 from fkn_bench.reproduce.evaluation import Evaluation, evaluate, run_trace
@@ -262,11 +262,18 @@ def run_reproduction(
     progress: bool = True,
     log: Log | None = stderr_log,
 ) -> Reproduction:
-    """Run the whole pipeline (module docstring) into ``out`` and return what it produced."""
-    settings = settings or ReproduceSettings()
+    """Run the whole pipeline (module docstring) into ``out`` and return what it produced. ``out``
+    is locked meanwhile (:func:`fkn_bench.io.directory_lock`: a second reproduction into it raises
+    :class:`~fkn_bench.io.LockedError`); a file that cannot be written (a full disk) raises
+    :class:`~fkn_bench.io.WriteError` naming it, and leaves what it would have replaced."""
+    with directory_lock(out, "a reproduction"):
+        for directory in (Path(out), Path(out) / "figures", Path(out) / "tables"):
+            remove_temporaries(directory, recursive=False)  # (a killed run's; training/ cleans its own)
+        return _run_reproduction(Path(out), settings or ReproduceSettings(), progress, log)
+
+
+def _run_reproduction(out: Path, settings: ReproduceSettings, progress: bool, log: Log | None) -> Reproduction:
     say = log or (lambda message: None)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     config = settings.training_config()
     seeds = list(range(settings.n_eval_seeds))
     seconds: dict[str, float] = {}

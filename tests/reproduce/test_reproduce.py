@@ -133,6 +133,29 @@ def test_usage_errors_exit_with_code_2(tmp_path: Path, capsys: pytest.CaptureFix
     assert "hiddn" in capsys.readouterr().err
 
 
+def test_a_full_disk_ends_the_quick_run_in_one_line(quick_report: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """Issue 34, finding 4: on a full disk ``reproduce --quick`` ended in torch's "unexpected pos
+    81792 vs 81684" traceback; now one line naming the file and the space, exit 2, and nothing torn
+    left (after the first epoch: ``quick_report`` has built the training data already)."""
+    import errno
+
+    import torch
+
+    def full_disk(document: object, path: Path, *args: object, **kwargs: object) -> None:
+        Path(path).write_bytes(b"PK\x03\x04 torn")  # part of the checkpoint, then the disk is full
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(torch, "save", full_disk)
+    out = tmp_path / "report"
+    assert main(["reproduce", "--quick", "--seeds", "1", "--out", str(out), "--no-progress"]) == 2
+    error = capsys.readouterr().err.strip().splitlines()
+    checkpoint = out / "training" / "ds1" / "checkpoint.pt"
+    assert len(error) == 1 and error[0].startswith("fkn-bench reproduce: error: no space left on the device to write "
+                                                   f"{checkpoint} ("), error
+    assert not checkpoint.exists() and not list(out.rglob("*.tmp"))
+
+
 def test_markdown_and_html_render_the_same_blocks() -> None:
     table = Table("A <table>", ("name", "value"), (("a|b", "1.0"), ("**x**", "2")), ("note with `code`",), name="t")
     blocks = [Heading("Title", 1), Paragraph("Text with **bold** & `code`."), Bullets(("one", "two")), table,
