@@ -127,7 +127,9 @@ class FlexKalmanNet(NoiseModel):
         mode: ``constant`` (paper) or ``time_varying``.
         samples_per_window: measurements per training window fed to the network (None: all).
         history: time-varying mode: valid measurements averaged per step.
-        seed: seed of the window subsampling.
+        seed: seed of the window subsampling (its generator's state goes into training checkpoints
+            with every other generator's: :meth:`~fkn_bench.training.Trainer.state_dict`, so that a
+            resumed training picks the samples the uninterrupted one picks).
     """
 
     def __init__(
