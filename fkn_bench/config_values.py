@@ -128,11 +128,12 @@ def init_annotations(cls: type) -> dict[str, Any]:
 
 
 def check_arguments(annotations: Mapping[str, Any], values: Mapping[str, Any], where: str) -> None:
-    """Raise ``ValueError`` (``"<where>: 'key' must be <kind> (got <value>)"``) for the first key of
-    ``values`` whose value is not of its annotation's kind; keys without one are left alone."""
+    """Raise ``ValueError`` (``"<where>: 'key' must be <kind> (got <value>)"``, without ``where``
+    when it is empty) for the first key of ``values`` whose value is not of its annotation's kind;
+    keys without one are left alone."""
     for key, value in values.items():
         kind = annotations.get(key)
         if kind is not None and not accepts(kind, value):
             shown = repr(value)
-            raise ValueError(f"{where}: {key!r} must be {describe_kind(kind)} (got "
+            raise ValueError(f"{where}: " * bool(where) + f"{key!r} must be {describe_kind(kind)} (got "
                              f"{shown if len(shown) <= 60 else shown[:57] + '...'})")

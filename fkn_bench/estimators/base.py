@@ -351,7 +351,10 @@ class Estimator(ABC):
         saved = document.get("class", target)
         if saved != target:
             raise EstimatorFileError(f"{path} holds a {saved} estimator, not a {target}; load it with load_estimator()")
-        try:
+        from fkn_bench.config_values import check_arguments, init_annotations
+
+        try:  # the values must be of the kinds the constructor takes: a std is a number, not true or "0.1"
+            check_arguments(init_annotations(cls), document["config"], "")
             return cls.from_config(document["config"])
         except (TypeError, ValueError) as exc:
             raise EstimatorFileError(f"{path}: invalid {cls.__name__} config: {exc}") from None

@@ -175,12 +175,11 @@ def load_estimator(path: str | Path) -> Estimator:
     """Load an estimator saved with :meth:`Estimator.save` (its class is recorded in the file).
 
     The file is data: its ``class`` is looked up among :func:`estimator_classes` (no module that a
-    file names is imported), and its ``config`` is checked against the annotations of the class's
-    constructor (:mod:`fkn_bench.config_values`: a standard deviation is a finite JSON number, not
-    ``true`` or ``"0.1"``) before the class builds from it. Every refusal is an
+    file names is imported), and :meth:`Estimator.load <fkn_bench.estimators.base.Estimator.load>`
+    checks its ``config`` against the annotations of the class's constructor
+    (:mod:`fkn_bench.config_values`: a standard deviation is a finite JSON number, not ``true`` or
+    ``"0.1"``) before the class builds from it. Every refusal is an
     :class:`~fkn_bench.estimators.base.EstimatorFileError` naming the file."""
-    from fkn_bench.config_values import check_arguments, init_annotations
-
     document = read_estimator_document(path)
     target = document.get("class")
     if not isinstance(target, str) or ":" not in target:
@@ -192,8 +191,4 @@ def load_estimator(path: str | Path) -> Estimator:
             f"{path}: cannot import estimator class {target}: an estimator file may name only the class of a built-in "
             f"estimator or of an installed plugin (entry points '{ENTRY_POINT_GROUP}'), no module is imported for it, and "
             f"{target} is not an Estimator class of those; known: {', '.join(sorted(known))}")
-    try:
-        check_arguments(init_annotations(cls), document["config"], f"invalid {cls.__name__} config")
-    except ValueError as exc:
-        raise EstimatorFileError(f"{path}: {exc}") from None
-    return cls.load(path)
+    return cls.load(path)  # (which checks the config's values)
