@@ -113,8 +113,9 @@ class SimulatedKill(BaseException):
 
 @pytest.fixture
 def kill_at_write(monkeypatch: pytest.MonkeyPatch) -> Callable[[int], AbstractContextManager[list[str]]]:
-    """``with kill_at_write(n) as written: ...`` lets the first ``n - 1`` atomic writes of
-    :mod:`fkn_bench.io` through and "kills" the process at the ``n``-th, as SIGKILL would between
+    """``with kill_at_write(n) as written: ...`` lets the first ``n - 1`` renames
+    (``os.replace``: every atomic write of :mod:`fkn_bench.io` ends with one) through and "kills"
+    the process at the ``n``-th, as SIGKILL would between
     writing a file's temporary copy and renaming it over the target: the target is not replaced,
     a stray temporary file is left beside it, and :class:`SimulatedKill` propagates (caught by the
     block; ``written`` lists the targets replaced before the kill). A block that makes fewer than

@@ -167,3 +167,65 @@ def _toml(tmp_path: Path) -> Path:
     path = tmp_path / "good.toml"
     path.write_text("a = 1\n", encoding="utf-8")
     return path
+
+
+def test_a_full_disk_is_one_error_naming_the_path_and_the_space(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """ENOSPC while writing (issue 34, finding 4): one :class:`io.DiskFullError` (an OSError)
+    naming the target, the free space and the bytes the write needed; the old file stays and no
+    temporary file is left."""
+    import errno
+
+    target = io.write_text_atomic(tmp_path / "doc.txt", "old")
+
+    def full(fd: int) -> None:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(io.os, "fsync", full)
+    with pytest.raises(io.DiskFullError) as caught:
+        io.write_text_atomic(target, "x" * 5000)
+    message = str(caught.value)
+    assert "\n" not in message and str(target) in message and "free" in message and "5 kB needed" in message
+    assert isinstance(caught.value, OSError) and caught.value.path == target
+    assert target.read_text() == "old" and _listing(tmp_path) == ["doc.txt"]
+
+
+def test_a_library_error_is_a_full_disk_only_when_the_disk_is_full(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """torch reports ENOSPC as ``RuntimeError("... unexpected pos ...")``: with (almost) no free
+    space it becomes :class:`io.DiskFullError`; with space left it is the library's own error."""
+    with pytest.raises(RuntimeError, match="unexpected pos"):
+        with io.atomic_path(tmp_path / "t.pt"):
+            raise RuntimeError("unexpected pos 81792 vs 81684")
+    monkeypatch.setattr(io, "_free_bytes", lambda path: 0)
+    with pytest.raises(io.DiskFullError, match=r"no space left on the device to write .*t\.pt \(0 B free"):
+        with io.atomic_path(tmp_path / "t.pt"):
+            raise RuntimeError("unexpected pos 81792 vs 81684")
+    with pytest.raises(io.DiskFullError, match="about 2 GB needed"):
+        io.check_free_space(tmp_path, 2e9, "the dataset x")
+    assert _listing(tmp_path) == []
+
+
+def test_other_write_failures_name_the_path(tmp_path: Path) -> None:
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with pytest.raises(io.WriteError, match=r"cannot write .*file/sub/doc\.json: (Not a directory|File exists)") as caught:
+        io.write_json_atomic(blocker / "sub" / "doc.json", {})
+    assert not isinstance(caught.value, io.DiskFullError)
+
+
+def test_the_directory_lock_refuses_a_second_holder_and_temporaries_are_removed(tmp_path: Path) -> None:
+    """:func:`io.directory_lock` is exclusive across open file descriptions (a second process, or
+    a second holder in this one) and released on exit; :func:`io.remove_temporaries` removes the
+    leftovers of killed atomic writers, nothing else."""
+    stray = tmp_path / "cells" / ".a.csv.x1y2.tmp"
+    stray.parent.mkdir()
+    stray.write_text("half")
+    keep = tmp_path / "cells" / "a.csv"
+    keep.write_text("whole")
+    with io.directory_lock(tmp_path, "results"):
+        with pytest.raises(io.LockedError, match=r"is in use by another fkn-bench process"):
+            with io.directory_lock(tmp_path):
+                pass
+        assert io.remove_temporaries(tmp_path) == [stray]
+    with io.directory_lock(tmp_path):  # released
+        pass
+    assert sorted(p.name for p in (tmp_path / "cells").iterdir()) == ["a.csv"]
