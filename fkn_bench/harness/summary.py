@@ -7,8 +7,8 @@ and how many runs each left out (``missing``). A run whose primary score (the 13
 not finite, NaN or infinity (an estimate that diverged to NaN or overflowed, a failed run), is
 never dropped without a word: ``non_finite_runs`` counts them, and the run table shows the count
 beside the seeds. Divergence is reported apart (``diverged_fraction``, over all runs, failed runs
-included) and never folded into the RMSEs. ANEES/ANIS pool every run's per-step NEES/NIS (Bar-Shalom, Li &
-Kirubarajan 2001, sec. 5.4): ``anees`` is the average over runs and steps,
+included) and never folded into the RMSEs. ANEES/ANIS pool every run's per-step NEES/NIS
+(Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4): ``anees`` is the average over runs and steps,
 ``nees_in_bounds_fraction`` the share of steps whose average over the runs lies in the two-sided
 95% chi-square interval for that many runs (``anees_bounds``, given for all runs).
 """
