@@ -126,8 +126,10 @@ def real_array(
     else:
         try:
             array = np.asarray(value)
-        except (TypeError, ValueError):  # a ragged nesting (numpy >= 1.24 refuses it)
+        except ValueError:  # a ragged nesting (numpy >= 1.24 refuses it)
             raise ValueError(f"{name} must be {wanted} (got a ragged nesting: {describe(value)})") from None
+        except (TypeError, RuntimeError) as exc:  # e.g. a GPU tensor, or one that requires grad
+            raise ValueError(f"{name} must be {wanted} (got {type(value).__name__}, not readable as one: {exc})") from None
     kind = array.dtype.kind
     if kind == "O":
         array = _real_objects(array, name, wanted, entry)
