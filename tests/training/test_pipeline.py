@@ -121,10 +121,12 @@ def test_a_full_disk_ends_train_in_one_line_and_resume_trusts_only_complete_chec
 
     from fkn_bench.cli import main
     from fkn_bench.io import directory_lock
-    from fkn_bench.training import pipeline
+    from fkn_bench.training import pipeline, plots
 
     (tmp_path / "scenarios.toml").write_text('[scenario.tiny-train]\nbase = "ds1"\nn_steps = 2000\n')
     monkeypatch.setattr(pipeline, "CHECKPOINT_INTERVAL_S", 0.0)  # a checkpoint after every epoch
+    for figure in ("plot_losses", "plot_parameters"):  # (drawn after the resume: most of the test's time)
+        monkeypatch.setattr(plots, figure, lambda *args, **kwargs: None)
     out = tmp_path / "run"
     argv = ["train", "--estimator", NAME, "--scenario", "tiny-train", "--scenario-file", str(tmp_path / "scenarios.toml"),
             "--no-progress", "--out"]  # (2 epochs)
