@@ -158,6 +158,7 @@ def _worker_main(job: _WorkerJob) -> None:
         try:
             return objective(trial)
         except KeyboardInterrupt:  # (Ctrl-C, SIGTERM) optuna fails the trial; it is retried on resume
+            trial.set_user_attr("error", "interrupted (Ctrl-C or SIGTERM); retried when the sweep runs again")
             trial.study._storage.set_trial_system_attr(trial._trial_id, INTERRUPTED, True)
             raise
 

@@ -181,7 +181,7 @@ def make_sampler(
 
 def retry_interrupted(study: optuna.Study, out: str | Path, *, own_storage: bool) -> list[int]:
     """Fail the trials of ``study`` whose sweep is gone while they ran, and enqueue a retry of
-    every interrupted trial without one; returns the interrupted trials' numbers.
+    every interrupted trial without one; returns the numbers of the trials it failed or retried.
 
     A trial left RUNNING is the sweep's that ran it (:data:`OWNER`); that sweep is gone when its
     output directory is ``out`` (whose lock the caller holds), lies on this machine and can be
@@ -198,7 +198,8 @@ def retry_interrupted(study: optuna.Study, out: str | Path, *, own_storage: bool
     found = []
     for t in trials:
         stale = t.state == TrialState.RUNNING and _owner_is_gone(t.system_attrs.get(OWNER), out, own_storage)
-        if not (stale or (t.system_attrs.get(INTERRUPTED) and t.state.is_finished())):
+        unretried = t.system_attrs.get(INTERRUPTED) and t.state.is_finished() and t.number not in retried
+        if not (stale or unretried):
             continue
         found.append(t.number)
         if t.number not in retried:
