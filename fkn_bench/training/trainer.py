@@ -505,7 +505,8 @@ class Trainer:
                 if isinstance(value, torch.Generator):
                     found[".".join(filter(None, ("model", prefix, attribute)))] = value
         if self.device.type == "cuda":
-            found["cuda"] = torch.cuda.default_generators[self.device.index or 0]
+            index = self.device.index if self.device.index is not None else torch.cuda.current_device()
+            found["cuda"] = torch.cuda.default_generators[index]
         return found
 
     def state_dict(self) -> dict[str, Any]:
