@@ -125,7 +125,11 @@ def _evaluation_objective(task: SweepTask) -> Callable[[optuna.Trial], float]:
             trial.set_user_attr("error", f"invalid configuration: {exc}")
             raise TrialError(f"trial {trial.number}: invalid configuration: {exc}") from None
         means = estimator.estimate(np.array(measurements), np.array(mask), float(task.scenario.dt)).means
-        rmse = math.sqrt(float(state_mse(torch.from_numpy(np.ascontiguousarray(means)), val.truth, loss_cut)))
+        try:
+            rmse = math.sqrt(float(state_mse(torch.from_numpy(np.ascontiguousarray(means)), val.truth, loss_cut)))
+        except ValueError as exc:  # e.g. a validation split no longer than the loss cut
+            trial.set_user_attr("error", str(exc))
+            raise TrialError(f"trial {trial.number}: {exc}") from None
         if not math.isfinite(rmse):
             trial.set_user_attr("error", "non-finite validation RMSE")
             raise TrialError(f"trial {trial.number}: non-finite validation RMSE")
