@@ -169,7 +169,7 @@ def _components_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedR
 
 def _consistency_table(ranked: Sequence[dict[str, Any]]) -> Table:
     header = ["estimator", "runs", "ANEES", "95% bounds", "NEES in bounds", "ANIS", "95% bounds (NIS)",
-              "NIS in bounds", "diverged", *DIVERGENCE_REASONS, "failed runs"]
+              "NIS in bounds", "diverged", *DIVERGENCE_REASONS, "failed runs", "score not finite"]
     rows = []
     for s in ranked:
         lo, hi = s["anees_bounds"]
@@ -179,12 +179,15 @@ def _consistency_table(ranked: Sequence[dict[str, Any]]) -> Table:
             _pct(s["nees_in_bounds_fraction"]), _fmt(s["anis"]), f"[{_fmt(nlo)}, {_fmt(nhi)}]",
             _pct(s["nis_in_bounds_fraction"]), _pct(s["diverged_fraction"]),
             *(_pct(s["divergence_reasons"][r]) for r in DIVERGENCE_REASONS), str(s["failed_runs"]),
+            str(s.get("non_finite_runs", 0)),
         ])
     notes = [
         "NEES on the 12-dim error [dtheta, dr, dw, dv] with the estimator's error covariance; NIS on the 6-dim "
         "pose innovation at update steps. For N runs of a consistent filter N x ANEES ~ chi2(12 N) at each step "
         "(Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4); bounds are the two-sided 95% interval for all runs. "
-        "Divergence reasons are shares of runs (a run can have several)."
+        "Divergence reasons are shares of runs (a run can have several). score not finite: runs whose 13-state "
+        "RMSE is NaN or infinite (a failed run, an estimate that overflowed); they are left out of the means "
+        "and IQRs of every table and counted here."
     ]
     return Table("Consistency and stability", header, rows, notes)
 
