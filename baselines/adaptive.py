@@ -186,11 +186,15 @@ def floor_from(matrix: ArrayF, fraction: float) -> float:
 
 
 def check_range(name: str, value: float, *, low: float = 0.0, high: float = 1.0, closed_low: bool = False, closed_high: bool = True) -> float:
-    """``value`` as a finite float in the interval (``(low, high]`` by default), else ValueError."""
+    """``value`` as a finite float in the interval (``(low, high]`` by default), else ValueError.
+    A number is an ``int`` or a ``float`` (numpy's too), never a bool or a numeric string: a
+    parameter file's ``true`` or ``"0.99"`` is refused, not read as 1 or 0.99."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a number (got {value!r})")
     try:
         number = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number (got {value!r})") from None
+    except OverflowError:  # an integer beyond float range
+        raise ValueError(f"{name} must be in the range of a float (got an integer of {len(str(value))} digits)") from None
     ok_low = number >= low if closed_low else number > low
     ok_high = number <= high if closed_high else number < high
     if not (math.isfinite(number) and ok_low and ok_high):
@@ -200,10 +204,20 @@ def check_range(name: str, value: float, *, low: float = 0.0, high: float = 1.0,
 
 
 def check_int(name: str, value: int, minimum: int) -> int:
-    """``value`` as an integer ``>= minimum`` (bools refused), else ValueError."""
-    if isinstance(value, bool) or int(value) != value or int(value) < minimum:
+    """``value`` as an integer ``>= minimum`` (bools, strings and fractional numbers refused), else
+    ValueError."""
+    integral = isinstance(value, (int, np.integer)) or (isinstance(value, (float, np.floating)) and float(value).is_integer())
+    if isinstance(value, (bool, np.bool_)) or not integral or int(value) < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum} (got {value!r})")
     return int(value)
+
+
+def check_flag(name: str, value: bool) -> bool:
+    """``value`` as a bool: ``True`` or ``False`` only (a parameter file's ``"false"`` or ``0``
+    would otherwise switch a rule on or off by accident), else ValueError."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name} must be true or false (got {value!r})")
+    return bool(value)
 
 
 # ---------------------------------------------------------------------------------------------

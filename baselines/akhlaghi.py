@@ -58,7 +58,7 @@ class AkhlaghiRule(ad.NoiseRule):
 
     def __init__(self, *, alpha: float = 0.3, adapt_r: bool = True, adapt_q: bool = True, floor: float = 1e-4) -> None:
         self.alpha = ad.check_range("alpha", alpha, closed_low=True)
-        self.adapt_r, self.adapt_q = bool(adapt_r), bool(adapt_q)
+        self.adapt_r, self.adapt_q = ad.check_flag("adapt_r", adapt_r), ad.check_flag("adapt_q", adapt_q)
         self.adapts_q = self.adapt_q
         self.floor = ad.check_range("floor", floor, high=1.0, closed_high=False, closed_low=True)
         if not (self.adapt_q or self.adapt_r):

@@ -37,6 +37,10 @@ def _tuned_adaptive(cls: type, description: str, scenario: Scenario | None = Non
     if "adapt" in options:
         tuned = {k: v for k, v in tuned.items() if k not in ("adapt_q", "adapt_r")}
     source = f"tuned on {document.get('scenario', {}).get('name', document['family'])}"
+    try:
+        cls(**tuned)  # the file's settings alone: a value of the wrong kind is the file's error, named so
+    except (TypeError, ValueError) as exc:
+        raise ArtifactError(f"{path}: invalid {cls.name} settings: {exc}") from None
     return cls(**{"description": f"{description} ({source})", **tuned, **options})
 
 

@@ -65,7 +65,7 @@ class SageHusaRule(ad.NoiseRule):
         self, *, forgetting: float = 0.99, adapt_r: bool = True, adapt_q: bool = False, floor: float = 1e-4, warmup: int = 0
     ) -> None:
         self.forgetting = ad.check_range("forgetting", forgetting)
-        self.adapt_r, self.adapt_q = bool(adapt_r), bool(adapt_q)
+        self.adapt_r, self.adapt_q = ad.check_flag("adapt_r", adapt_r), ad.check_flag("adapt_q", adapt_q)
         self.adapts_q = self.adapt_q
         self.floor = ad.check_range("floor", floor, high=1.0, closed_high=False)
         if not (self.adapt_q or self.adapt_r):

@@ -134,10 +134,13 @@ def gate_threshold(level: float | None, dof: int) -> tuple[float | None, float]:
 
 
 def check_dt(dt: Any) -> float:
-    """The time step ``dt`` (s) as a float; ``ValueError`` unless it is a finite number > 0."""
+    """The time step ``dt`` (s) as a float; ``ValueError`` unless it is a finite number > 0 (a
+    bool or a string is no number: ``True`` is not 1 s, ``"0.1"`` not 0.1 s)."""
+    if isinstance(dt, (bool, str, bytes)):
+        raise ValueError(f"dt must be a number (got {dt!r})")
     try:
         step = float(dt)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValueError(f"dt must be a number (got {dt!r})") from None
     if not math.isfinite(step) or step <= 0:
         raise ValueError(f"dt must be a finite number > 0 (got {dt!r})")

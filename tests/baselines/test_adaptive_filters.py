@@ -3,6 +3,8 @@ against the manual EKF, online vs batch, hostile input, outputs, configuration a
 
 from __future__ import annotations
 
+import json
+
 from pathlib import Path
 
 import numpy as np
@@ -160,11 +162,32 @@ def test_registry_descriptions_and_knobs(tmp_path: Path) -> None:
         ("vbakf", {"r_std": [0.1] * 6}, "r_std needs 7 values"),
         ("akhlaghi", {"q_std": [-1.0] * 13}, r"q_std\[0\] = -1.0 is outside"),
         ("akhlaghi", {"gamma": 1.0}, "unknown AkhlaghiEstimator options"),
+        # values of the wrong kind (issue 34, finding 5): a number is no string or bool, a flag no string
+        ("sage-husa", {"forgetting": "0.986"}, r"forgetting must be a number \(got '0.986'\)"),
+        ("sage-husa", {"forgetting": True}, r"forgetting must be a number \(got True\)"),
+        ("sage-husa", {"warmup": "100"}, "warmup must be an integer"),
+        ("akhlaghi", {"adapt_r": "false"}, r"adapt_r must be true or false \(got 'false'\)"),
+        ("vbakf", {"iterations": 2.5}, "iterations must be an integer"),
+        ("vbakf", {"tau_r": 10**400}, "tau_r must be in the range of a float"),
     ],
 )
 def test_bad_knobs_are_refused(name: str, options: dict, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         make_estimator(name, **options)
+
+
+def test_a_parameter_file_of_the_wrong_kind_is_refused_naming_the_file(tmp_path: Path) -> None:
+    """A tuned adaptive filter's ``parameters=`` file whose value is ``"0.986"`` or ``true`` is
+    refused naming the file (it was read as 0.986 and 1.0; issue 34, finding 5)."""
+    from fkn_bench.training.artifacts import ArtifactError, artifact_path
+
+    document = json.loads(artifact_path("sage-husa", "ds1").read_text())
+    for bad in ("0.986", True):
+        document["estimator_config"]["forgetting"] = bad
+        path = tmp_path / "sage-husa.json"
+        path.write_text(json.dumps(document))
+        with pytest.raises(ArtifactError, match=r"sage-husa\.json: invalid sage-husa settings: forgetting must be a number"):
+            make_estimator("sage-husa", scenario=get_scenario("ds1"), parameters=str(path))
 
 
 def test_online_api_errors() -> None:

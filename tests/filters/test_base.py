@@ -410,7 +410,7 @@ def test_input_validation(name: str) -> None:
         variant.run(noise, z[:0], mask[:0], dt=0.1)
     with pytest.raises(ValueError, match="floating point"):
         variant.run(noise, z.long(), mask, dt=0.1)
-    for dt in (0.0, -0.1, math.nan, math.inf, "fast", None):
+    for dt in (0.0, -0.1, math.nan, math.inf, "fast", None, True, "0.1", 10**400):  # no bool, no string, nothing beyond float
         with pytest.raises(ValueError, match="dt must be"):
             variant.run(noise, z, mask, dt=dt)  # type: ignore[arg-type]
     k, m = variant.covariance_dim, variant.innovation_dim

@@ -193,6 +193,7 @@ def test_a_non_trainable_estimator_is_swept_over_its_options(tmp_path: Path) -> 
     assert done.value == pytest.approx(expected, rel=1e-12) and done.intermediate_values == {1: done.value}
     # a validation split no longer than the loss cut fails the trial (it was a traceback out of the sweep)
     short = optuna.create_study(direction="minimize")
+    short.enqueue_trial({"forgetting": 0.97})  # valid options: the split is what fails (no unseeded draw)
     short.optimize(make_objective(SweepTask("sage-husa-default", get_scenario("ds1", n_steps=1000), space)), n_trials=1,
                    catch=CATCH)
     assert short.trials[0].state == TrialState.FAIL and "loss_cut 100 leaves no steps" in short.trials[0].user_attrs["error"]
