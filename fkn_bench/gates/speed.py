@@ -503,23 +503,33 @@ MEASURED: dict[str, dict[str, float]] = {
     # three checks and ukf-forward, mekf-forward (shared machine): medians 3.112 -> 5.049,
     # 1.146 -> 2.080, 15.07 -> 15.71 (threshold kept); ukf 0.519, mekf 0.665 (unchanged within
     # their spread: entries and thresholds kept).
-    "ekf-forward": {"median": 5.0488, "min": 4.9151, "max": 5.1759, "doubled_median": 2.862, "doubled_max": 2.9422, "n": 6},
+    # ekf-forward and ekf-forward-backward re-measured on 2026-11-27 (quiet machine, `--calibrate 5`
+    # with the four filter checks; ukf and mekf within their earlier spread): the doubled ratios
+    # had come within 8% and 4% of the thresholds 3.5 and 1.5 (one doubled ekf-forward passed
+    # in a loaded test run); thresholds set between the least real and the largest doubled ratio.
+    "ekf-forward": {"median": 6.8541, "min": 5.0605, "max": 7.2018, "doubled_median": 3.2097, "doubled_max": 3.2491, "n": 5},
     "ukf-forward": {"median": 0.512, "min": 0.5091, "max": 0.5769, "doubled_median": 0.2615, "doubled_max": 0.2954, "n": 6},
     "mekf-forward": {"median": 0.6368, "min": 0.622, "max": 0.6508, "doubled_median": 0.3334, "doubled_max": 0.3398, "n": 6},
-    "ekf-forward-backward": {"median": 2.0801, "min": 2.0204, "max": 2.2927, "doubled_median": 1.0276, "doubled_max": 1.0552, "n": 6},
+    "ekf-forward-backward": {"median": 2.7012, "min": 2.2613, "max": 2.7943, "doubled_median": 1.3129, "doubled_max": 1.4423, "n": 5},
     "train-epoch": {"median": 15.7108, "min": 15.2687, "max": 17.6752, "doubled_median": 7.7134, "doubled_max": 7.749, "n": 6},
-    "online-step:manual-ekf": {"median": 0.5542, "min": 0.536, "max": 0.5951, "doubled_median": 0.2808, "doubled_max": 0.2866, "n": 6},
-    "online-step:manual-ukf": {"median": 0.2531, "min": 0.2399, "max": 0.2657, "doubled_median": 0.1229, "doubled_max": 0.1253, "n": 6},
-    "online-step:manual-mekf": {"median": 0.3511, "min": 0.3298, "max": 0.3535, "doubled_median": 0.179, "doubled_max": 0.1822, "n": 6},
-    "online-step:oracle-ekf": {"median": 0.5413, "min": 0.5141, "max": 0.5492, "doubled_median": 0.2793, "doubled_max": 0.2894, "n": 6},
-    "online-step:flexkalmannet": {"median": 0.5492, "min": 0.5385, "max": 0.5644, "doubled_median": 0.2705, "doubled_max": 0.2924, "n": 6},
-    "online-step:sage-husa-default": {"median": 0.3793, "min": 0.3521, "max": 0.4048, "doubled_median": 0.1866, "doubled_max": 0.1926, "n": 6},
-    "online-step:akhlaghi-default": {"median": 0.4249, "min": 0.4132, "max": 0.4788, "doubled_median": 0.2163, "doubled_max": 0.2258, "n": 6},
-    "online-step:vbakf-default": {"median": 0.2744, "min": 0.2557, "max": 0.277, "doubled_median": 0.1373, "doubled_max": 0.1419, "n": 6},
-    "online-step:nll-tuned-ekf": {"median": 0.5608, "min": 0.5399, "max": 0.5867, "doubled_median": 0.2781, "doubled_max": 0.2807, "n": 6},
-    "online-step:direct-tuned-ekf": {"median": 0.5463, "min": 0.526, "max": 0.5611, "doubled_median": 0.2814, "doubled_max": 0.2852, "n": 6},
-    # fkn-bench bench gate --check online-step:flexkalmannet-tv --calibrate 6 (issue 21)
-    "online-step:flexkalmannet-tv": {"median": 0.044, "min": 0.0423, "max": 0.0455, "doubled_median": 0.0248, "doubled_max": 0.0256, "n": 6},
+    "online-step:manual-ekf": {"median": 0.4251, "min": 0.4127, "max": 0.4377, "doubled_median": 0.1794, "doubled_max": 0.1823, "n": 6},
+    "online-step:manual-ukf": {"median": 0.1864, "min": 0.1629, "max": 0.206, "doubled_median": 0.0943, "doubled_max": 0.0992, "n": 6},
+    "online-step:manual-mekf": {"median": 0.2628, "min": 0.2534, "max": 0.2745, "doubled_median": 0.1309, "doubled_max": 0.1347, "n": 6},
+    "online-step:oracle-ekf": {"median": 0.4266, "min": 0.4037, "max": 0.4408, "doubled_median": 0.2267, "doubled_max": 0.2343, "n": 6},
+    "online-step:flexkalmannet": {"median": 0.4131, "min": 0.3906, "max": 0.4511, "doubled_median": 0.2183, "doubled_max": 0.2274, "n": 6},
+    "online-step:sage-husa-default": {"median": 0.2839, "min": 0.2574, "max": 0.3056, "doubled_median": 0.1429, "doubled_max": 0.1441, "n": 6},
+    "online-step:akhlaghi-default": {"median": 0.3069, "min": 0.2666, "max": 0.3363, "doubled_median": 0.1575, "doubled_max": 0.1686, "n": 6},
+    "online-step:vbakf-default": {"median": 0.2134, "min": 0.195, "max": 0.2233, "doubled_median": 0.0991, "doubled_max": 0.1059, "n": 6},
+    "online-step:nll-tuned-ekf": {"median": 0.4316, "min": 0.4153, "max": 0.4798, "doubled_median": 0.2142, "doubled_max": 0.2305, "n": 6},
+    "online-step:direct-tuned-ekf": {"median": 0.4314, "min": 0.3498, "max": 0.4411, "doubled_median": 0.2453, "doubled_max": 0.2529, "n": 6},
+    # The online-step entries re-measured on 2026-11-27 (issue 34's session; the 2-core AMD EPYC,
+    # quiet): every median had moved to about 0.77x its earlier value, at the issue's commit as at
+    # this one (the numpy reference loop is faster with this machine's numpy 2.4), leaving
+    # manual-ekf 1.09x and manual-ukf 1.04x above their thresholds: the gate failed at random in
+    # the test command. `fkn-bench bench gate --calibrate 6` with the eleven online checks
+    # (flexkalmannet-tv with --calibrate 10: its ratio spreads most); thresholds 0.7 of the median
+    # (flexkalmannet-tv 0.040, between its least real ratio and its largest doubled one).
+    "online-step:flexkalmannet-tv": {"median": 0.061, "min": 0.0495, "max": 0.0688, "doubled_median": 0.031, "doubled_max": 0.0315, "n": 10},
 }
 """Ratios measured when the thresholds were set (see module docstring and the comment inside).
 
@@ -531,7 +541,7 @@ def builtin_checks() -> list[RatioCheck]:
     """The filter and training checks."""
     return [
         RatioCheck("ekf-forward", "batched torch EKF forward vs the per-step numpy EKF loop",
-                   _filter_setup("ekf"), min_ratio=3.5,
+                   _filter_setup("ekf"), min_ratio=4.2,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run"),
         RatioCheck("ukf-forward", "batched torch UKF forward vs the per-step numpy EKF loop",
                    _filter_setup("ukf"), min_ratio=0.36,
@@ -540,7 +550,7 @@ def builtin_checks() -> list[RatioCheck]:
                    _filter_setup("mekf"), min_ratio=0.45,
                    hotspot="fkn_bench.filters.mekf:MultiplicativeEKF.run"),
         RatioCheck("ekf-forward-backward", "batched EKF forward + gradient vs the per-step numpy EKF loop",
-                   _filter_setup("ekf", backward=True), min_ratio=1.5,
+                   _filter_setup("ekf", backward=True), min_ratio=1.8,
                    hotspot="fkn_bench.filters.ekf:ExtendedKalmanFilter.run", combine=average_filter_results),
         RatioCheck("train-epoch", "FlexKalmanNet Trainer epoch vs the sequential reference trainer",
                    _train_setup, min_ratio=11.0,
@@ -555,17 +565,17 @@ ONLINE_REPEATS = 9
 """Rounds per measurement of the online checks (a few milliseconds each for the numpy filters)."""
 
 ONLINE_STEP_MIN_RATIOS: dict[str, float] = {
-    "manual-ekf": 0.39,
-    "manual-ukf": 0.18,
-    "manual-mekf": 0.25,
-    "oracle-ekf": 0.38,
-    "flexkalmannet": 0.38,
-    "sage-husa-default": 0.27,
-    "akhlaghi-default": 0.3,
-    "vbakf-default": 0.19,
-    "nll-tuned-ekf": 0.39,
-    "direct-tuned-ekf": 0.38,
-    "flexkalmannet-tv": 0.031,  # the network on every measurement
+    "manual-ekf": 0.3,
+    "manual-ukf": 0.13,
+    "manual-mekf": 0.18,
+    "oracle-ekf": 0.3,
+    "flexkalmannet": 0.29,
+    "sage-husa-default": 0.2,
+    "akhlaghi-default": 0.21,
+    "vbakf-default": 0.15,
+    "nll-tuned-ekf": 0.3,
+    "direct-tuned-ekf": 0.3,
+    "flexkalmannet-tv": 0.04,  # the network on every measurement
 }
 """``online-step:<estimator>`` thresholds by estimator name: the numpy loop's time over the
 estimator's ``reset()`` + ``step()`` time on the same sequence must be at least this. The adaptive
