@@ -1,57 +1,18 @@
-"""Suite-wide hooks.
+"""Suite-wide fixtures: the scenario registry restored after each test and module, the GPU's
+filter path on the CPU, torch's ``meta`` default device, and simulated kills.
 
-Timed tests and the two pytest-xdist workers: the default run (``-n 2`` in ``pyproject.toml``)
-keeps both cores busy, but the speed-ratio gate compares numpy and torch code whose relative
-speed changes when the other core is loaded (measured: a doubled ``online-step:manual-mekf``
-passed its threshold with the other worker running the suite). A test marked ``exclusive_cpu``
-therefore holds an exclusive lock for its whole run (setup, call, teardown) and every other test
-a shared one, fixtures of wider scope included (they are built inside the setup of the first test
-that needs them): while a timed test runs, the other worker waits between its tests, and the
-timing sees the machine the thresholds were calibrated on. Keep the ``exclusive_cpu`` tests in
-``tests/gates/test_speed_gate.py``: xdist's ``loadfile`` hands out the files with the most tests
-first, so they run at the start, beside short tests; one in another file ran beside the
-accuracy gate's 70-second fixture and left its worker idle that long. Without xdist (``-n 0``), or where
-``fcntl`` does not exist (Windows), no lock is taken.
+No test here times anything: the speed-ratio gate's timed checks run after the tests as
+``fkn-bench bench gate --trips`` (README, "Benchmarks and CI gates"), where no second pytest
+worker shares the machine.
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
-from pathlib import Path
 
 import pytest
-
-try:
-    import fcntl
-except ImportError:  # not a POSIX system: run without the lock
-    fcntl = None  # type: ignore[assignment]
-
-
-def _lock_path() -> Path | None:
-    if fcntl is None or not os.environ.get("PYTEST_XDIST_WORKER"):
-        return None
-    # one fixed file: the workers of one run share it (so would two runs at once, which is right:
-    # they share the cores too); flock locks end with their process, so a stale file is harmless
-    return Path(tempfile.gettempdir()) / "fkn-bench-exclusive-cpu.lock"
-
-
-@pytest.hookimpl(hookwrapper=True)
-def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
-    """Shared lock around an ordinary test, exclusive around an ``exclusive_cpu`` one."""
-    path = _lock_path()
-    if path is None:
-        yield
-        return
-    exclusive = item.get_closest_marker("exclusive_cpu") is not None
-    with open(path, "a+") as handle:
-        fcntl.flock(handle, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def _restoring_the_scenario_registry() -> Iterator[None]:

@@ -8,7 +8,9 @@
   records its ``batch``) the fraction of the *small-bmm limit* at that batch measured in the same
   run (:data:`MATMULS_PER_STEP`);
 * ``fkn-bench bench gate``: the CI speed-ratio gate (:mod:`fkn_bench.gates.speed`): each check's
-  ratio against the reference timed beside it, its threshold and verdict;
+  ratio against the reference timed beside it, its threshold and verdict; with ``--trips`` also
+  each hotspot made to do its work twice, which must fail (the test command runs
+  ``fkn-bench bench gate --trips`` after pytest: timed checks are a benchmark, not a test);
 * ``fkn-bench bench train``: one epoch of FlexKalmanNet's batched trainer against one epoch of
   the sequential reference trainer (windows one after another, the network at every step) on the
   same data and configuration, and their ratio; with ``--time-varying`` also the trainer's epoch in
@@ -20,6 +22,7 @@ Examples::
     fkn-bench bench run -k "filter or online"      # a part of it
     fkn-bench bench report bench.json
     fkn-bench bench gate --check ekf-forward --check train-epoch
+    fkn-bench bench gate --trips                   # CI: every check, and every hotspot doubled fails
     fkn-bench bench gate --check online-step:my-filter --calibrate 10   # ratios and a threshold
 """
 
@@ -80,6 +83,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     gate.add_argument("--list", action="store_true", help="list the checks and thresholds, measure nothing")
     gate.add_argument("--calibrate", type=int, metavar="N",
                       help="measure each check N times and with its work doubled; print the ratios and a threshold")
+    gate.add_argument("--trips", action="store_true",
+                      help="also show that the gate works: each hotspot made to do its work twice must fail "
+                           "(one check per hotspot; exit 1 when a doubled hotspot passes)")
     gate.add_argument("--json", action="store_true")
     gate.set_defaults(handler=run_gate)
 
@@ -277,9 +283,23 @@ def run_gate(args: argparse.Namespace) -> int:
         if not args.json:
             print(speed.format_outcomes(outcomes[-1:]).splitlines()[-1] if len(outcomes) > 1
                   else speed.format_outcomes(outcomes[-1:]), flush=True)
+    tripped = []
+    if args.trips:
+        if not args.json:
+            print("the same code doing its work twice (each must fail):", flush=True)
+        for check in speed.trip_checks(checks):
+            tripped.append(speed.trips(check))
+            if not args.json:
+                line = speed.format_outcomes(tripped[-1:]).splitlines()[-1]
+                verdict = ("DOUBLED PASSED (the gate would miss a 2x slowdown)" if tripped[-1].passed
+                           else "tripped, as it should")
+                print(line[: line.rindex(" ok" if tripped[-1].passed else " TOO SLOW") + 1] + verdict, flush=True)
     if args.json:
-        print(json.dumps([o.to_dict() for o in outcomes], indent=2))
-    return 0 if all(o.passed for o in outcomes) else 1
+        document: Any = [o.to_dict() for o in outcomes]
+        if args.trips:
+            document = {"checks": document, "doubled": [o.to_dict() for o in tripped]}
+        print(json.dumps(document, indent=2))
+    return 0 if all(o.passed for o in outcomes) and not any(o.passed for o in tripped) else 1
 
 
 # ---------------------------------------------------------------------------------- train
