@@ -271,8 +271,8 @@ def average_filter_results(first: Any, second: Any) -> Any:
 def calibrate(check: RatioCheck, *, runs: int = 10, doubled_runs: int = 4) -> dict[str, float]:
     """Measure ``check`` ``runs`` times, and ``doubled_runs`` times with its hotspot doubled; returns
     a :data:`MEASURED` entry plus ``suggested_min_ratio`` (0.7 of the median, rounded to two
-    significant digits). Run it on the machine the gate runs on, as the gate sees it (the test
-    run gives timed tests the CPU to themselves)."""
+    significant digits). Run it on the machine the gate runs on, as the gate sees it (quiet:
+    the test command runs the gate after pytest, with nothing else running)."""
     workloads = _build(check)
     normal = [measure_ratio(check, workloads=workloads).ratio for _ in range(runs)]
     slow: list[float] = []
@@ -493,8 +493,8 @@ def _train_setup() -> Workloads:
 
 
 MEASURED: dict[str, dict[str, float]] = {
-    # `fkn-bench bench gate --calibrate 6` on the 2-core AMD EPYC CI machine, quiet (the default
-    # test run gives the timed tests the CPU to themselves, tests/conftest.py); 6 measurements and
+    # `fkn-bench bench gate --calibrate 6` on the 2-core AMD EPYC CI machine, quiet (as the test
+    # command runs the gate: after pytest, nothing else running); 6 measurements and
     # 3 doubled per check. Thresholds: 0.7 of the median, rounded to two significant digits.
     # The filter checks and train-epoch re-measured after the structured EKF step (issue 17; it runs
     # from 128 rows, so these 16-row workloads keep the generic step, and their ratios moved by
