@@ -10,10 +10,10 @@ how much space is free and about how much the write needed. Both are ``OSError``
 existing ``except OSError`` handlers keep working; the command line prints them in one line with
 exit code 2. :func:`check_free_space` refuses work up front when its output cannot fit.
 
-Temporary files are named ``.<target name>.<random>[suffix].tmp`` (:data:`TEMPORARY_PATTERN`). A
-process killed between creating one and the rename leaves it behind; :func:`remove_temporaries`
-deletes such leftovers, and writers call it while they hold :func:`directory_lock`, so that no live
-writer's file is removed.
+Temporary files are named ``.<target name>.<random>[suffix].tmp`` (:data:`TEMPORARY_PATTERN`), and
+their writer holds an exclusive ``flock`` on each while it writes. A process killed between
+creating one and the rename leaves it behind, unlocked (a lock dies with its process);
+:func:`remove_temporaries` deletes such leftovers and skips the files a live writer still holds.
 """
 
 from __future__ import annotations
@@ -126,9 +126,9 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
         fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix + ".tmp", dir=target.parent)
     except OSError as exc:
         raise _write_error(exc, target) from None
-    os.close(fd)
     tmp = Path(tmp_name)
     try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # a live writer's file: remove_temporaries leaves it alone
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp creates 0600; give the file the usual permissions
         try:
             yield tmp
@@ -149,6 +149,7 @@ def atomic_path(path: str | Path, suffix: str = "") -> Iterator[Path]:
             pass
         except OSError:  # pragma: no cover - a directory that vanished or turned read-only
             pass
+        os.close(fd)  # releases the lock
 
 
 def _size(path: Path) -> int:
@@ -202,23 +203,37 @@ def directory_lock(directory: str | Path, what: str = "this directory") -> Itera
         os.close(fd)  # closing releases the lock
 
 
-def remove_temporaries(directory: str | Path, *, recursive: bool = True) -> list[Path]:
-    """Delete the temporary files (:data:`TEMPORARY_PATTERN`) that killed writers left under
-    ``directory``; returns them. Call it only while holding :func:`directory_lock` on
-    ``directory`` (a live writer's temporary file would go too)."""
+def remove_temporaries(directory: str | Path, *, recursive: bool = True, target: str | None = None) -> list[Path]:
+    """Delete the temporary files (:data:`TEMPORARY_PATTERN`; with ``target``, only those of the
+    file of that name) that killed writers left under ``directory``, skipping any that a live
+    writer holds locked (module docstring); returns the files removed."""
     directory = Path(directory)
     if not directory.is_dir():
         return []
-    found = directory.rglob(TEMPORARY_PATTERN) if recursive else directory.glob(TEMPORARY_PATTERN)
+    pattern = f".{glob_escape(target)}.*.tmp" if target else TEMPORARY_PATTERN
+    found = directory.rglob(pattern) if recursive else directory.glob(pattern)
     removed = []
     for path in sorted(found):
-        if path.is_file():
-            try:
-                path.unlink()
-            except OSError:
-                continue
-            removed.append(path)
+        if not path.is_file() or path.is_symlink():
+            continue
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            path.unlink()
+        except OSError:  # locked by a live writer (BlockingIOError), or already gone
+            continue
+        finally:
+            os.close(fd)
+        removed.append(path)
     return removed
+
+
+def glob_escape(name: str) -> str:
+    """``name`` with the glob metacharacters ``*?[`` escaped (for :meth:`Path.glob`)."""
+    return "".join(f"[{c}]" if c in "*?[" else c for c in name)
 
 
 def write_bytes_atomic(path: str | Path, data: bytes) -> Path:

@@ -229,3 +229,19 @@ def test_the_directory_lock_refuses_a_second_holder_and_temporaries_are_removed(
     with io.directory_lock(tmp_path):  # released
         pass
     assert sorted(p.name for p in (tmp_path / "cells").iterdir()) == ["a.csv"]
+
+
+def test_a_live_writers_temporary_is_never_removed(tmp_path: Path) -> None:
+    """A writer holds a lock on its temporary file while it writes, so that a concurrent
+    :func:`io.remove_temporaries` (another command cleaning up after a killed one) skips it; a
+    dead writer's leftover, and with ``target`` only that file's, is removed."""
+    dead = tmp_path / ".doc.json.abc123.tmp"
+    dead.write_text("half")
+    other = tmp_path / ".notes.md.abc123.tmp"
+    other.write_text("half")
+    with io.atomic_path(tmp_path / "doc.json") as live:
+        live.write_text("{}")
+        assert io.remove_temporaries(tmp_path, target="doc.json") == [dead]
+        assert live.exists() and other.exists()
+    assert (tmp_path / "doc.json").read_text() == "{}"
+    assert io.remove_temporaries(tmp_path) == [other] and _listing(tmp_path) == ["doc.json"]

@@ -54,7 +54,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.harness.estimators import SelectionError, select_estimators
-    from fkn_bench.harness.grid import safe_name
+    from fkn_bench.harness.grid import path_name
     from fkn_bench.harness.leaderboard import ranked_summaries, scenario_order
     from fkn_bench.harness.plots import comparison_figure, errors_figure, save_figure, states_figure, uncertainty_figure
     from fkn_bench.harness.reference import quoted_rows
@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     run_trace = trace(resolved, SimulatedSource(scenario, args.split), args.seed)
-    stem = f"{safe_name(resolved.name)}-{safe_name(scenario.name)}-seed{args.seed}"
+    stem = f"{path_name(resolved.name)}-{path_name(scenario.name)}-seed{args.seed}"
     written = [
         save_figure(states_figure(run_trace, steps=args.steps), out / f"{stem}-states.png"),
         save_figure(uncertainty_figure(run_trace, steps=args.steps), out / f"{stem}-uncertainty.png"),
@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     if results is not None:
         for name in scenario_order(results.scenarios()):
             figure = comparison_figure(name, ranked_summaries(results, name), quoted_rows(name))
-            written.append(save_figure(figure, out / f"comparison-{safe_name(name)}.png"))
+            written.append(save_figure(figure, out / f"comparison-{path_name(name)}.png"))
     for path in written:
         print(path)
     return 0
@@ -98,14 +98,14 @@ def run(args: argparse.Namespace) -> int:
 
 def _ratios(args: argparse.Namespace, scenario) -> int:  # noqa: ANN001
     from fkn_bench.harness.estimators import resolve_estimator
-    from fkn_bench.harness.grid import safe_name
+    from fkn_bench.harness.grid import path_name
     from fkn_bench.harness.plots import save_figure
     from fkn_bench.harness.ratios import ratio_convergence, ratio_figure
 
     with usage_errors(ValueError):
         result = ratio_convergence(resolve_estimator(args.estimator or "rigid-body-ekf-ratios", scenario), scenario,
                                    args.seeds, args.duration)
-    path = save_figure(ratio_figure([result]), Path(args.out) / f"ratios-{safe_name(result.estimator)}-{safe_name(scenario.name)}.png")
+    path = save_figure(ratio_figure([result]), Path(args.out) / f"ratios-{path_name(result.estimator)}-{path_name(scenario.name)}.png")
     for time in sorted({100.0, 300.0, 600.0, float(args.duration)}):
         print(f"{result.estimator} on {scenario.name}: {result.share_below(0.02, time):.0%} of {args.seeds} seeds "
               f"have inertia-ratio error < 0.02 at {time:g} s (median error {result.median_at(time):.3g})")

@@ -44,7 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.estimators import EstimatorFileError, UnknownEstimatorError
     from fkn_bench.harness.recording import record
-    from fkn_bench.io import WriteError
+    from fkn_bench.io import WriteError, remove_temporaries
     from fkn_bench.scenarios import get_scenario
 
     check_minimum(args, seed=0, steps=1)
@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     estimator = None if args.estimator.lower() == "none" else args.estimator
     if estimator is not None and estimator.endswith(".json") and not Path(estimator).is_file():
         raise UsageError(f"estimator file not found: {estimator}")
+    remove_temporaries(args.out.parent, recursive=False, target=args.out.name)  # a killed record's leftovers
     try:
         summary = record(args.out, scenario=scenario, estimator=estimator, seed=args.seed, split=args.split,
                          n_steps=args.steps, namespace=args.namespace, foxglove=not args.no_foxglove,

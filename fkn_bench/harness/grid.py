@@ -27,7 +27,7 @@ from fkn_bench.harness.sources import EpisodeSource
 from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
 from fkn_bench.metrics import MetricSettings
 
-__all__ = ["SEED_CHUNK", "ONLINE_STEPS", "CellSpec", "chunk_seeds", "build_grid", "safe_name", "path_name",
+__all__ = ["SEED_CHUNK", "ONLINE_STEPS", "CellSpec", "chunk_seeds", "build_grid", "path_name",
            "estimator_label", "variant_id"]
 
 SEED_CHUNK = 10
@@ -52,12 +52,6 @@ def chunk_seeds(seeds: Sequence[int], size: int = SEED_CHUNK) -> list[tuple[int,
     if min(seeds) < 0:
         raise ValueError("seeds must be non-negative")
     return [tuple(seeds[i : i + size]) for i in range(0, len(seeds), size)]
-
-
-def safe_name(name: str) -> str:
-    """A file-system-safe, readable version of a name for figure files (several names can give
-    the same result; result cells use :func:`path_name`)."""
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", name) or "_"
 
 
 _PLAIN = re.compile(r"[A-Za-z0-9_.-]")

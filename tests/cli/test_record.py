@@ -99,5 +99,10 @@ def test_an_existing_out_file_is_replaced_only_with_force(tmp_path: Path, capsys
     err = capsys.readouterr().err
     assert err == f"fkn-bench record: error: --out {out} exists; choose another file name, or pass --force to replace it\n"
     assert out.read_text() == "MINE\n" and sorted(p.name for p in tmp_path.iterdir()) == ["thesis.txt"]
+    leftover = tmp_path / ".thesis.txt.k1ll3d.tmp"  # what a record killed before its rename leaves
+    leftover.write_bytes(b"half an MCAP")
+    other = tmp_path / ".other.mcap.k1ll3d.tmp"  # another file's: not this command's to remove
+    other.write_bytes(b"")
     assert main([*args, "--force"]) == 0
     assert list_topics(out)  # an MCAP now
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".other.mcap.k1ll3d.tmp", "thesis.txt"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from fkn_bench.harness import SEED_CHUNK, ResolvedEstimator, SimulatedSource, build_grid, chunk_seeds
-from fkn_bench.harness.grid import estimator_label, path_name, safe_name, variant_id
+from fkn_bench.harness.grid import estimator_label, path_name, variant_id
 from fkn_bench.metrics import MetricSettings
 from fkn_bench.scenarios import get_scenario
 
@@ -44,11 +44,6 @@ def test_source_key_follows_the_configuration() -> None:
     assert a.key() != b.key() and a.label == b.label == "ds1"
     with pytest.raises(ValueError):
         SimulatedSource(get_scenario("ds1"), split="nope")
-
-
-def test_safe_name() -> None:
-    assert safe_name("manual-ekf") == "manual-ekf"
-    assert safe_name("my filter/v2") == "my_filter_v2"
 
 
 def test_path_names_are_injective_and_stay_in_their_directory() -> None:
