@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, ClassVar, Self
 
 from fkn_bench.training import TrainConfig
-from fkn_bench.training.options import check_option_types
+from fkn_bench.training.options import check_option_types, naming_the_file
 from fkn_bench.training.pipeline import options_with_file
 
 __all__ = ["KalmanNetConfig", "RecursiveKalmanNetConfig"]
@@ -91,9 +91,14 @@ class KalmanNetConfig(TrainConfig):
         known = {f.name for f in dataclasses.fields(cls)} - set(cls._not_options)
         unknown = sorted(set(data) - known)
         if unknown:
-            raise ValueError(f"unknown {cls._label} config keys {unknown}; valid: {sorted(known)}")
+            files = sorted({source for key, source in getattr(data, "sources", {}).items() if key in unknown})
+            raise ValueError("".join(f"{f}: " for f in files) + f"unknown {cls._label} config keys {unknown}; "
+                             f"valid: {sorted(known)}")
         check_option_types(cls, data, cls._label)
-        return cls(**dict(data))
+        try:
+            return cls(**dict(data))
+        except ValueError as exc:  # a value out of range: name its file, when it came from one
+            raise naming_the_file(exc, data) from None
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Self:

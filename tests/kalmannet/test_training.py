@@ -106,3 +106,19 @@ def test_installed_weights_deploy_and_a_corrupt_file_is_refused(runs: list, tmp_
     weights.unlink()
     with pytest.raises(ArtifactError, match="weights file .* is missing"):
         make_estimator("kalmannet", scenario=get_scenario("ds1"))
+
+
+def test_a_config_file_value_out_of_range_is_refused_naming_the_file(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A KalmanNet TOML whose value has the right kind but is out of range (``manifold``, ``epochs
+    = 0``) or whose key is unknown is refused naming the file (issue 34, finding 5: the range
+    errors did not say which file)."""
+    import pytest
+
+    from fkn_bench.kalmannet.config import KalmanNetConfig
+
+    path = tmp_path / "kn.toml"
+    for text, message in (('manifold = "sphere"\n', "manifold must be"), ("epochs = 0\n", "epochs must be >= 1"),
+                          ("epoch = 3\n", "unknown KalmanNet config keys")):
+        path.write_text(text)
+        with pytest.raises(ValueError, match=rf"^{path}: {message}"):
+            KalmanNetConfig.from_toml(path)
