@@ -20,7 +20,8 @@ from fkn_bench.limits import check_memory
 from fkn_bench.scenarios import SPLITS, Scenario, get_scenario
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["Episodes", "EpisodeStream", "generate_episodes", "initial_states", "rate_offsets", "true_inertia"]
+__all__ = ["Episodes", "EpisodeStream", "generate_episodes", "initial_rates", "initial_states", "rate_offsets",
+           "true_inertia"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,7 +119,37 @@ def initial_states(scenario: Scenario, seeds: Sequence[int]) -> tuple[ArrayF, Ar
         offset = stream(seed, "position0").standard_normal(3)
         positions.append(np.array(scenario.position0) + scenario.position0_std * offset)
     velocity = np.tile(np.array(scenario.velocity0), (len(seeds), 1))
-    return np.array(attitudes).reshape(-1, 4), np.array(positions).reshape(-1, 3), velocity
+    if scenario.velocity0_std:  # (no draw at zero spread: the velocity stays exactly velocity0)
+        velocity += scenario.velocity0_std * np.array([stream(seed, "velocity0").standard_normal(3) for seed in seeds])
+    return np.array(attitudes).reshape(-1, 4), np.array(positions).reshape(-1, 3), velocity.reshape(-1, 3)
+
+
+def initial_rates(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
+    """Each seed's initial angular rate ``(B, 3)``, rad/s, in the scenario's ``omega0_frame``:
+    ``omega0`` for every seed, or, with a rate prior (:class:`~fkn_bench.scenarios.Scenario`,
+    "Prior"), ``m u`` with the axis ``u`` (uniform on the sphere: a normalised standard normal
+    3-vector, drawn first) and the magnitude ``m`` (log-uniform: ``exp(U(log low, log high))``;
+    or uniform) from the seed's ``omega0`` stream."""
+    base = np.array(scenario.omega0, dtype=float)
+    if not scenario.has_rate_prior:
+        return np.tile(base, (len(seeds), 1))
+    out = np.empty((len(seeds), 3))
+    for row, seed in enumerate(seeds):
+        rng = stream(seed, "omega0")
+        if scenario.omega0_axis == "uniform":
+            axis = rng.standard_normal(3)
+            axis /= np.linalg.norm(axis)
+        else:
+            axis = base / np.linalg.norm(base)
+        if scenario.omega0_magnitude is None:
+            magnitude = float(np.linalg.norm(base))
+        elif scenario.omega0_magnitude_distribution == "log-uniform":
+            low, high = scenario.omega0_magnitude
+            magnitude = float(np.exp(rng.uniform(np.log(low), np.log(high))))
+        else:
+            magnitude = float(rng.uniform(*scenario.omega0_magnitude))
+        out[row] = magnitude * axis
+    return out
 
 
 def true_inertia(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
@@ -175,7 +206,7 @@ class EpisodeStream:
 
     def _make_rotation(self) -> ForcedRotation | PerturbedRotation | FreeTumble:
         sc = self.scenario
-        omega = np.tile(np.array(sc.omega0), (len(self.seeds), 1))
+        omega = initial_rates(sc, self.seeds)
         if sc.omega0_frame == "body":
             omega = quat.rotate(self._q0, omega)
         if sc.dynamics == "forced" and sc.has_kicks:

@@ -47,10 +47,12 @@ _DRAWS: dict[str, tuple[str, tuple[int, ...]]] = {
 }
 """Per-step draw method and shape of each measurement stream."""
 
-STREAMS: tuple[str, ...] = ("attitude0", "position0", *_DRAWS, "inertia", "kick", "kick_noise")
+STREAMS: tuple[str, ...] = ("attitude0", "position0", *_DRAWS, "inertia", "kick", "kick_noise", "omega0", "velocity0")
 """Names of the independent random streams of an episode. Their order fixes their keys: append
 new streams at the end (``kick`` and ``kick_noise``: the torque bursts of
-:func:`fkn_bench.envs.episodes.rate_offsets`, one draw per step)."""
+:func:`fkn_bench.envs.episodes.rate_offsets`, one draw per step; ``omega0`` and ``velocity0``:
+the scenario's prior over the initial rate and velocity, :func:`fkn_bench.envs.episodes.initial_rates`
+and :func:`~fkn_bench.envs.episodes.initial_states`)."""
 
 BLOCK = 4096
 """Steps per random-stream block."""

@@ -25,8 +25,9 @@ def run(args: argparse.Namespace) -> int:
     load_scenario_files(args)
     if args.name:  # one scenario: its configuration, key by key
         scenario = get_scenario(args.name)
-        lines = scenario.to_dict() | {"config_hash": scenario.config_hash()}
-        document: Any = lines
+        prior = scenario.describe_prior()
+        lines = scenario.to_dict() | {"config_hash": scenario.config_hash()} | {f"prior.{k}": v for k, v in prior.items()}
+        document: Any = scenario.to_dict() | {"config_hash": scenario.config_hash(), "prior": prior}
     else:  # every scenario: name and description
         scenarios = list_scenarios()
         document = [s.to_dict() for s in scenarios]

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, Literal
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-__all__ = ["Scenario", "ConfigError", "ASTROBEE_INERTIA", "ASTROBEE_MASS", "SPLITS"]
+__all__ = ["Scenario", "ConfigError", "ASTROBEE_INERTIA", "ASTROBEE_MASS", "SPLITS", "MAX_RATE"]
 
 ASTROBEE_INERTIA: tuple[float, float, float] = (0.153428, 0.142714, 0.162303)
 """Astrobee flight GNC principal moments of inertia, kg m^2 (nasa/astrobee,
@@ -62,6 +62,11 @@ MAX_NOISE = 1e6
 """The largest standard deviation a scenario's noise may have (m or rad, after ``noise_scale``):
 larger noise is no measurement of this problem, and 1e300 overflows to NaN poses."""
 
+MAX_RATE = 100.0
+"""The largest initial angular rate a scenario may state, rad/s per axis and for a drawn magnitude
+(16 revolutions per second, far beyond any free-flyer; the truth checks of recordings and datasets
+allow 1e3)."""
+
 
 @dataclass(frozen=True)
 class Scenario:
@@ -83,8 +88,19 @@ class Scenario:
         are ``inertia * (1 + u)`` with ``u`` uniform in ``[-inertia_error, inertia_error]`` per
         axis (free dynamics only): ``inertia`` is then the nominal value an estimator is told.
         ``attitude0``: initial attitude (wxyz); ``None`` draws a uniformly random one per seed.
-        ``position0`` (m) plus per-axis Gaussian spread ``position0_std`` and constant
-        ``velocity0`` (m/s) give the translation.
+        ``position0`` (m) plus per-axis Gaussian spread ``position0_std`` and ``velocity0`` (m/s)
+        plus per-axis Gaussian spread ``velocity0_std`` give the translation.
+    Prior over the initial rate
+        Each episode's initial rate is ``m u`` (rad/s, in ``omega0_frame``): the axis ``u`` is
+        ``omega0``'s direction (``omega0_axis = "fixed"``) or uniform on the sphere
+        (``"uniform"``), and the magnitude ``m`` is ``|omega0|`` or, with ``omega0_magnitude =
+        (low, high)``, drawn log-uniformly (``omega0_magnitude_distribution``; or uniformly) in
+        that range. With neither (the defaults) every episode spins at ``omega0``. Together with
+        ``attitude0 = None``, ``position0_std``, ``velocity0_std`` and ``inertia_error`` this is
+        the scenario's stated prior over its truth (:meth:`describe_prior`); every draw comes from
+        the episode seed's own streams (``omega0``, ``velocity0``, ``position0``, ``attitude0``,
+        ``inertia``), so an episode is the same whatever else the scenario changes, and a prior
+        of zero spread draws nothing.
     Sampling
         ``dt`` (s) between samples, ``n_steps`` samples per episode, and the train/val/test
         fractions ``split`` (contiguous, in that order).
@@ -112,12 +128,16 @@ class Scenario:
     dynamics: Literal["forced", "free"] = "forced"
     omega0: tuple[float, float, float] = (0.02, 0.04, 0.06)
     omega0_frame: Literal["world", "body"] = "world"
+    omega0_axis: Literal["fixed", "uniform"] = "fixed"
+    omega0_magnitude: tuple[float, float] | None = None
+    omega0_magnitude_distribution: Literal["log-uniform", "uniform"] = "log-uniform"
     inertia: tuple[float, float, float] = ASTROBEE_INERTIA
     inertia_error: float = 0.0
     attitude0: tuple[float, float, float, float] | None = None
     position0: tuple[float, float, float] = (10.9, -6.7, 4.9)
     position0_std: float = 0.0
     velocity0: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    velocity0_std: float = 0.0
     dt: float = 0.1
     n_steps: int = 16000
     split: tuple[float, float, float] = (0.8, 0.1, 0.1)
@@ -153,6 +173,20 @@ class Scenario:
         _check(c <= a + b, "inertia", "physical: each moment <= sum of the other two", self.inertia)
         set_(self, "inertia", inertia)
         _check(self.omega0_frame in ("world", "body"), "omega0_frame", "'world' or 'body'", self.omega0_frame)
+        _check(self.omega0_axis in ("fixed", "uniform"), "omega0_axis", "'fixed' or 'uniform'", self.omega0_axis)
+        _check(self.omega0_magnitude_distribution in ("log-uniform", "uniform"), "omega0_magnitude_distribution",
+               "'log-uniform' or 'uniform'", self.omega0_magnitude_distribution)
+        if self.omega0_magnitude is not None:
+            low, high = _vector(self.omega0_magnitude, "omega0_magnitude", 2)
+            lowest = 0.0 if self.omega0_magnitude_distribution == "uniform" else 1e-9
+            _check(lowest <= low <= high <= MAX_RATE, "omega0_magnitude",
+                   f"a range (low, high) with {'0' if lowest == 0 else '0 <'} low <= high <= {MAX_RATE:g} rad/s"
+                   + (" (log-uniform: low > 0)" if lowest else ""), self.omega0_magnitude)
+            set_(self, "omega0_magnitude", (low, high))
+        _check(self.omega0_axis == "uniform" or self.omega0_magnitude is None or any(self.omega0), "omega0",
+               "non-zero when its magnitude is drawn about a fixed axis (omega0_axis = 'fixed')", self.omega0)
+        _check(all(abs(v) <= MAX_RATE for v in self.omega0), "omega0", f"a rate of at most {MAX_RATE:g} rad/s per axis",
+               self.omega0)
         e = self.inertia_error
         _check(_is_finite_number(e) and 0.0 <= e < 0.5 and (e == 0.0 or self.dynamics == "free"), "inertia_error",
                "a number in [0, 0.5), non-zero only with free dynamics", e)
@@ -164,7 +198,7 @@ class Scenario:
             norm = math.sqrt(sum(v * v for v in q))
             _check(norm > 1e-9, "attitude0", "a non-zero quaternion (wxyz) or None", self.attitude0)
             set_(self, "attitude0", tuple(v / norm for v in q))
-        for name in ("position0_std", "sigma_position", "sigma_attitude", "noise_scale",
+        for name in ("position0_std", "velocity0_std", "sigma_position", "sigma_attitude", "noise_scale",
                      "outlier_position_sigma", "noise_step_scale", "kick_sigma"):
             value = getattr(self, name)
             _check(_is_finite_number(value) and 0 <= value <= MAX_NOISE, name, f"a finite number in [0, {MAX_NOISE:g}]", value)
@@ -240,6 +274,39 @@ class Scenario:
         val_end = int(round((self.split[0] + self.split[1]) * n))
         return {"train": (0, train_end), "val": (train_end, val_end), "test": (val_end, n), "full": (0, n)}
 
+    @property
+    def has_rate_prior(self) -> bool:
+        """True when each episode draws its initial rate (class docstring, "Prior")."""
+        return self.omega0_axis == "uniform" or self.omega0_magnitude is not None
+
+    def describe_prior(self) -> dict[str, str]:
+        """The stated prior over each episode's truth, one line per quantity (SI units), as
+        ``fkn-bench scenarios NAME`` prints it."""
+        def vec(values: tuple[float, ...]) -> str:
+            return "(" + ", ".join(f"{v:g}" for v in values) + ")"
+
+        if self.has_rate_prior:
+            magnitude = (f"|omega0| = {math.sqrt(sum(v * v for v in self.omega0)):g}" if self.omega0_magnitude is None
+                         else f"{self.omega0_magnitude_distribution} in [{self.omega0_magnitude[0]:g}, "
+                              f"{self.omega0_magnitude[1]:g}]")
+            axis = "uniform on the sphere" if self.omega0_axis == "uniform" else f"fixed along {vec(self.omega0)}"
+            rate = f"magnitude {magnitude} rad/s, axis {axis} ({self.omega0_frame} frame)"
+        else:
+            rate = f"fixed {vec(self.omega0)} rad/s ({self.omega0_frame} frame)"
+        def spread(std: float) -> str:
+            return f" + N(0, {std:g}^2) per axis" if std else " (fixed)"
+
+        prior = {
+            "rate": rate,
+            "attitude": "uniform on SO(3)" if self.attitude0 is None else f"fixed {vec(self.attitude0)} (wxyz)",
+            "position": f"{vec(self.position0)} m" + spread(self.position0_std),
+            "velocity": f"{vec(self.velocity0)} m/s" + spread(self.velocity0_std),
+        }
+        if self.dynamics == "free":
+            prior["inertia"] = (f"{vec(self.inertia)} kg m^2" + (f" x (1 + U(-{self.inertia_error:g}, "
+                                f"{self.inertia_error:g})) per axis" if self.inertia_error else " (fixed)"))
+        return prior
+
     # ------------------------------------------------------------------ conversions
     def replace(self, **changes: Any) -> Scenario:
         """A copy with ``changes`` applied (validated); unknown field names raise ConfigError."""
@@ -272,7 +339,8 @@ class Scenario:
 _NO_DEFAULT = object()
 _LATER_DEFAULTS: dict[str, Any] = {
     "omega0_frame": "world", "inertia_error": 0.0, "noise_step_scale": 1.0, "kick_rate": 0.0, "kick_length": 0,
-    "kick_sigma": 0.0, "kick_decay": 5.0,
+    "kick_sigma": 0.0, "kick_decay": 5.0, "omega0_axis": "fixed", "omega0_magnitude": None,
+    "omega0_magnitude_distribution": "log-uniform", "velocity0_std": 0.0,
 }
 """Fields added after the first release, with the defaults that leave them out of the hash."""
 

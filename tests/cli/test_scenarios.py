@@ -45,14 +45,16 @@ def test_shows_one_scenario(capsys: pytest.CaptureFixture) -> None:
     assert fields["dropout"] == "0.2" and fields["burst_length"] == "50" and fields["burst_rate"] == "0.002"
     assert fields["omega0"] == "[0.02, 0.04, 0.06]"
     assert fields["config_hash"] == scenario.config_hash()
-    assert set(fields) == set(scenario.to_dict()) | {"config_hash"}
+    prior = {f"prior.{k}": v for k, v in scenario.describe_prior().items()}  # the stated prior over its truth
+    assert set(fields) == set(scenario.to_dict()) | {"config_hash"} | set(prior)
+    assert fields["prior.rate"] == "fixed (0.02, 0.04, 0.06) rad/s (world frame)" and fields["prior.attitude"] == prior["prior.attitude"]
 
 
 def test_shows_one_scenario_json(capsys: pytest.CaptureFixture) -> None:
     assert main(["scenarios", "tumble-fast", "--json"]) == 0
     document = json.loads(capsys.readouterr().out)
     scenario = get_scenario("tumble-fast")
-    assert document == scenario.to_dict() | {"config_hash": scenario.config_hash()}
+    assert document == scenario.to_dict() | {"config_hash": scenario.config_hash(), "prior": scenario.describe_prior()}
 
 
 def test_unknown_name_exits_2(capsys: pytest.CaptureFixture) -> None:

@@ -100,6 +100,8 @@ def test_observation_layout() -> None:
         ("ds2", {"noise_scale": 5.0, "measurement_every": 10, "dropout": 0.2, "n_steps": 700}),
         ("tumble-fast", {"n_steps": 300, "measurement_every": 3}),
         ("ds1-flips", {"n_steps": 600, "measurement_every": 1}),
+        ("tumble-fast", {"n_steps": 200, "omega0_axis": "uniform", "omega0_magnitude": (0.05, 1.0),
+                         "velocity0_std": 0.01}),  # a stated prior: reset(seed=s) gives episode s's truth
     ],
 )
 def test_episode_equals_generate_episodes(scenario: str, overrides: dict) -> None:

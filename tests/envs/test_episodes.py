@@ -254,3 +254,30 @@ def test_episodes_index_by_sequence() -> None:
         episodes[3]
     with pytest.raises(TypeError, match="integer or a slice"):
         episodes["a"]
+
+
+def test_a_stated_prior_draws_each_episodes_own_truth() -> None:
+    """Rate (axis uniform, magnitude log-uniform) and velocity drawn per seed from the seed's own
+    streams: inside the stated range, different between seeds, the same for a seed whatever the
+    batch or the measurement noise (common random numbers), and nothing drawn at zero spread."""
+    from fkn_bench.envs.episodes import initial_rates, initial_states
+
+    spin = get_scenario("ds1", name="spin", omega0_axis="uniform", omega0_magnitude=(0.02, 0.5), velocity0_std=0.01,
+                        n_steps=50)
+    rates = initial_rates(spin, range(200))
+    magnitude = np.linalg.norm(rates, axis=1)
+    assert (magnitude >= 0.02).all() and (magnitude <= 0.5).all() and len(np.unique(magnitude)) == 200
+    assert np.abs(np.log(magnitude).mean() - np.log(0.1)) < 0.15  # log-uniform: mean of log = log(0.1)
+    assert np.linalg.norm((rates / magnitude[:, None]).mean(axis=0)) < 0.2  # no preferred axis
+    velocity = initial_states(spin, range(200))[2]
+    assert 0.008 < velocity.std() < 0.012
+    batch = generate_episodes(spin, [0, 3, 7])
+    alone = generate_episodes(spin.replace(noise_scale=5.0), [3])
+    np.testing.assert_array_equal(batch.truth[1], alone.truth[0])
+    np.testing.assert_array_equal(batch.truth[:, 0, 7:10], initial_rates(spin, [0, 3, 7]))
+    # zero spread: exactly omega0 and velocity0 (no draw), as before the prior existed
+    ds1 = get_scenario("ds1")
+    np.testing.assert_array_equal(initial_rates(ds1, [0, 1]), np.tile(ds1.omega0, (2, 1)))
+    np.testing.assert_array_equal(initial_states(ds1, [0, 1])[2], np.zeros((2, 3)))
+    fixed_axis = initial_rates(ds1.replace(omega0_magnitude=(0.05, 0.05), omega0_magnitude_distribution="uniform"), [4])
+    np.testing.assert_allclose(fixed_axis[0], 0.05 * np.array(ds1.omega0) / np.linalg.norm(ds1.omega0), rtol=1e-15)

@@ -100,6 +100,15 @@ def test_frozen() -> None:
         ({"split": (1.0, 0.0, 0.0)}, "split", "three positive fractions"),
         ({"split": (0.9998, 0.0001, 0.0001)}, "split", "at least 2 samples"),
         ({"name": ""}, "name", "non-empty"),
+        ({"omega0_axis": "random"}, "omega0_axis", "'fixed' or 'uniform'"),
+        ({"omega0_magnitude": (0.0, 0.5)}, "omega0_magnitude", "log-uniform: low > 0"),
+        ({"omega0_magnitude": (0.5, 0.1)}, "omega0_magnitude", "low <= high"),
+        ({"omega0_magnitude": (0.1, 1e3)}, "omega0_magnitude", "<= 100 rad/s"),
+        ({"omega0_magnitude": (0.1,)}, "omega0_magnitude", "2 finite numbers"),
+        ({"omega0_magnitude_distribution": "normal"}, "omega0_magnitude_distribution", "'log-uniform' or 'uniform'"),
+        ({"omega0": (0.0, 0.0, 0.0), "omega0_magnitude": (0.1, 0.2)}, "omega0", "non-zero when its magnitude is drawn"),
+        ({"omega0": (1e3, 0.0, 0.0)}, "omega0", "at most 100 rad/s"),
+        ({"velocity0_std": -0.01}, "velocity0_std", "in [0, 1e+06]"),
     ],
 )
 def test_invalid_values_name_field_and_range(changes: dict, field: str, allowed: str) -> None:
@@ -184,6 +193,10 @@ _CHANGES = {
     "position0": (10.9, -6.7, 5.0),
     "position0_std": 0.1,
     "velocity0": (0.0, 0.0, 0.01),
+    "velocity0_std": 0.01,
+    "omega0_axis": "uniform",
+    "omega0_magnitude": (0.02, 0.5),
+    "omega0_magnitude_distribution": "uniform",
     "dt": 0.05,
     "n_steps": 16001,
     "split": (0.7, 0.2, 0.1),
@@ -217,3 +230,20 @@ def test_change_table_covers_every_generating_field() -> None:
 def test_config_hash_sensitive_to_generating_fields(field: str) -> None:
     base = Scenario(name="x", dynamics="free") if field == "inertia_error" else Scenario(name="x")
     assert base.replace(**{field: _CHANGES[field]}).config_hash() != base.config_hash()
+
+
+def test_the_prior_is_described_quantity_by_quantity() -> None:
+    """``describe_prior`` (what ``fkn-bench scenarios NAME`` prints): fixed values say so; drawn
+    ones state their distribution and range."""
+    from fkn_bench.scenarios import get_scenario
+
+    assert get_scenario("ds1").describe_prior() == {
+        "rate": "fixed (0.02, 0.04, 0.06) rad/s (world frame)", "attitude": "uniform on SO(3)",
+        "position": "(10.9, -6.7, 4.9) m (fixed)", "velocity": "(0, 0, 0) m/s (fixed)",
+    }
+    spin = Scenario(name="spin", omega0_axis="uniform", omega0_magnitude=(0.02, 0.5), velocity0_std=0.01,
+                    position0_std=1.0, dynamics="free", inertia_error=0.1)
+    prior = spin.describe_prior()
+    assert prior["rate"] == "magnitude log-uniform in [0.02, 0.5] rad/s, axis uniform on the sphere (world frame)"
+    assert prior["velocity"] == "(0, 0, 0) m/s + N(0, 0.01^2) per axis"
+    assert prior["inertia"].endswith("x (1 + U(-0.1, 0.1)) per axis") and spin.has_rate_prior
