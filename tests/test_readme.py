@@ -53,8 +53,8 @@ def test_ci_runs_the_readme_test_command() -> None:
     awk = re.search(r"command=\$\(awk '([^']*)' README.md\)", (REPO / ".ci" / "run").read_text())
     assert awk, ".ci/run no longer extracts the command with awk"
     extracted = subprocess.run(["awk", awk.group(1), str(README)], capture_output=True, text=True, check=True).stdout
-    assert extracted.strip() == ('python -m pip install torch==2.13.0 -e ".[dev]" && python -m pytest '
-                                 '&& fkn-bench bench gate --trips')
+    assert extracted.strip() == ('python -m pip install torch==2.13.0 -e ".[dev]" && fkn-bench bench compile '
+                                 '&& python -m pytest && fkn-bench bench gate --trips')
 
 
 def test_add_your_estimator_example_registers_a_conforming_estimator(monkeypatch) -> None:  # type: ignore[no-untyped-def]

@@ -7,6 +7,8 @@
   ``steps`` each benchmark records in ``extra_info``, and for a batched filter benchmark (one that
   records its ``batch``) the fraction of the *small-bmm limit* at that batch measured in the same
   run (:data:`MATMULS_PER_STEP`);
+* ``fkn-bench bench compile``: compile the EKF's numba kernels now (about 35 s in a fresh
+  environment; numba's disk cache keeps them for every later process);
 * ``fkn-bench bench gate``: the CI speed-ratio gate (:mod:`fkn_bench.gates.speed`): each check's
   ratio against the reference timed beside it, its threshold and verdict; with ``--trips`` also
   each hotspot made to do its work twice, which must fail (the test command runs
@@ -77,6 +79,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     report.add_argument("--json", action="store_true", help="print the summary as JSON")
     report.set_defaults(handler=run_report)
 
+    compile_ = kinds.add_parser("compile", help="compile the EKF's numba kernels now (cached on disk for later runs)")
+    compile_.set_defaults(handler=run_compile)
     gate = kinds.add_parser("gate", help="the CI speed-ratio gate: ratios against references timed beside them")
     gate.add_argument("--check", action="append", metavar="NAME", help="only this check (repeatable; default: all)")
     gate.add_argument("--attempts", type=int, default=3, help="measurements before a check fails (default: 3)")
@@ -246,6 +250,23 @@ def run_suite(args: argparse.Namespace) -> int:
     if output.is_file():
         print(format_summary(_load_benchmarks(output), source=str(args.json)))
     return code
+
+
+# ---------------------------------------------------------------------------------- compile
+def run_compile(args: argparse.Namespace) -> int:
+    """Compile (or load from numba's cache) every kernel of :mod:`fkn_bench.filters.kernels`."""
+    import time
+
+    from fkn_bench.filters import kernels
+
+    start = time.perf_counter()
+    try:
+        compiled = kernels.warm_up()
+    except RuntimeError as exc:
+        raise UsageError(str(exc)) from None
+    print(f"fkn-bench bench compile: {len(compiled)} kernels ready ({', '.join(compiled)}) in "
+          f"{time.perf_counter() - start:.1f} s", file=sys.stderr)
+    return 0
 
 
 # ---------------------------------------------------------------------------------- gate

@@ -79,3 +79,16 @@ def test_gate_measures_one_check(capsys: pytest.CaptureFixture) -> None:
     (outcome,) = json.loads(capsys.readouterr().out)
     assert outcome["check"] == "online-step:manual-ekf" and outcome["passed"]
     assert outcome["attempts"][0]["ratio"] >= outcome["min_ratio"]
+
+
+def test_bench_compile_readies_every_kernel(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    """``fkn-bench bench compile`` (the test command's first step) compiles, or loads from numba's
+    cache, all four EKF kernels; with the kernels off it says so, exit 2."""
+    from fkn_bench.cli import main
+    from fkn_bench.filters import kernels
+
+    assert main(["bench", "compile"]) == 0
+    assert "4 kernels ready (predict_forward, predict_backward, update_forward, update_backward)" in capsys.readouterr().err
+    monkeypatch.setattr(kernels, "ENABLED", False)
+    assert main(["bench", "compile"]) == 2
+    assert "the compiled kernels are off here" in capsys.readouterr().err
