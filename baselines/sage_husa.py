@@ -2,8 +2,8 @@
 
 A. P. Sage and G. W. Husa (1969), "Adaptive filtering with unknown prior statistics", Proc.
 Joint Automatic Control Conference, pp. 760-769: covariance matching of the innovation. The
-fading-memory form used here (the common "Sage-Husa with forgetting factor" formulation, see the
-project's REFERENCE.md) weights the sample of update ``i`` by ``b^(k-i)``:
+fading-memory form used here (the common "Sage-Husa with forgetting factor" formulation, e.g.
+the improved Sage-Husa filters of the integrated-navigation literature) weights the sample of update ``i`` by ``b^(k-i)``:
 
     d_k = (1 - b) / (1 - b^(k+1))
     R_k = (1 - d_k) R_{k-1} + d_k (nu_k nu_k^T - H P-_k H^T)          (before the gain)

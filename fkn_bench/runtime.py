@@ -2,7 +2,7 @@
 device batched work runs on (:func:`resolve_device`: ``--device``).
 
 On small machines the filter's many small operations run fastest on one thread, and with two
-threads and a busy second core a step can run ten times slower (REFERENCE.md, measured here:
+threads and a busy second core a step can run ten times slower (measured here:
 20 x 1600 EKF steps took 8 s with two threads beside another process, 0.5 s with one). The
 estimators therefore run the filter core under :func:`torch_threads` with ``FILTER_THREADS``
 threads; set the environment variable ``FKN_BENCH_THREADS`` to change it.

@@ -1,4 +1,4 @@
-"""Layer rules (issue 14, item 5; ``DESIGN.md``, "Layers"): imports point down only, and no module
+"""Layer rules (issue 14, item 5; README, "Benchmarks and CI gates"): imports point down only, and no module
 sits in an import cycle.
 
 Every module of ``fkn_bench`` is parsed (``ast``, nothing is imported), the mapped packages
@@ -18,7 +18,7 @@ to top (:data:`LAYERS`; a package may import its own layer and the layers below)
     users          reproduce, sweep, gates (they use harness + training)
     cli            cli (and fkn_bench.__main__)
 
-``DESIGN.md`` draws harness above "reproduce, sweep, gates" but says they "use harness +
+The first design of the layers drew harness above "reproduce, sweep, gates" but says they "use harness +
 training", and the issue orders "... flexkalmannet/baselines < harness < cli": the test follows
 the words (what the code does: the accuracy gate runs harness grids, reproduce draws with the
 harness's plots), so reproduce, sweep and gates sit between the harness and the CLI.

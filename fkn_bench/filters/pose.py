@@ -3,7 +3,7 @@ and from 7-dim quaternion-and-position innovations to 6-dim pose innovations (nu
 
 For a unit quaternion ``q``, a small change ``dq`` is the world-frame rotation
 ``dtheta = 2 Theta(q)^T dq`` and conversely ``dq = Theta(q) dtheta / 2`` (``Theta`` is the paper's
-eq. 11; REFERENCE.md: map the quaternion block with ``J = 2 Xi(q)^T``). The additive EKF's 13x13
+eq. 11; the quaternion block maps with ``J = 2 Xi(q)^T``, Markley & Crassidis 2014, ch. 2). The additive EKF's 13x13
 covariance is singular along ``q``; the 12x12 error covariance is what consistency (NEES) uses.
 The congruences ``T P T^T`` are symmetric only to rounding: every covariance returned here is
 symmetrised (:func:`fkn_bench.linalg.symmetrize`).

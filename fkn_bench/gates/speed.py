@@ -1,7 +1,7 @@
 """The speed-ratio gate: each timed workload against a fixed reference run beside it.
 
-Absolute timings on shared machines vary by tens of percent between identical runs (REFERENCE.md),
-so this gate never compares a time with a stored one. Each :class:`RatioCheck` times the code
+Absolute timings on shared machines vary by tens of percent between identical runs (measured
+here), so this gate never compares a time with a stored one. Each :class:`RatioCheck` times the code
 under test (the *candidate*) and a fixed *reference* that does the same work the plain way, in
 the same process, interleaved, and gates on ``ratio = reference time / candidate time`` (how many
 times faster the candidate is than its reference; higher is better). The reference of

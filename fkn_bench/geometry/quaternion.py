@@ -149,7 +149,7 @@ def error_rotation_vector(q_true: ArrayF, q_est: ArrayF) -> ArrayF:
 def angle_between(q1: ArrayF, q2: ArrayF) -> ArrayF:
     """Angle (rad, in ``[0, pi]``) of the rotation between two attitudes, sign-safe.
 
-    ``2 atan2(|vec(q_e)|, |w(q_e)|)`` with ``q_e = q1^-1 (x) q2`` (REFERENCE.md, metrics).
+    ``2 atan2(|vec(q_e)|, |w(q_e)|)`` with ``q_e = q1^-1 (x) q2``.
     """
     qe = multiply(conjugate(q1), q2)
     return 2.0 * np.arctan2(np.linalg.norm(qe[..., 1:], axis=-1), np.abs(qe[..., 0]))

@@ -4,7 +4,7 @@ rows (never ranked: they come from the paper's own recording, not from this benc
 Source: M. D. Pinheiro-Torres Vogt, M. Huwald, M. K. Ben-Larbi and E. Stoll, "FlexKalmanNet: A
 Modular AI-Enhanced Kalman Filter Framework Applied to Spacecraft Motion Estimation", table
 "RMSE of each variable of the state vector for EKF runs using learned parameters from DS1 and
-using the manually tuned parameters, both run on DS1" (REFERENCE.md, "Reported"). The paper gives
+using the manually tuned parameters, both run on DS1" (the paper's results section). The paper gives
 per-component RMSE only, to three decimals; its test loss (0.0067 for DS1) is an MSE on
 z-score-normalised positions and is not comparable with the 13-state RMSE here.
 """

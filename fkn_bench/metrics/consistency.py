@@ -4,13 +4,14 @@ References: Y. Bar-Shalom, X. R. Li and T. Kirubarajan, *Estimation with Applica
 and Navigation*, Wiley (2001), section 5.4 (normalized estimation error squared, NEES
 ``e' P^-1 e``; normalized innovation squared, NIS ``nu' S^-1 nu``; average NEES over ``N``
 independent runs, with ``N * ANEES ~ chi2(N n)`` for a consistent filter with an ``n``-dim error,
-tested against a two-sided probability region). REFERENCE.md gives the 95% intervals used as
-test values: ``n = 12, N = 50: [10.68, 13.40]``; ``n = 3, N = 50: [2.36, 3.72]``; NIS
+tested against a two-sided probability region). The 95% intervals of chi2 used as test
+values: ``n = 12, N = 50: [10.68, 13.40]``; ``n = 3, N = 50: [2.36, 3.72]``; NIS
 ``n = 6, N = 50: [5.08, 7.00]``.
 
 The NEES here is on the 12-dim error ``[dtheta, dr, dw, dv]``
 (:func:`fkn_bench.metrics.errors.error_state`) with the estimator's 12x12 error covariance: the
-additive EKF's 13x13 state covariance is singular along the quaternion (REFERENCE.md). The NIS is
+additive EKF's 13x13 state covariance is singular along the quaternion
+(:mod:`fkn_bench.filters.pose`). The NIS is
 on the 6-dim pose innovation ``[dtheta, dr]`` that every estimator reports at its update steps.
 
 Quantiles of chi2(k) are ``2 gammaincinv(k / 2, p)`` (what ``scipy.stats.chi2.ppf`` computes;

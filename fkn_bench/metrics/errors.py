@@ -9,7 +9,7 @@ matter to any metric built on them (squares, norms and quadratic forms).
 
 ``q`` and ``-q`` are the same attitude: the estimated quaternion is sign-aligned to the truth
 before component errors are taken, and attitude error angles are sign-safe
-(``2 atan2(|vec(q_e)|, |w(q_e)|)``, REFERENCE.md "Metrics"), so a 180-degree flip of the
+(``2 atan2(|vec(q_e)|, |w(q_e)|)``, :func:`fkn_bench.geometry.quaternion.angle_between`), so a 180-degree flip of the
 quaternion *sign* reads as 0 deg.
 """
 
@@ -69,7 +69,7 @@ def error_state(truth: ArrayF, means: ArrayF) -> ArrayF:
 
 def attitude_error_deg(q_true: ArrayF, q_est: ArrayF) -> ArrayF:
     """Attitude error angle in degrees, ``(...,)``, in ``[0, 180]``; sign-safe
-    (``2 atan2(|vec(q_e)|, |w(q_e)|)`` with ``q_e = q_true^-1 (x) q_est``, REFERENCE.md)."""
+    (``2 atan2(|vec(q_e)|, |w(q_e)|)`` with ``q_e = q_true^-1 (x) q_est``)."""
     return np.degrees(quat.angle_between(np.asarray(q_true, dtype=float), np.asarray(q_est, dtype=float)))
 
 

@@ -1,6 +1,7 @@
 """Settling time: the first time after which an error stays inside a band for the rest of a run.
 
-Definition (REFERENCE.md "Metrics", band form ``max(abs tol, 2% of peak)``):
+Definition (the settling time of control engineering, e.g. Ogata, Modern Control Engineering,
+2010, with the band ``max(abs tol, 2% of peak)``):
 
 1. The error magnitude ``e_k`` of a state group (e.g. the attitude error angle) is smoothed by a
    centred moving root mean square over ``window`` steps (``s_k = sqrt(mean(e_j^2))`` for

@@ -1,6 +1,7 @@
 """Divergence of a run: the stability verdict reported apart from accuracy.
 
-A run is flagged diverged (REFERENCE.md "Metrics") when any of these holds:
+A run is flagged diverged (this benchmark's rule; the NEES test after Bar-Shalom, Li &
+Kirubarajan 2001, sec. 5.4) when any of these holds:
 
 * ``non_finite``: the estimate (or its error covariance, when reported) holds NaN or infinity in
   the scored window;

@@ -4,8 +4,8 @@
   quaternion compared with the true one of the same sign (FlexKalmanNet section 4.2), excluding
   the first ``loss_cut`` steps of each sequence (the paper's loss cut, 100). Its square root is
   the "13-state RMSE" the paper reports as training, validation and test loss.
-* ``nll``: the innovation negative log-likelihood, which needs no ground truth (REFERENCE.md;
-  e.g. Abbeel et al., "Discriminative training of Kalman filters", RSS 2005; Sarkka, Bayesian
+* ``nll``: the innovation negative log-likelihood, which needs no ground truth (e.g.
+  Abbeel et al., "Discriminative training of Kalman filters", RSS 2005; Sarkka, Bayesian
   Filtering and Smoothing, 2013, section 12.3): the mean over update steps after ``loss_cut`` of
   ``1/2 [m log 2 pi + log det S_k + nu_k^T S_k^-1 nu_k]``.
 * ``gaussian-nll``: the Gaussian negative log-likelihood of the true state under the estimate and

@@ -21,7 +21,7 @@ Examples
   proposed filter close to KFTCM, its ``R`` closer to the truth than the nominal one.
 * **Sage-Husa** -- A. P. Sage and G. W. Husa (1969), "Adaptive filtering with unknown prior
   statistics", Proc. JACC, 760-769: covariance matching of the innovation, the estimator of ``R``
-  given the rest of the model (here with the fading memory ``b`` of the project's REFERENCE.md).
+  given the rest of the model (here with the fading memory ``b`` of :mod:`fkn_bench.baselines.sage_husa`).
   The standard setting of that estimator -- the process model right, ``R`` unknown -- on the
   same tracking model: ``Q`` given as ``6.5 Q1`` (the truth's mean, +-8 %), ``R`` started at
   ``100 I``. Claims: ``R^`` converges to the (slowly varying) true ``R``, and the filter to the

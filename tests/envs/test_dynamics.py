@@ -191,7 +191,7 @@ def test_free_tumble_conserves_energy_and_momentum(full_tumbles: dict, key: str,
 @pytest.mark.parametrize("key", ["ds1-rate", "ds2-rate", "ds1-rate-identity"])
 def test_free_tumble_is_not_constant_rate(full_tumbles: dict, key: str) -> None:
     """Astrobee's inertia is not isotropic: over the 1600 s episode the world-frame rate wobbles
-    by several percent (REFERENCE.md: ~14%), unlike forced rotation."""
+    by several percent (about 14% for ds1's rate), unlike forced rotation."""
     _, w = full_tumbles[key]
     variation = np.linalg.norm(w - w[0], axis=1) / np.linalg.norm(w[0])
     assert variation.max() > 0.05

@@ -10,7 +10,7 @@ import torch
 
 @pytest.fixture(autouse=True, scope="module")
 def _one_torch_thread() -> Iterator[None]:
-    """Run the filter core on one thread (REFERENCE.md: fastest on these small machines) and
+    """Run the filter core on one thread (fastest on these small machines: :mod:`fkn_bench.runtime`) and
     restore the previous setting afterwards."""
     previous = torch.get_num_threads()
     torch.set_num_threads(1)

@@ -1,4 +1,4 @@
-"""NEES, NIS, ANEES and chi-square bounds (REFERENCE.md numbers; Bar-Shalom et al. 2001)."""
+"""NEES, NIS, ANEES and chi-square bounds (Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4)."""
 
 from __future__ import annotations
 
