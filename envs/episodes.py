@@ -7,6 +7,7 @@ identical values for the same scenario and seeds, whatever the chunk sizes or ba
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -133,19 +134,20 @@ def initial_rates(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
     base = np.array(scenario.omega0, dtype=float)
     if not scenario.has_rate_prior:
         return np.tile(base, (len(seeds), 1))
+
+    def norm(v: ArrayF) -> float:  # element-wise and libm: the same bits on every CPU (no BLAS dot)
+        return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
     out = np.empty((len(seeds), 3))
     for row, seed in enumerate(seeds):
         rng = stream(seed, "omega0")
-        if scenario.omega0_axis == "uniform":
-            axis = rng.standard_normal(3)
-            axis /= np.linalg.norm(axis)
-        else:
-            axis = base / np.linalg.norm(base)
+        axis = rng.standard_normal(3) if scenario.omega0_axis == "uniform" else base
+        axis = axis / norm(axis)
         if scenario.omega0_magnitude is None:
-            magnitude = float(np.linalg.norm(base))
+            magnitude = norm(base)
         elif scenario.omega0_magnitude_distribution == "log-uniform":
             low, high = scenario.omega0_magnitude
-            magnitude = float(np.exp(rng.uniform(np.log(low), np.log(high))))
+            magnitude = math.exp(rng.uniform(math.log(low), math.log(high)))
         else:
             magnitude = float(rng.uniform(*scenario.omega0_magnitude))
         out[row] = magnitude * axis

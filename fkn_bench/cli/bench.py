@@ -7,7 +7,7 @@
   ``steps`` each benchmark records in ``extra_info``, and for a batched filter benchmark (one that
   records its ``batch``) the fraction of the *small-bmm limit* at that batch measured in the same
   run (:data:`MATMULS_PER_STEP`);
-* ``fkn-bench bench compile``: compile the EKF's numba kernels now (about 35 s in a fresh
+* ``fkn-bench bench compile``: compile the EKF's numba kernels now (about 45 s in a fresh
   environment; numba's disk cache keeps them for every later process);
 * ``fkn-bench bench gate``: the CI speed-ratio gate (:mod:`fkn_bench.gates.speed`): each check's
   ratio against the reference timed beside it, its threshold and verdict; with ``--trips`` also

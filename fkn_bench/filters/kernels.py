@@ -21,8 +21,8 @@ Compilation (``numba.njit``, ``cache=True``) happens on first use, a few seconds
 is cached on disk beside this file (or in numba's user cache directory where that is
 read-only). :data:`ENABLED` switches the kernels off (the torch operations then run everywhere),
 which is how the tests compare the two. :func:`warm_up` (``fkn-bench bench compile``) compiles
-every kernel at once: about 35 s on the 2-core AMD EPYC in a fresh environment (17 s of it
-the two forward kernels), a second once cached. The test command runs it before pytest, so that
+every kernel at once: 45 s on the 2-core AMD EPYC in a fresh environment (17.5 s of it the
+two forward kernels), under a second once cached. The test command runs it before pytest, so that
 the two test workers do not both compile the kernels inside whichever tests first reach them.
 """
 
