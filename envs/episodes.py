@@ -100,6 +100,9 @@ class Episodes:
         """The named split (``train``, ``val``, ``test`` or ``full``) of full-length episodes."""
         if self.start != 0 or self.n_steps != self.scenario.n_steps:
             raise ValueError("split() needs full-length episodes (generate with split='full')")
+        if self.scenario.split_mode == "episodes" and name in ("train", "val"):
+            raise ValueError(f"scenario '{self.scenario.name}' splits by episodes: its {name} split is other "
+                             f"episodes (generate_episodes(scenario, n, split={name!r})), not a piece of these")
         return self.window(*_split_bounds(self.scenario, name))
 
 
@@ -280,7 +283,9 @@ def generate_episodes(
     """:class:`Episodes` (batch axis first) of ``scenario`` (a registered name or a
     :class:`Scenario`) for ``seeds`` (an int ``N`` means seeds ``0 .. N-1``; else a list of
     seeds, each an integer in ``[0, 2**63)``, :func:`fkn_bench.inputs.check_seed`), whole or one
-    ``split`` (``full``, ``train``, ``val`` or ``test``)."""
+    ``split`` (``full``, ``train``, ``val`` or ``test``). For an episode-split scenario
+    (``split_mode = "episodes"``) a split is whole episodes and ``seeds`` index the split's own
+    pool: the returned ``seeds`` are the episode seeds, :meth:`Scenario.split_seeds`."""
     scenario = get_scenario(scenario)
     start, stop = _split_bounds(scenario, split)
     if isinstance(seeds, (int, np.integer)) and not isinstance(seeds, (bool, np.bool_)):
@@ -291,6 +296,7 @@ def generate_episodes(
         seed_list = [check_seed(s, f"seeds[{i}]") for i, s in enumerate(seeds)]
     if not seed_list:
         raise ValueError("at least one seed is required")
+    seed_list = scenario.split_seeds(split, seed_list)  # episode-split scenarios: the split's own pool
     source = EpisodeStream(scenario, seed_list)
     source.seek(start)
     times, truth, measurements, valid = source.advance(stop - start)

@@ -1,8 +1,16 @@
 """The registry of named scenarios, and scenarios defined in TOML files.
 
-Built-in scenarios follow the FlexKalmanNet paper (sections 4 and 5): ``ds1`` and ``ds2`` are its
-two data sets, ``ds1-noise5x`` and ``ds1-gap100`` its robustness runs; the others stress what the
-paper does not (dropout, free tumbling with Astrobee's inertia, sign flips and outliers).
+Two kinds of built-in scenarios:
+
+* **Prior families** (the benchmark's headline): ``spin`` (forced rotation) and ``free-tumble``
+  (torque-free rigid body), each with five stress variants (:data:`PRIOR_FAMILIES`). Every episode
+  draws its own truth from the scenario's stated prior (rate magnitude and axis, attitude,
+  position, drift, principal moments; ``fkn-bench scenarios NAME`` prints it) and train, val and
+  test are disjoint sets of episodes, so a learned filter is scored on truths it never saw.
+* **The paper's scenarios** (Pinheiro-Torres Vogt et al., FlexKalmanNet, sections 4 and 5): ``ds1`` and
+  ``ds2`` are its two data sets (one fixed rate, zero velocity; train/val/test are pieces of one
+  trajectory), ``ds1-noise5x`` and ``ds1-gap100`` its robustness runs; the others stress what the
+  paper does not (dropout, free tumbling with Astrobee's inertia, sign flips and outliers).
 
 TOML format (``fkn-bench ... --scenario-file my.toml``)::
 
@@ -34,6 +42,9 @@ __all__ = [
     "load_scenarios",
     "BUILTIN_SCENARIOS",
     "DS1_NOISE_STEP",
+    "SPIN",
+    "FREE_TUMBLE",
+    "PRIOR_FAMILIES",
 ]
 
 
@@ -249,6 +260,75 @@ DS1_NOISE_STEP = _DS1.replace(
 """Issue 21's scenario where noise adaptation should pay: its own model family, so that the
 learned and tuned estimators run there with parameters trained on its training split."""
 register_scenario(DS1_NOISE_STEP)
+
+_PRIOR = dict(
+    split_mode="episodes",
+    n_steps=3000,
+    attitude0=None,
+    omega0_axis="uniform",
+    position0_std=1.0,
+    velocity0_std=0.01,
+    tags=("prior",),
+)
+"""What the two prior families share: every split whole episodes from disjoint seed pools, 300 s
+episodes (3000 samples at 10 Hz, a measurement every second), a uniformly random attitude and rate
+axis, a start within about a metre of the paper's position (N(0, 1 m^2) per axis) and a drift of
+N(0, (1 cm/s)^2) per axis (about 1.6 cm/s typical speed, 5 m over an episode)."""
+
+SPIN = _DS1.replace(
+    name="spin",
+    description=(
+        "Prior family: forced rotation at a rate drawn per episode, magnitude log-uniform in "
+        "[0.03, 0.6] rad/s (1.7 to 34 deg/s, ds1's 0.075 and ds2's 0.374 inside) about a uniformly "
+        "random axis, a drift of 1 cm/s per axis and a metre of position spread; 300 s episodes, "
+        "train/val/test from disjoint seed pools"
+    ),
+    omega0_magnitude=(0.03, 0.6),
+    model_family="spin",
+    **_PRIOR,
+)
+"""The forced-spin prior family's headline scenario (its stress variants: :data:`PRIOR_FAMILIES`)."""
+
+FREE_TUMBLE = SPIN.replace(
+    name="free-tumble",
+    description=(
+        "Prior family: torque-free tumble of an Astrobee-class body, principal moments Astrobee's "
+        "x U(0.9, 1.1) per axis, body rate magnitude log-uniform in [0.05, 0.6] rad/s about a "
+        "uniformly random body axis (spins near the intermediate axis included: about 3% of "
+        "episodes start within 15 deg of it), the same translation prior as spin; 300 s episodes, "
+        "train/val/test from disjoint seed pools"
+    ),
+    dynamics="free",
+    omega0_frame="body",
+    omega0_magnitude=(0.05, 0.6),
+    inertia_error=0.1,
+    model_family="free-tumble",
+)
+"""The free-tumble prior family's headline scenario."""
+
+_STRESS = (
+    ("noise5x", "five times the measurement noise (0.5 m, 0.5 rad)", dict(noise_scale=5.0)),
+    ("gap100", "a measurement every 100 steps (10 s)", dict(measurement_every=100)),
+    ("dropout", "20% random dropout and bursts of 50 missing steps (probability 0.002 per step)",
+     dict(dropout=0.2, burst_rate=0.002, burst_length=50)),
+    ("flips", "each measured quaternion negated with probability 0.5 and 1% gross outliers",
+     dict(sign_flip_probability=0.5, outlier_fraction=0.01)),
+    ("noise-step", "five times the measurement noise in the middle third of each episode",
+     dict(noise_step_scale=5.0)),
+)
+"""The stress variants of each prior family: what they change and the fields that change it. They
+keep their family's ``model_family``: the learned and tuned estimators meet them untrained."""
+
+PRIOR_FAMILIES: dict[str, tuple[str, ...]] = {}
+"""Each prior family's scenarios, headline first (``{"spin": ("spin", "spin-noise5x", ...)}``)."""
+for _family in (SPIN, FREE_TUMBLE):
+    register_scenario(_family)
+    _members = [_family.name]
+    for _suffix, _what, _fields in _STRESS:
+        register_scenario(_family.replace(name=f"{_family.name}-{_suffix}", description=f"{_family.name} with {_what}",
+                                          tags=("prior", "stress"), **_fields))
+        _members.append(f"{_family.name}-{_suffix}")
+    PRIOR_FAMILIES[_family.model_family] = tuple(_members)
 
 BUILTIN_SCENARIOS: frozenset[str] = frozenset(_REGISTRY)
 """Names of the built-in scenarios, which a scenario file redefines only with ``override = true``."""

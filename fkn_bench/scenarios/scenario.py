@@ -24,7 +24,8 @@ from typing import TYPE_CHECKING, Any, Literal
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-__all__ = ["Scenario", "ConfigError", "ASTROBEE_INERTIA", "ASTROBEE_MASS", "SPLITS", "MAX_RATE"]
+__all__ = ["Scenario", "ConfigError", "ASTROBEE_INERTIA", "ASTROBEE_MASS", "SPLITS", "MAX_RATE", "SEED_POOLS",
+           "POOL_SIZE"]
 
 ASTROBEE_INERTIA: tuple[float, float, float] = (0.153428, 0.142714, 0.162303)
 """Astrobee flight GNC principal moments of inertia, kg m^2 (nasa/astrobee,
@@ -33,6 +34,17 @@ ASTROBEE_MASS = 9.5838
 """Astrobee flight GNC mass, kg (same source)."""
 
 SPLITS: tuple[str, ...] = ("train", "val", "test", "full")
+
+POOL_SIZE = 2**61
+"""Episodes per split of an episode-split scenario (``split_mode = "episodes"``)."""
+SEED_POOLS: dict[str, int] = {"test": 0, "full": 0, "train": 2**62, "val": 2**62 + POOL_SIZE}
+"""First episode seed of each split's pool in an episode-split scenario: episode ``i`` of split
+``s`` is the episode of seed ``SEED_POOLS[s] + i``. Test (and full) episodes are seeds
+``[0, 2**62)``, so that a leaderboard's seed ``s`` and ``reset(seed=s)`` are test episode ``s``;
+training and validation episodes come from the disjoint ranges ``[2**62, 2**62 + 2**61)`` and
+``[2**62 + 2**61, 2**63)``. Every episode seed keys its own random streams
+(:func:`fkn_bench.envs.measurements.stream`, a ``numpy.random.SeedSequence`` of the seed), so the
+pools are independent streams and no test truth is ever a training truth."""
 
 
 class ConfigError(ValueError):
@@ -102,8 +114,11 @@ class Scenario:
         ``inertia``), so an episode is the same whatever else the scenario changes, and a prior
         of zero spread draws nothing.
     Sampling
-        ``dt`` (s) between samples, ``n_steps`` samples per episode, and the train/val/test
-        fractions ``split`` (contiguous, in that order).
+        ``dt`` (s) between samples, ``n_steps`` samples per episode. ``split_mode = "time"`` (the
+        paper's): train, val and test are contiguous pieces of each episode, of fractions
+        ``split`` in that order. ``split_mode = "episodes"`` (the prior families): every split is
+        whole episodes, drawn from disjoint seed pools (:data:`SEED_POOLS`), so that no truth
+        trained or validated on is ever tested on; ``split`` is then unused.
     Measurements
         Position noise N(0, (``noise_scale`` * ``sigma_position``)^2) per axis (m); attitude
         noise as an error rotation ``exp(e/2) (x) q`` with e ~ N(0, (``noise_scale`` *
@@ -141,6 +156,7 @@ class Scenario:
     dt: float = 0.1
     n_steps: int = 16000
     split: tuple[float, float, float] = (0.8, 0.1, 0.1)
+    split_mode: Literal["time", "episodes"] = "time"
     sigma_position: float = 0.1
     sigma_attitude: float = 0.1
     noise_scale: float = 1.0
@@ -226,6 +242,7 @@ class Scenario:
                "'forced' when torque bursts are on (kick_rate, kick_length, kick_sigma)", self.dynamics)
         _check(not (self.dropout == 1.0), "dropout", "a number in [0, 1) (1 removes every measurement)",
                self.dropout)
+        _check(self.split_mode in ("time", "episodes"), "split_mode", "'time' or 'episodes'", self.split_mode)
         split = _vector(self.split, "split", 3)
         _check(all(v > 0 for v in split) and abs(sum(split) - 1.0) < 1e-9, "split",
                "three positive fractions (train, val, test) summing to 1", self.split)
@@ -268,11 +285,34 @@ class Scenario:
         return factor
 
     def split_bounds(self) -> dict[str, tuple[int, int]]:
-        """Half-open step ranges ``[start, stop)`` of the train, val, test and full splits."""
+        """Half-open step ranges ``[start, stop)`` of the train, val, test and full splits (every
+        one ``[0, n_steps)`` with ``split_mode = "episodes"``: a split is then a pool of whole
+        episodes, :meth:`split_seeds`)."""
         n = self.n_steps
+        if self.split_mode == "episodes":
+            return {name: (0, n) for name in SPLITS}
         train_end = int(round(self.split[0] * n))
         val_end = int(round((self.split[0] + self.split[1]) * n))
         return {"train": (0, train_end), "val": (train_end, val_end), "test": (val_end, n), "full": (0, n)}
+
+    def split_seeds(self, split: str, seeds: Iterable[int]) -> list[int]:
+        """The episode seeds of episodes ``seeds`` of ``split``: the seeds themselves with
+        ``split_mode = "time"`` (every split is a piece of the same episodes); with ``"episodes"``,
+        ``SEED_POOLS[split] + i`` for episode ``i`` of the split's pool (:data:`SEED_POOLS`).
+        Raises :class:`ConfigError` for an index outside the pool: a test seed of ``2**62`` or
+        more would be a training or validation episode."""
+        if split not in SPLITS:
+            raise ConfigError(f"unknown split {split!r}; valid splits: {', '.join(SPLITS)}")
+        seeds = [int(s) for s in seeds]
+        if self.split_mode == "time":
+            return seeds
+        size = 2**62 if SEED_POOLS[split] == 0 else POOL_SIZE
+        for seed in seeds:
+            if not 0 <= seed < size:
+                raise ConfigError(
+                    f"episode {seed} is outside the {split} pool of episode-split scenario '{self.name}': its "
+                    f"{split} episodes are 0 .. {size - 1} (larger seeds are other splits' episodes)")
+        return [SEED_POOLS[split] + seed for seed in seeds]
 
     @property
     def has_rate_prior(self) -> bool:
@@ -340,7 +380,7 @@ _NO_DEFAULT = object()
 _LATER_DEFAULTS: dict[str, Any] = {
     "omega0_frame": "world", "inertia_error": 0.0, "noise_step_scale": 1.0, "kick_rate": 0.0, "kick_length": 0,
     "kick_sigma": 0.0, "kick_decay": 5.0, "omega0_axis": "fixed", "omega0_magnitude": None,
-    "omega0_magnitude_distribution": "log-uniform", "velocity0_std": 0.0,
+    "omega0_magnitude_distribution": "log-uniform", "velocity0_std": 0.0, "split_mode": "time",
 }
 """Fields added after the first release, with the defaults that leave them out of the hash."""
 

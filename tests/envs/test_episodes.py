@@ -281,3 +281,29 @@ def test_a_stated_prior_draws_each_episodes_own_truth() -> None:
     np.testing.assert_array_equal(initial_states(ds1, [0, 1])[2], np.zeros((2, 3)))
     fixed_axis = initial_rates(ds1.replace(omega0_magnitude=(0.05, 0.05), omega0_magnitude_distribution="uniform"), [4])
     np.testing.assert_allclose(fixed_axis[0], 0.05 * np.array(ds1.omega0) / np.linalg.norm(ds1.omega0), rtol=1e-15)
+
+
+def test_an_episode_split_scenario_draws_each_split_from_its_own_seed_pool() -> None:
+    """split_mode = "episodes": every split is whole episodes; train and val come from their own
+    seed pools, so no episode (and no drawn truth) is shared with the test split, and the test
+    split and the full episode of seed s are the same episode (what ``reset(seed=s)`` plays)."""
+    from fkn_bench.scenarios import POOL_SIZE, SEED_POOLS, ConfigError
+
+    spin = get_scenario("spin", n_steps=40)
+    test, full = generate_episodes(spin, 3, split="test"), generate_episodes(spin, 3, split="full")
+    train, val = generate_episodes(spin, 3, split="train"), generate_episodes(spin, 3, split="val")
+    assert test.seeds == full.seeds == (0, 1, 2) and test.start == 0 and test.n_steps == 40
+    np.testing.assert_array_equal(test.truth, full.truth)
+    assert train.seeds == tuple(SEED_POOLS["train"] + i for i in range(3))
+    assert val.seeds == tuple(SEED_POOLS["val"] + i for i in range(3))
+    rates = [tuple(split.truth[:, 0, 7]) for split in (test, train, val)]
+    assert len({r for split in rates for r in split}) == 9  # nine distinct truths
+    with pytest.raises(ConfigError, match="outside the test pool"):
+        generate_episodes(spin, [SEED_POOLS["train"]], split="test")
+    with pytest.raises(ConfigError, match="outside the train pool"):
+        generate_episodes(spin, [POOL_SIZE], split="train")
+    with pytest.raises(ValueError, match="splits by episodes"):
+        full.split("train")
+    # the paper's time split is untouched: the seeds are the episodes, splits are pieces of them
+    ds1 = get_scenario("ds1", n_steps=100)
+    assert generate_episodes(ds1, 2, split="train").seeds == (0, 1)

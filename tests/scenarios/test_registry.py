@@ -245,3 +245,25 @@ def test_override_true_replaces_a_built_in_scenario(tmp_path: Path, isolated_reg
     path = _write(tmp_path, "[scenario.ds1]\noverride = true\nbase = \"ds1\"\nnoise_scale = 5.0\n")
     (s,) = load_scenarios(path)
     assert s.name == "ds1" and get_scenario("ds1").noise_scale == 5.0
+
+
+def test_prior_families_state_their_prior_and_keep_their_family() -> None:
+    from fkn_bench.scenarios import PRIOR_FAMILIES
+
+    assert set(PRIOR_FAMILIES) == {"spin", "free-tumble"}
+    for family, names in PRIOR_FAMILIES.items():
+        head = get_scenario(names[0])
+        assert head.name == family and "prior" in head.tags and head.split_mode == "episodes"
+        assert head.has_rate_prior and head.omega0_axis == "uniform" and head.attitude0 is None
+        low, high = head.omega0_magnitude
+        assert high / low >= 10 and head.velocity0_std > 0 and head.position0_std > 0
+        assert len(names) == 6
+        for name in names[1:]:  # stress variants: the family's prior, untrained-for measurement streams
+            variant = get_scenario(name)
+            assert variant.model_family == family and variant.split_mode == "episodes"
+            assert variant.omega0_magnitude == head.omega0_magnitude and "stress" in variant.tags
+    spin, tumble = get_scenario("spin"), get_scenario("free-tumble")
+    ds1_rate, ds2_rate = (sum(v * v for v in get_scenario(n).omega0) ** 0.5 for n in ("ds1", "ds2"))
+    assert spin.omega0_magnitude[0] < ds1_rate < ds2_rate < spin.omega0_magnitude[1]  # covers the paper's rates
+    assert spin.dynamics == "forced" and tumble.dynamics == "free" and tumble.inertia_error > 0
+    assert "prior" in get_scenario("free-tumble-flips").tags

@@ -200,6 +200,7 @@ _CHANGES = {
     "dt": 0.05,
     "n_steps": 16001,
     "split": (0.7, 0.2, 0.1),
+    "split_mode": "episodes",
     "sigma_position": 0.2,
     "sigma_attitude": 0.2,
     "noise_scale": 5.0,
