@@ -345,6 +345,12 @@ class Scenario:
         if self.dynamics == "free":
             prior["inertia"] = (f"{vec(self.inertia)} kg m^2" + (f" x (1 + U(-{self.inertia_error:g}, "
                                 f"{self.inertia_error:g})) per axis" if self.inertia_error else " (fixed)"))
+        if self.split_mode == "episodes":
+            prior["splits"] = ("whole episodes from disjoint seed pools: test (and reset(seed=s)) episode s is seed s, "
+                               "train episode i seed 2**62 + i, val episode i seed 2**62 + 2**61 + i")
+        else:
+            train, val, test = (f"{100 * f:g}%" for f in self.split)
+            prior["splits"] = f"pieces of each episode: train the first {train}, val the next {val}, test the last {test}"
         return prior
 
     # ------------------------------------------------------------------ conversions

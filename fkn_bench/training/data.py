@@ -7,6 +7,11 @@ cut every ``stride`` samples; a batch is a set of windows that run through the f
 parallel as its batch axis. Validation runs the filter over the whole val split, as evaluation
 does over the test split.
 
+An episode-split scenario (a prior family, ``split_mode = "episodes"``) has no single recording:
+its data set is at least :data:`PRIOR_EPISODES` whole episodes of its train pool (each a different
+truth drawn from its prior), cut into windows, and as many episodes of its val pool for validation,
+episodes ``dataset_seed, dataset_seed + 1, ...`` of each pool; its test episodes are never seen.
+
 A data set may mix scenarios (a sequence of them, with one ``dt``): its windows are those of every
 scenario, and validation runs over every scenario's val split. A mixture trains one estimator for
 several kinds of motion (e.g. constant rate and free tumbling).
@@ -31,7 +36,7 @@ from torch import Tensor
 
 from fkn_bench.scenarios import Scenario, get_scenario
 
-__all__ = ["Sequences", "TrainingData", "training_data"]
+__all__ = ["PRIOR_EPISODES", "Sequences", "TrainingData", "episodes_of", "training_data"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,10 +65,22 @@ class Sequences:
         return Sequences(self.measurements.to(device), self.mask.to(device), self.truth.to(device))
 
 
+PRIOR_EPISODES = 32
+"""The fewest episodes of each pool (train, val) in an episode-split scenario's data set: 32
+truths drawn from the prior for training (96 windows of 800 samples from 300 s episodes) and 32
+for validation, where the paper's protocol has four episodes of one fixed truth."""
+
+
+def episodes_of(scenario: Scenario, episodes: int) -> int:
+    """Episodes of ``scenario`` in a data set of ``episodes`` configured: at least
+    :data:`PRIOR_EPISODES` for an episode-split scenario (module docstring)."""
+    return max(int(episodes), PRIOR_EPISODES) if scenario.split_mode == "episodes" else int(episodes)
+
+
 def _split(scenario: Scenario, split: str, every: int, dtype: torch.dtype, episodes: int = 1) -> Sequences:
     from fkn_bench.envs import generate_episodes
 
-    seeds = [scenario.dataset_seed + i for i in range(episodes)]
+    seeds = [scenario.dataset_seed + i for i in range(episodes_of(scenario, episodes))]
     episode = generate_episodes(scenario.replace(measurement_every=every), seeds, split=split)
     return Sequences(torch.as_tensor(episode.measurements, dtype=dtype), torch.as_tensor(episode.valid),
                      torch.as_tensor(episode.truth, dtype=dtype))
@@ -79,8 +96,9 @@ class TrainingData:
         train_measurement_every: measurement schedule of the training windows (default: the
             scenario's).
         episodes: episodes in the data set: seeds ``dataset_seed, dataset_seed + 1, ...`` (the
-            paper has one recording: 1). Training windows come from every episode's train
-            split, validation runs over every episode's val split.
+            paper has one recording: 1; an episode-split scenario at least
+            :data:`PRIOR_EPISODES` per pool, :func:`episodes_of`). Training windows come from
+            every episode's train split, validation runs over every episode's val split.
     """
 
     def __init__(
@@ -148,6 +166,8 @@ class TrainingData:
             "config_hash": [s.config_hash() for s in self.scenarios] if mixture else self.scenario.config_hash(),
             "dataset_seed": self.scenario.dataset_seed,
             "episodes": self.episodes,
+            **({"episodes_per_pool": {s.name: episodes_of(s, self.episodes) for s in self.scenarios}}
+               if any(s.split_mode == "episodes" for s in self.scenarios) else {}),
             "window": self.window,
             "stride": self.stride,
             "windows": self.n_windows,

@@ -241,7 +241,9 @@ def test_the_prior_is_described_quantity_by_quantity() -> None:
     assert get_scenario("ds1").describe_prior() == {
         "rate": "fixed (0.02, 0.04, 0.06) rad/s (world frame)", "attitude": "uniform on SO(3)",
         "position": "(10.9, -6.7, 4.9) m (fixed)", "velocity": "(0, 0, 0) m/s (fixed)",
+        "splits": "pieces of each episode: train the first 80%, val the next 10%, test the last 10%",
     }
+    assert get_scenario("spin").describe_prior()["splits"].startswith("whole episodes from disjoint seed pools")
     spin = Scenario(name="spin", omega0_axis="uniform", omega0_magnitude=(0.02, 0.5), velocity0_std=0.01,
                     position0_std=1.0, dynamics="free", inertia_error=0.1)
     prior = spin.describe_prior()

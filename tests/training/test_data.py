@@ -56,3 +56,22 @@ def test_a_mixture_holds_the_windows_and_val_splits_of_every_scenario() -> None:
     assert mixed.describe()["scenario"] == "ds1+tumble-fast" and len(mixed.describe()["config_hash"]) == 2
     with pytest.raises(ValueError, match="one dt"):
         TrainingData([get_scenario("ds1"), get_scenario("ds1").replace(name="fast", dt=0.05)], window=800)
+
+
+def test_a_prior_family_trains_on_its_train_pool_and_validates_on_its_val_pool() -> None:
+    """An episode-split scenario: at least PRIOR_EPISODES episodes per pool, windows of whole
+    train-pool episodes, validation over val-pool episodes, never a test episode."""
+    from fkn_bench.envs.episodes import initial_rates
+    from fkn_bench.scenarios import SEED_POOLS
+    from fkn_bench.training.data import PRIOR_EPISODES
+
+    spin = get_scenario("spin", n_steps=200)
+    data = TrainingData(spin, window=100, episodes=4)
+    assert data.n_windows == 2 * PRIOR_EPISODES and data.val.batch_size == PRIOR_EPISODES
+    assert data.describe()["episodes_per_pool"] == {"spin": PRIOR_EPISODES}
+    trained = initial_rates(spin, [SEED_POOLS["train"] + i for i in range(PRIOR_EPISODES)])
+    validated = initial_rates(spin, [SEED_POOLS["val"] + i for i in range(PRIOR_EPISODES)])
+    torch.testing.assert_close(data.train.truth[::2, 0, 7:10], torch.as_tensor(trained), rtol=0, atol=0)
+    torch.testing.assert_close(data.val.truth[:, 0, 7:10], torch.as_tensor(validated), rtol=0, atol=0)
+    tested = generate_episodes(spin, 50, split="test").truth[:, 0, 7:10]
+    assert not set(map(tuple, tested.tolist())) & set(map(tuple, trained.tolist() + validated.tolist()))
