@@ -9,6 +9,10 @@ With ``--ratios`` instead: the inertia-ratio error over time of an estimator tha
 ratios (default ``rigid-body-ekf-ratios``), over ``--seeds`` episodes from their first sample, with
 the share of seeds below 0.02 at 600 s.
 
+Every PNG names, in its text chunk ``fkn-bench command``, the command that draws it (these
+options, ``--out`` left out); a comparison chart also holds the numbers it plots and their SHA-256
+(:mod:`fkn_bench.harness.figures`), as the leaderboards' own charts do.
+
 Examples::
 
     fkn-bench plot --estimator manual-ekf --scenario ds1 --seed 0 --steps 500 --out figures \\
@@ -19,6 +23,7 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import shlex
 from pathlib import Path
 
 from fkn_bench.cli import usage_errors
@@ -51,12 +56,30 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(handler=run)
 
 
+def _command(args: argparse.Namespace, *, run: bool = True, results: bool = False) -> str:
+    """The command that draws a figure of this invocation (module docstring): the options that
+    decide what is drawn, ``--out`` left out (the figure is the same wherever it is written)."""
+    parts = ["fkn-bench", "plot"]
+    if args.ratios:
+        parts += ["--ratios", "--scenario", args.scenario, "--seeds", str(args.seeds), "--duration", f"{args.duration:g}"]
+        parts += ["--estimator", args.estimator] if args.estimator else []
+    elif run:
+        parts += ["--estimator", args.estimator] if args.estimator else []
+        parts += ["--scenario", args.scenario, "--seed", str(args.seed), "--split", args.split, "--cut", str(args.cut)]
+        parts += ["--steps", str(args.steps)] if args.steps is not None else []
+    if results:
+        parts += ["--results", args.results]
+    parts += [f"--scenario-file={path}" for path in getattr(args, "scenario_file", []) or []]
+    return shlex.join(parts)
+
+
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.harness.estimators import SelectionError, select_estimators
     from fkn_bench.harness.grid import path_name
     from fkn_bench.harness.leaderboard import ranked_summaries, scenario_order
-    from fkn_bench.harness.plots import comparison_figure, errors_figure, save_figure, states_figure, uncertainty_figure
+    from fkn_bench.harness.plots import (comparison_chart, comparison_data, errors_figure, save_figure, states_figure,
+                                         uncertainty_figure)
     from fkn_bench.harness.reference import quoted_rows
     from fkn_bench.harness.sources import SimulatedSource
     from fkn_bench.harness.store import ResultStore, StoreError
@@ -81,16 +104,18 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     run_trace = trace(resolved, SimulatedSource(scenario, args.split), args.seed)
     stem = f"{path_name(resolved.name)}-{path_name(scenario.name)}-seed{args.seed}"
+    command = _command(args)
     written = [
-        save_figure(states_figure(run_trace, steps=args.steps), out / f"{stem}-states.png"),
-        save_figure(uncertainty_figure(run_trace, steps=args.steps), out / f"{stem}-uncertainty.png"),
+        save_figure(states_figure(run_trace, steps=args.steps), out / f"{stem}-states.png", command=command),
+        save_figure(uncertainty_figure(run_trace, steps=args.steps), out / f"{stem}-uncertainty.png", command=command),
         save_figure(errors_figure(run_trace, settings=MetricSettings(cut=args.cut), steps=args.steps),
-                    out / f"{stem}-errors.png"),
+                    out / f"{stem}-errors.png", command=command),
     ]
     if results is not None:
         for name in scenario_order(results.scenarios()):
-            figure = comparison_figure(name, ranked_summaries(results, name), quoted_rows(name))
-            written.append(save_figure(figure, out / f"comparison-{path_name(name)}.png"))
+            data = comparison_data(name, ranked_summaries(results, name), quoted_rows(name))
+            written.append(save_figure(comparison_chart(data), out / f"comparison-{path_name(name)}.png",
+                                       command=_command(args, run=False, results=True), data=data))
     for path in written:
         print(path)
     return 0
@@ -105,7 +130,8 @@ def _ratios(args: argparse.Namespace, scenario) -> int:  # noqa: ANN001
     with usage_errors(ValueError):
         result = ratio_convergence(resolve_estimator(args.estimator or "rigid-body-ekf-ratios", scenario), scenario,
                                    args.seeds, args.duration)
-    path = save_figure(ratio_figure([result]), Path(args.out) / f"ratios-{path_name(result.estimator)}-{path_name(scenario.name)}.png")
+    path = save_figure(ratio_figure([result]), Path(args.out) / f"ratios-{path_name(result.estimator)}-{path_name(scenario.name)}.png",
+                       command=_command(args))
     for time in sorted({100.0, 300.0, 600.0, float(args.duration)}):
         print(f"{result.estimator} on {scenario.name}: {result.share_below(0.02, time):.0%} of {args.seeds} seeds "
               f"have inertia-ratio error < 0.02 at {time:g} s (median error {result.median_at(time):.3g})")

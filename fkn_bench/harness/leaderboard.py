@@ -2,10 +2,31 @@
 the per-seed CSV of record and a provenance document, all built from stored results.
 
 Ranking: by the primary score, the 13-state RMSE (:data:`fkn_bench.harness.summary.PRIMARY_SCORE`),
-mean over seeds, lower is better; ties by estimator name; estimators without a score (every run
-failed) last. Divergence rates, consistency and cost are
-shown beside it, never folded into it. The paper's numbers appear as labelled, unranked
-"(quoted)" rows where they apply (:mod:`fkn_bench.harness.reference`).
+mean over seeds, lower is better; equal means by estimator name; estimators without a score (every
+run failed) last. Divergence rates, consistency and cost are shown beside it, never folded into
+it. The paper's numbers appear as labelled, unranked "(quoted)" rows where they apply
+(:mod:`fkn_bench.harness.reference`).
+
+Statistics (:mod:`fkn_bench.metrics.statistics`): every mean comes with its 95% Student-t
+confidence interval over the test episodes (seeds), "n/a" when fewer than two episodes were scored
+or one episode's score is not finite. Each ranked estimator is compared with the one ranked above
+by a two-sided Wilcoxon signed-rank test on the per-seed scores of the seeds both were scored on
+(:func:`tie_tests`); where it cannot separate them at the 5% level (p >= 0.05) the estimator shares
+the rank above (:func:`rank_numbers`: ranks 1, 1, 3 ...); where a common seed's score is not
+finite there is no test and no tie.
+
+Sections (:func:`scenario_section`): the index leads with the prior families (scenarios tagged
+"prior": every episode draws its own truth, episode-disjoint splits), then the paper's fixed-truth
+scenarios (the other registered ones: ds1, ds2, their variants, tumble-*), then any other
+scenario; each section has its own overview, its estimators ordered by their mean rank in it. A
+section without results says so.
+
+Figures (:mod:`fkn_bench.harness.figures`): for the headline scenarios with results
+(:func:`figure_scenarios`: each prior family's headline scenario, then ds1) a comparison chart,
+``figures/comparison-<scenario>.png``, drawn from the same summaries as the tables; its PNG text
+chunks name the command that draws it (:data:`LEADERBOARD_COMMAND`) and hold the plotted numbers
+(:func:`fkn_bench.harness.plots.comparison_data`) with their SHA-256, so a test recomputes the
+fingerprint from the results and finds a figure drawn from other numbers.
 
 Every file is a pure function of the stored results (no dates, no machine facts of the process
 that builds it), so rebuilding from the same results gives byte-identical files. The one text
@@ -17,6 +38,7 @@ met and missed, each number with the command that produced it), is copied into t
     <scenario>.md/.html  ranking, per-component RMSE, consistency and stability
     <scenario>.csv       the ranking table's deterministic columns
     results.csv          per-seed tidy rows of record (cost excluded), sorted
+    figures/comparison-<scenario>.png   the headline scenarios' comparison charts
     provenance.json      seeds, settings, scenario hashes, estimator fingerprints, environments
     .fkn-bench-files.json  the files fkn-bench wrote here, with their SHA-256
 
@@ -29,8 +51,9 @@ results directory per split and cut.
 
 Writing (:func:`write_leaderboards`) follows :mod:`fkn_bench.harness.manifest`: a file is
 replaced only when fkn-bench wrote it (listed in ``.fkn-bench-files.json`` with its SHA-256, and
-not edited since) or it already holds the new text; anybody else's ``README.md`` or
-``results.csv`` is refused in one line unless ``force``.
+not edited since; ``figures/`` has its own list) or it already holds the new text; anybody else's
+``README.md``, ``results.csv`` or ``figures/comparison-ds1.png`` is refused in one line unless
+``force``, before anything is written.
 """
 
 from __future__ import annotations
@@ -44,8 +67,10 @@ from urllib.parse import quote
 
 import pandas as pd
 
+from fkn_bench.harness.figures import png_bytes
 from fkn_bench.harness.grid import path_name
-from fkn_bench.harness.manifest import write_files
+from fkn_bench.harness.manifest import check_files, write_files
+from fkn_bench.harness.plots import comparison_chart, comparison_data
 from fkn_bench.harness.records import Results
 from fkn_bench.harness.reference import QuotedRow, quoted_rows
 from fkn_bench.harness.report import format_number, format_percent
@@ -55,6 +80,7 @@ from fkn_bench.harness.summary import GROUP_RMSE_KEYS, summarize_pair
 from fkn_bench.harness.tables import Table, html_page, markdown_table
 from fkn_bench.io import to_jsonable
 from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS
+from fkn_bench.metrics.statistics import ALPHA, INTERVAL_METHOD, TEST_METHOD, PairedTest, paired_test
 from fkn_bench.types import STATE_NAMES
 
 __all__ = [
@@ -62,10 +88,18 @@ __all__ = [
     "REGENERATE_COMMAND",
     "LEADERBOARD_COMMAND",
     "CSV_FLOAT_FORMAT",
+    "FIGURES_DIR",
+    "SECTIONS",
     "rank",
+    "tie_tests",
+    "rank_numbers",
     "ranked_summaries",
     "scenario_order",
+    "scenario_section",
+    "figure_scenarios",
+    "figure_name",
     "build_leaderboards",
+    "build_figures",
     "write_leaderboards",
 ]
 
@@ -102,6 +136,51 @@ def rank(summaries: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return sorted(summaries, key=lambda s: (_score(s), s["estimator"]))
 
 
+def _by_seed(summary: dict[str, Any]) -> dict[int, float]:
+    return dict(zip(summary["seeds"], summary["state_rmse_by_seed"]))
+
+
+def tie_tests(ranked: Sequence[dict[str, Any]]) -> list[PairedTest | None]:
+    """For each ranked summary, the paired test (:func:`fkn_bench.metrics.statistics.paired_test`)
+    of its per-seed scores against the estimator ranked just above; None for the first and for
+    estimators without a score (every run failed), which are not ranked."""
+    tests: list[PairedTest | None] = [None]
+    for above, below in zip(ranked, ranked[1:]):
+        scored = math.isfinite(_score(above)) and math.isfinite(_score(below))
+        tests.append(paired_test(_by_seed(above), _by_seed(below)) if scored else None)
+    return tests[: len(ranked)]
+
+
+def rank_numbers(ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest | None]) -> list[int | None]:
+    """The rank of each ranked summary: its position, or the rank above when the paired test
+    cannot separate the two (``tests[i].tied``); None for estimators without a score."""
+    numbers: list[int | None] = []
+    for i, (summary, test) in enumerate(zip(ranked, tests)):
+        if not math.isfinite(_score(summary)):
+            numbers.append(None)
+        elif i and test is not None and test.tied and numbers[-1] is not None:
+            numbers.append(numbers[-1])
+        else:
+            numbers.append(i + 1)
+    return numbers
+
+
+def _versus_above(test: PairedTest | None, first: bool) -> str:
+    """The ranking table's "vs. above" cell: ``= (p 0.43)`` tied, ``< (p 0.002)`` separated."""
+    if first:
+        return _DASH
+    if test is None or test.pvalue is None:
+        return "n/a"
+    p = "p < 0.001" if test.pvalue < 0.001 else f"p {test.pvalue:.2g}"
+    return f"{'=' if test.tied else '<'} ({p})"
+
+
+def _with_interval(summary: dict[str, Any]) -> str:
+    """``mean [low, high]``: the 13-state RMSE and its 95% interval (``[n/a]`` without one)."""
+    ci = summary.get("state_rmse_ci")
+    return f"{_fmt(summary['state_rmse'], 4)} " + (f"[{_fmt(ci[0], 4)}, {_fmt(ci[1], 4)}]" if ci else "[n/a]")
+
+
 def scenario_order(names: Sequence[str]) -> list[str]:
     """Registry order for registered scenarios, then the others alphabetically."""
     from fkn_bench.scenarios import scenario_names
@@ -110,20 +189,84 @@ def scenario_order(names: Sequence[str]) -> list[str]:
     return registered + sorted(set(names) - set(registered))
 
 
+SECTIONS: dict[str, tuple[str, str]] = {
+    "prior": (
+        "Prior families: every episode its own truth",
+        "The scenarios tagged `prior` (`fkn-bench scenarios` prints each prior): the forced-spin and free-tumble "
+        "families, each a headline scenario with its stress variants. Every episode draws its own truth (angular "
+        "rate and axis, drift, position, inertia) from the scenario's prior, and the train, validation and test "
+        "splits are disjoint sets of episodes from separate seed streams: no test truth was seen in training. "
+        "These are the benchmark's headline.",
+    ),
+    "paper": (
+        "The paper's scenarios: fixed truth, train and test share one trajectory",
+        "ds1, ds2 and their variants (ds1-*, tumble-*), after the FlexKalmanNet paper. Their truth is fixed: every "
+        "episode shares one angular rate, position and velocity (only the initial attitude and the noise are "
+        "drawn per seed), and train, validation and test are three pieces of the same trajectory, so a learned "
+        "or tuned estimator is scored on the truth it was fitted to. Kept to compare with the paper, not as the "
+        "headline.",
+    ),
+    "other": (
+        "Other scenarios",
+        "Scenarios that are not registered in this fkn-bench (e.g. from a scenario file).",
+    ),
+}
+"""The index's sections, in order: ``{key: (heading, description)}`` (:func:`scenario_section`)."""
+
+FIGURES_DIR = "figures"
+"""The subdirectory of the leaderboards holding their figures (its own manifest)."""
+
+
+def scenario_section(results: Results, scenario: str) -> str:
+    """The :data:`SECTIONS` key of ``scenario``: ``"prior"`` when its stored configuration (else
+    the registry's) is tagged "prior", ``"paper"`` for the other registered scenarios, else
+    ``"other"``."""
+    from fkn_bench.scenarios import get_scenario, scenario_names
+
+    tags = (results.source(scenario).get("config") or {}).get("tags")
+    registered = scenario in scenario_names()
+    if tags is None and registered:
+        tags = get_scenario(scenario).tags
+    if "prior" in (tags or ()):
+        return "prior"
+    return "paper" if registered else "other"
+
+
+def figure_scenarios(scenarios: Sequence[str]) -> list[str]:
+    """Those of ``scenarios`` whose comparison chart the leaderboards draw: the headline scenario of
+    each prior family (:data:`fkn_bench.scenarios.PRIOR_FAMILIES`), then ds1."""
+    from fkn_bench.scenarios import PRIOR_FAMILIES
+
+    return [name for name in (*PRIOR_FAMILIES, "ds1") if name in scenarios]
+
+
+def figure_name(scenario: str) -> str:
+    """The comparison chart's file name under :data:`FIGURES_DIR`."""
+    return f"comparison-{path_name(scenario)}.png"
+
+
+def _figure_link(scenario: str) -> str:
+    return (f"![{scenario}: 13-state RMSE of every estimator, mean and 95% confidence interval over the test "
+            f"episodes, best first]({FIGURES_DIR}/{quote(figure_name(scenario))})")
+
+
 # ---------------------------------------------------------------------------------------- tables
 def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]) -> Table:
+    tests = tie_tests(ranked)
+    numbers = rank_numbers(ranked, tests)
     header = [
-        "rank", "estimator", "13-state RMSE", "median [IQR]", "attitude (deg)", "position (m)", "rate (rad/s)",
+        "rank", "estimator", "13-state RMSE [95% CI]", "vs. above", "median [IQR]", "attitude (deg)", "position (m)", "rate (rad/s)",
         "velocity (m/s)", "settling (s)", "settled", "diverged", "ANEES", "NEES in 95% bounds", "µs/step online",
         "µs/step batched",
     ]
     rows = []
-    for i, s in enumerate(ranked, start=1):
+    for i, (s, test, number) in enumerate(zip(ranked, tests, numbers)):
         st = s["statistics"]["state_rmse"]
         rows.append([
-            str(i) if math.isfinite(_score(s)) else _DASH,
+            _DASH if number is None else str(number),
             s["estimator"] + (f" (trained on {s['trained_on']})" if s.get("trained_on") else ""),
-            _fmt(s["state_rmse"], 4),
+            _with_interval(s),
+            _versus_above(test, i == 0) if number is not None else _DASH,
             f"{_fmt(st['median'], 4)} [{_fmt(st['q25'], 3)}, {_fmt(st['q75'], 3)}]",
             *(_fmt(s[k]) for k in (*GROUP_RMSE_KEYS.values(), "settling_time_s")),
             _pct(s["settled_fraction"]),
@@ -135,11 +278,18 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
         ])
     for q in quoted:
         rows.append([_DASH, q.label, f"{_fmt(q.state_rmse, 4)}*"] + [_DASH] * (len(header) - 3))
+    runs = sorted({s["runs"] for s in ranked})
+    episodes = f"{runs[0]}" if len(runs) == 1 else f"{runs[0]} to {runs[-1]}"
     notes = [
         "13-state RMSE: root of the mean, over the 13 state components [q, r, w, v] and the scored window, of "
         "the squared component errors (quaternion sign-aligned to the truth), per seed; mean over seeds, lower "
         "is better (the primary score). median [IQR]: over seeds. attitude ... velocity: RMSE of the group error "
         "magnitudes (attitude angle, norms of the position, rate and velocity errors).",
+        f"Statistics over {episodes} test episodes (seeds) per estimator. [95% CI]: {INTERVAL_METHOD}; n/a where "
+        "fewer than two episodes were scored or an episode's score is not finite (see score not finite below). "
+        f"vs. above: {TEST_METHOD}. '=': the test cannot separate the estimator from the one ranked above "
+        f"(p >= {ALPHA:g}), so it shares that rank; '<': separated; n/a: not tested (no common episode, or a score "
+        "that is not finite).",
         "settling: mean over seeds of the time until every group error stays in its band; settled: share of "
         "seeds where every group settled. diverged: share of seeds flagged diverged (NaN, failed Cholesky, "
         "error growth, or NEES above the 99.9% chi-square quantile through the final window). ANEES: average "
@@ -228,26 +378,36 @@ def ranked_summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
     return rank([summarize_pair(results, e, scenario) for e in estimators])
 
 
-def _scenario_files(results: Results, scenario: str, ranked: Sequence[dict[str, Any]]) -> dict[str, str]:
+def _scenario_files(results: Results, scenario: str, ranked: Sequence[dict[str, Any]], figure: bool = False) -> dict[str, str]:
     quoted = quoted_rows(scenario)
     runs = max(s["runs"] for s in ranked)
     intro = _scenario_intro(results, scenario, runs)
     tables = [_ranking_table(ranked, quoted), _components_table(ranked, quoted), _consistency_table(ranked),
               _settling_table(ranked)]
     title = f"fkn-bench leaderboard: {scenario}"
-    markdown = f"# {title}\n\n" + "\n\n".join(intro) + "\n\n" + "\n".join(markdown_table(t) for t in tables)
+    shown = [_figure_link(scenario)] if figure else []
+    markdown = f"# {title}\n\n" + "\n\n".join([*intro, *shown]) + "\n\n" + "\n".join(markdown_table(t) for t in tables)
     page = html_page(title, [p.replace("`", "") for p in intro], tables)
     stem = path_name(scenario)
     return {f"{stem}.md": markdown, f"{stem}.html": page, f"{stem}.csv": _scenario_csv(ranked)}
 
 
 def _scenario_csv(ranked: Sequence[dict[str, Any]]) -> str:
+    """The ranking's deterministic columns; ``p_vs_above`` rounded to 3 significant digits (the
+    test's decision does not hinge on more, and the file stays the same across SciPy versions)."""
     records = []
-    for i, s in enumerate(ranked, start=1):
+    tests = tie_tests(ranked)
+    for s, test, number in zip(ranked, tests, rank_numbers(ranked, tests)):
         st = s["statistics"]["state_rmse"]
+        ci = s.get("state_rmse_ci") or (None, None)
+        tested = test is not None and test.pvalue is not None
         records.append({
-            "rank": i if math.isfinite(_score(s)) else None,
+            "rank": number,
             **{k: s[k] for k in ("estimator", "scenario", "runs", "state_rmse")},
+            "state_rmse_ci_low": ci[0],
+            "state_rmse_ci_high": ci[1],
+            "tied_with_above": test.tied if tested else None,
+            "p_vs_above": float(f"{test.pvalue:.3g}") if tested else None,
             **{f"state_rmse_{k}": st[k] for k in ("median", "q25", "q75")},
             **{k: s[k] for k in GROUP_RMSE_KEYS.values()},
             **{f"rmse_{n}": s["rmse"][n] for n in STATE_NAMES},
@@ -258,6 +418,7 @@ def _scenario_csv(ranked: Sequence[dict[str, Any]]) -> str:
         })
     frame = pd.DataFrame(records)
     frame["rank"] = frame["rank"].astype("Int64")
+    frame["tied_with_above"] = frame["tied_with_above"].astype("boolean")
     return rows_to_csv(frame, float_format=CSV_FLOAT_FORMAT)
 
 
@@ -265,34 +426,65 @@ NOTES_FILE = "NOTES.md"
 """Hand-written notes in a results directory, copied into the leaderboard index."""
 
 
-def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]], notes: str | None) -> str:
+def _overview(section: str, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]]) -> Table:
+    """The section's overview: estimators (by mean rank over the section's scenarios) x scenarios,
+    each cell the mean 13-state RMSE +- its 95% interval's half width; bold: rank 1 (shared)."""
     positions: dict[str, list[int]] = {}
-    scores: dict[tuple[str, str], float] = {}
+    cells: dict[tuple[str, str], str] = {}
     for scenario in scenarios:
-        for position, summary in enumerate(ranked[scenario]):
+        tests = tie_tests(ranked[scenario])
+        for position, (summary, number) in enumerate(zip(ranked[scenario], rank_numbers(ranked[scenario], tests))):
             positions.setdefault(summary["estimator"], []).append(position)
-            scores[(summary["estimator"], scenario)] = summary["state_rmse"]
+            text = _fmt(summary["state_rmse"], 4)
+            if text != _DASH:
+                ci = summary.get("state_rmse_ci")
+                text += f" ±{_fmt(ci[1] - summary['state_rmse'], 2)}" if ci else " (CI n/a)"
+            cells[(summary["estimator"], scenario)] = f"**{text}**" if number == 1 else text
     estimators = sorted(positions, key=lambda e: (sum(positions[e]) / len(positions[e]), e))
-
-    def cell(e: str, s: str) -> str:
-        text = _fmt(scores.get((e, s)), 4)
-        return f"**{text}**" if ranked[s][0]["estimator"] == e and text != _DASH else text
-
-    overview = Table(
-        "Overview: 13-state RMSE (mean over seeds, lower is better; best in bold; estimators by mean rank)",
-        ["estimator", *scenarios], [[e, *(cell(e, s) for s in scenarios)] for e in estimators],
+    return Table(
+        f"Overview: {SECTIONS[section][0].split(':')[0].lower()}",
+        ["estimator", *scenarios], [[e, *(cells.get((e, s), _DASH) for s in scenarios)] for e in estimators],
+        notes=["13-state RMSE, mean ± half width of its 95% confidence interval over the test episodes (lower is "
+               "better); bold: rank 1, and any estimator the paired test cannot separate from it; estimators by "
+               "their mean rank over this section's scenarios; – : not run."],
     )
-    links = [
+
+
+def _episodes(results: Results, scenarios: Sequence[str]) -> str:
+    counts = sorted({len(set(results.seeds(e, s))) for s in scenarios for e in results.estimators()
+                     if results.cells(e, s)})
+    return f"{counts[0]}" if len(counts) == 1 else f"{counts[0]} to {counts[-1]}"
+
+
+def _section(results: Results, section: str, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]]) -> list[str]:
+    heading, description = SECTIONS[section]
+    lines = [f"## {heading}", "", description, ""]
+    if not scenarios:
+        return lines + ["No results for these scenarios in [`results/`](results/) yet.", ""]
+    lines += [f"Test episodes (seeds) per estimator and scenario: {_episodes(results, scenarios)}.", "",
+              markdown_table(_overview(section, scenarios, ranked), level=3).rstrip("\n"), ""]
+    for scenario in figure_scenarios(scenarios):
+        lines += [_figure_link(scenario), ""]
+    if figure_scenarios(scenarios):
+        lines += [f"Charts drawn by `{LEADERBOARD_COMMAND}` from the same results as the tables (bar: mean; line: "
+                  "95% confidence interval); each PNG's text chunks hold the numbers it plots and their SHA-256.", ""]
+    lines += [
         f"- [{s}]({u}.md) ([HTML]({u}.html), [CSV]({u}.csv)): best {ranked[s][0]['estimator']} "
         f"({_fmt(ranked[s][0]['state_rmse'], 4)})"
         for s, u in ((s, quote(path_name(s))) for s in scenarios)
     ]
+    return lines + [""]
+
+
+def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]], notes: str | None) -> str:
+    sections = {key: [s for s in scenarios if scenario_section(results, s) == key] for key in SECTIONS}
     env_lines = [
         f"- fkn-bench {e.get('fkn_bench')}, commit {e.get('git_commit')}, Python {e.get('python')}, "
         f"numpy {e.get('numpy')}, torch {e.get('torch')}, {(e.get('machine') or {}).get('platform')}"
         for e in _environments(results)
     ]
     settings = results.settings()
+    body = [line for key in SECTIONS if key != "other" or sections[key] for line in _section(results, key, sections[key], ranked)]
     return "\n".join([
         "# fkn-bench leaderboards",
         "",
@@ -309,19 +501,20 @@ def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[di
         "squared errors, quaternion sign-aligned to the truth, per seed, then the mean over seeds. Divergence "
         "rates, consistency (ANEES) and cost are reported beside it on each scenario's page.",
         "",
-        markdown_table(overview).rstrip("\n"),
+        f"Statistics: each mean comes with its {INTERVAL_METHOD}; n/a where an episode's score is not finite. "
+        f"Adjacent ranks are compared by a {TEST_METHOD}; an estimator the test cannot separate from the one above "
+        "shares its rank (no test, and no tie, where a score is not finite). Estimators are ranked within each "
+        "section.",
         "",
+        *body,
         *(["## Notes", "", f"(From [`results/{NOTES_FILE}`](results/{NOTES_FILE}), written by people; every number "
            "comes with the command that produced it.)", "", notes.strip(), ""] if notes else []),
-        "## Scenarios",
-        "",
-        *links,
-        "",
         "## Files",
         "",
-        "- `<scenario>.md` / `.html`: ranking, RMSE per component (with the paper's quoted rows on ds1), "
-        "consistency and stability, settling times.",
+        "- `<scenario>.md` / `.html`: ranking with 95% confidence intervals and paired tests, RMSE per component "
+        "(with the paper's quoted rows on ds1), consistency and stability, settling times.",
         "- `<scenario>.csv`: the ranking's deterministic columns.",
+        f"- `{FIGURES_DIR}/comparison-<scenario>.png`: the headline scenarios' charts, drawn by `{LEADERBOARD_COMMAND}`.",
         "- `results.csv`: the CSV of record, one row per estimator x scenario x seed x metric (cost excluded).",
         "- `provenance.json`: seeds, metric settings, scenario hashes, estimator fingerprints and the software "
         "and machines that produced the results.",
@@ -365,26 +558,61 @@ def _provenance(results: Results, scenarios: Sequence[str]) -> str:
     return json.dumps(to_jsonable(document), indent=2, sort_keys=True) + "\n"
 
 
+def _ranked(results: Results, scenarios: Sequence[str]) -> dict[str, list[dict[str, Any]]]:
+    return {scenario: ranked_summaries(results, scenario) for scenario in scenarios}
+
+
 def build_leaderboards(results: Results, notes: str | None = None) -> dict[str, str]:
-    """Every leaderboard file as ``{relative path: text}`` (see module docstring); ``notes``
-    (Markdown) becomes the index's "Notes" section."""
+    """Every leaderboard text file as ``{file name: text}`` (see module docstring; the figures:
+    :func:`build_figures`); ``notes`` (Markdown) becomes the index's "Notes" section."""
+    return _build(results, notes)[0]
+
+
+def build_figures(results: Results, *, command: str = LEADERBOARD_COMMAND) -> dict[str, bytes]:
+    """The comparison charts of :func:`figure_scenarios` as ``{file name: PNG bytes}`` (names under
+    :data:`FIGURES_DIR`), each PNG naming ``command`` and holding its plotted numbers
+    (:func:`fkn_bench.harness.figures.png_bytes`)."""
+    if not len(results):
+        raise ValueError("no results to draw figures from")
+    results.check_comparable()
+    scenarios = figure_scenarios(scenario_order(results.scenarios()))
+    return _figures(_ranked(results, scenarios), scenarios, command)
+
+
+def _figures(ranked: dict[str, list[dict[str, Any]]], scenarios: Sequence[str], command: str) -> dict[str, bytes]:
+    figures = {}
+    for scenario in scenarios:
+        data = comparison_data(scenario, ranked[scenario], quoted_rows(scenario))
+        figures[figure_name(scenario)] = png_bytes(comparison_chart(data), command=command, data=data)
+    return figures
+
+
+def _build(results: Results, notes: str | None, draw: bool = False) -> tuple[dict[str, str], dict[str, bytes]]:
     if not len(results):
         raise ValueError("no results to build leaderboards from")
     results.check_comparable()
     scenarios = scenario_order(results.scenarios())
+    drawn = figure_scenarios(scenarios)
     files: dict[str, str] = {}
-    ranked = {scenario: ranked_summaries(results, scenario) for scenario in scenarios}
+    ranked = _ranked(results, scenarios)
     for scenario in scenarios:
-        files.update(_scenario_files(results, scenario, ranked[scenario]))
+        files.update(_scenario_files(results, scenario, ranked[scenario], figure=scenario in drawn))
     files["README.md"] = _index(results, scenarios, ranked, notes)
     files["results.csv"] = rows_to_csv(deterministic_rows(results.rows), float_format=CSV_FLOAT_FORMAT)
     files["provenance.json"] = _provenance(results, scenarios)
-    return files
+    return files, (_figures(ranked, drawn, LEADERBOARD_COMMAND) if draw else {})
 
 
 def write_leaderboards(results: Results, out_dir: str | Path, notes: str | None = None, *,
                        force: bool = False) -> list[Path]:
-    """Build and write every leaderboard file (atomically) under ``out_dir``, replacing only
-    files fkn-bench wrote there unless ``force`` (module docstring); returns the paths. Raises
+    """Build and write every leaderboard file (atomically) under ``out_dir`` and the figures under
+    ``out_dir/figures``, replacing only files fkn-bench wrote there unless ``force`` (module
+    docstring); returns the paths. Raises
     :class:`~fkn_bench.harness.manifest.ForeignFileError` (nothing written) for a file in the way."""
-    return write_files(out_dir, build_leaderboards(results, notes), force=force, what="leaderboards")
+    files, figures = _build(results, notes, draw=True)
+    figure_dir = Path(out_dir) / FIGURES_DIR
+    check_files(figure_dir, sorted(figures), force=force)  # before any table is written
+    paths = write_files(out_dir, files, force=force, what="leaderboards")
+    if figures:
+        paths += write_files(figure_dir, figures, force=force, what="leaderboard figures")
+    return paths

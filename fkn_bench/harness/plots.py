@@ -17,13 +17,15 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from fkn_bench.geometry import quaternion as quat
+from fkn_bench.harness.figures import write_png
 from fkn_bench.harness.reference import QuotedRow
 from fkn_bench.harness.trace import Trace
 from fkn_bench.metrics import GROUP_UNITS, GROUPS, MetricSettings, group_errors, moving_rms, settling_time
 from fkn_bench.plotting import STATE_RMSE_UNIT, legend_beside, new_figure, save_png
 from fkn_bench.types import STATE_GROUPS, STATE_NAMES
 
-__all__ = ["states_figure", "uncertainty_figure", "errors_figure", "comparison_figure", "save_figure", "new_figure"]
+__all__ = ["states_figure", "uncertainty_figure", "errors_figure", "COMPARISON_DIGITS", "comparison_data", "comparison_figure",
+           "comparison_chart", "save_figure", "new_figure"]
 
 _GROUP_LABELS = {
     "attitude": "orientation q (-)",
@@ -169,7 +171,7 @@ def _rmse_label(name: str, diverged: float, value: float, off_scale: bool) -> st
 def _rmse_limit(values: np.ndarray, spans: np.ndarray) -> tuple[float, np.ndarray]:
     """The right end of the RMSE axis and which ``values`` lie beyond it: a value above ten times
     the median (a diverged filter's 1e30) would squash every other bar, so it is left off the
-    scale; the axis ends 10% beyond the largest remaining value or interquartile end."""
+    scale; the axis ends 10% beyond the largest remaining value or interval end."""
     finite = values[np.isfinite(values) & (values > 0)]
     cap = 10.0 * float(np.median(finite)) if finite.size else np.inf
     off = np.isfinite(values) & (values > cap)
@@ -178,44 +180,86 @@ def _rmse_limit(values: np.ndarray, spans: np.ndarray) -> tuple[float, np.ndarra
     return (1.1 * float(shown.max()) if shown.size and shown.max() > 0 else 1.0), off
 
 
+COMPARISON_DIGITS = 6
+"""Significant digits of the numbers a comparison chart plots (:func:`comparison_data`): far
+beyond what a figure resolves, and the same on every CPU whatever the order of its sums."""
+
+
+def _rounded(value: Any) -> float | None:
+    """``value`` to :data:`COMPARISON_DIGITS` significant digits; None when missing or not finite."""
+    if value is None or not np.isfinite(float(value)):
+        return None
+    return float(f"{float(value):.{COMPARISON_DIGITS}g}")
+
+
+def comparison_data(scenario: str, summaries: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow] = ()) -> dict[str, Any]:
+    """Exactly the numbers :func:`comparison_figure` plots, JSON-compatible: per estimator (in the
+    order given, best first) its label, mean 13-state RMSE over seeds, 95% interval
+    (``state_rmse_ci`` of :func:`fkn_bench.harness.summary.summarize_pair`; None when it has none)
+    and diverged share; then the quoted paper rows (label and value). Numbers are rounded to
+    :data:`COMPARISON_DIGITS` significant digits; a missing or non-finite value is None."""
+    rows = []
+    for s in summaries:
+        ci = s.get("state_rmse_ci")
+        rows.append({
+            "estimator": s["estimator"],
+            "mean": _rounded(s["state_rmse"]),
+            "ci": [_rounded(ci[0]), _rounded(ci[1])] if ci else None,
+            "diverged": _rounded(s.get("diverged_fraction") or 0.0),
+        })
+    return {"scenario": scenario, "estimators": rows,
+            "quoted": [{"label": q.label, "mean": _rounded(q.state_rmse)} for q in quoted]}
+
+
 def comparison_figure(scenario: str, summaries: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow] = ()) -> Figure:
-    """Horizontal bar chart of the 13-state RMSE (mixed SI units) per estimator on ``scenario``,
-    in the order given (best first, at the top): the bar is the mean over seeds, the black line
-    spans the interquartile range; quoted paper rows are hatched at the bottom. A diverged share,
-    and the value of a bar beyond ten times the median (drawn to the axis' end), are written in
-    the estimator's tick label (red), clear of the bars and lines."""
-    values = np.asarray([s["state_rmse"] for s in summaries] + [q.state_rmse for q in quoted], dtype=float)
-    iqr = [(s["statistics"]["state_rmse"]["q25"], s["statistics"]["state_rmse"]["q75"]) for s in summaries]
-    limit, off = _rmse_limit(values, np.asarray([high for _, high in iqr], dtype=float))
-    diverged = [float(s.get("diverged_fraction") or 0.0) for s in summaries] + [0.0] * len(quoted)
-    names = [s["estimator"] for s in summaries] + [q.label for q in quoted]
+    """:func:`comparison_chart` of :func:`comparison_data`."""
+    return comparison_chart(comparison_data(scenario, summaries, quoted))
+
+
+def comparison_chart(data: dict[str, Any]) -> Figure:
+    """Horizontal bar chart of the 13-state RMSE (mixed SI units) per estimator of ``data``
+    (:func:`comparison_data`), in its order (best first, at the top): the bar is the mean over
+    seeds, the black line spans its 95% confidence interval; quoted paper rows are hatched at the
+    bottom. A diverged share, and the value of a bar beyond ten times the median (drawn to the
+    axis' end), are written in the estimator's tick label (red), clear of the bars and lines."""
+    estimators, quoted = data["estimators"], data["quoted"]
+    nan = float("nan")
+    values = np.asarray([nan if r["mean"] is None else r["mean"] for r in [*estimators, *quoted]], dtype=float)
+    spans = [(r["ci"][0], r["ci"][1]) if r["ci"] and None not in r["ci"] else (nan, nan) for r in estimators]
+    limit, off = _rmse_limit(values, np.asarray([high for _, high in spans], dtype=float))
+    diverged = [float(r["diverged"] or 0.0) for r in estimators] + [0.0] * len(quoted)
+    names = [r["estimator"] for r in estimators] + [q["label"] for q in quoted]
     labels = [_rmse_label(n, d, v, o) for n, d, v, o in zip(names, diverged, values, off)]
     # wide enough for the longest tick label beside a 5-inch bar area (about 0.08 in per character)
     figure = new_figure(max(8.0, 5.2 + 0.08 * max(map(len, labels), default=0)), max(3.0, 0.32 * len(labels) + 1.8))
     ax = figure.subplots()
     y = np.arange(len(labels))
     bars = ax.barh(y, np.minimum(np.nan_to_num(values, nan=0.0), limit), height=0.7, color="tab:blue")
-    for bar in bars[len(summaries):]:
+    for bar in bars[len(estimators):]:
         bar.set_facecolor("white")
         bar.set_edgecolor("tab:gray")
         bar.set_hatch("//")
-    for i, (low, high) in enumerate(iqr):
+    for i, (low, high) in enumerate(spans):
         if np.isfinite(low) and np.isfinite(high):
-            ax.plot([low, high], [i, i], color="black", linewidth=2, solid_capstyle="butt")
+            ax.plot([low, min(high, limit)], [i, i], color="black", linewidth=2, solid_capstyle="butt")
     ax.set_yticks(y, labels)
     for tick, d, o in zip(ax.get_yticklabels(), diverged, off):
         if d > 0 or o:
             tick.set_color("tab:red")
     ax.set_xlim(0.0, limit)
     ax.invert_yaxis()  # best at the top
-    ax.set_xlabel(f"13-state RMSE ({STATE_RMSE_UNIT})\nbar: mean over seeds; line: interquartile range")
+    ax.set_xlabel(f"13-state RMSE ({STATE_RMSE_UNIT})\nbar: mean over seeds; line: 95% confidence interval (Student-t)")
     ax.set_ylabel("estimator, best first")
-    ax.set_title(f"{scenario}: estimators compared (lower is better)")
+    ax.set_title(f"{data['scenario']}: estimators compared (lower is better)")
     ax.grid(axis="x", alpha=0.3)
     ax.set_axisbelow(True)
     return figure
 
 
-def save_figure(figure: Figure, path: str | Path, *, dpi: int = 100) -> Path:
-    """Write ``figure`` as PNG atomically (:func:`fkn_bench.plotting.save_png`); returns the path."""
-    return save_png(figure, path, dpi=dpi)
+def save_figure(figure: Figure, path: str | Path, *, dpi: int = 100, command: str | None = None, data: Any = None) -> Path:
+    """Write ``figure`` as PNG atomically (:func:`fkn_bench.plotting.save_png`); returns the path.
+    With ``command`` (the command that draws it) the PNG's text chunks name it, and hold ``data``
+    (the numbers it plots) with their fingerprint when given (:mod:`fkn_bench.harness.figures`)."""
+    if command is None:
+        return save_png(figure, path, dpi=dpi)
+    return write_png(figure, path, command=command, data=data, dpi=dpi)

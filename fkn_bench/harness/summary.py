@@ -11,6 +11,12 @@ included) and never folded into the RMSEs. ANEES/ANIS pool every run's per-step 
 (Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4): ``anees`` is the average over runs and steps,
 ``nees_in_bounds_fraction`` the share of steps whose average over the runs lies in the two-sided
 95% chi-square interval for that many runs (``anees_bounds``, given for all runs).
+
+The primary score per seed is kept (``state_rmse_by_seed``, aligned with ``seeds``; NaN where not
+finite) for the paired tests between estimators (:func:`fkn_bench.metrics.statistics.paired_test`),
+and ``state_rmse_ci`` is its 95% Student-t interval of the mean over the seeds
+(:func:`fkn_bench.metrics.statistics.mean_interval`): ``[low, high]``, or ``None`` when there are
+fewer than two seeds or a seed's score is not finite (never a NaN interval).
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ import pandas as pd
 
 from fkn_bench.harness.records import Results
 from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS, NEES_DOF, NIS_DOF, average_statistic, chi2_interval, summarize
+from fkn_bench.metrics.statistics import mean_interval
 from fkn_bench.types import STATE_NAMES
 
 __all__ = ["PRIMARY_SCORE", "GROUP_RMSE_KEYS", "STATISTIC_METRICS", "summarize_pair", "summarize_results",
@@ -87,6 +94,7 @@ def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str,
     primary = _column(table, *PRIMARY_SCORE, runs)
     failed = _column(table, "stability", "failed", runs)
     source = cells[0].source
+    interval = mean_interval(primary)
     return {
         "estimator": estimator,
         "scenario": scenario,
@@ -97,6 +105,8 @@ def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str,
         "failed_runs": int(np.nansum(failed)),
         "non_finite_runs": int(np.count_nonzero(~np.isfinite(primary))),
         "state_rmse": summarize(primary).mean,
+        "state_rmse_ci": [interval.low, interval.high] if interval else None,
+        "state_rmse_by_seed": [float(v) if np.isfinite(v) else float("nan") for v in primary],
         "rmse": {name: mean("state", f"rmse_{name}") for name in STATE_NAMES},
         **{GROUP_RMSE_KEYS[g]: mean(g, "rmse") for g in GROUPS},
         "settling_time_s": mean("settling", "time"),

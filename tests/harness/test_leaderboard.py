@@ -69,7 +69,7 @@ def test_notes_written_by_people_become_a_section_of_the_index(small_results_dir
     assert "## Notes" not in files["README.md"]
     noted = build_leaderboards(ResultStore(small_results_dir).load(), notes="### Finding\n\nA number (`cmd`).\n")
     index = noted["README.md"]
-    assert index.index("## Overview") < index.index("## Notes") < index.index("### Finding") < index.index("## Scenarios")
+    assert index.index("### Overview") < index.index("## Notes") < index.index("### Finding") < index.index("## Files")
     assert {k: v for k, v in noted.items() if k != "README.md"} == {k: v for k, v in files.items() if k != "README.md"}
     # the command reads them from the results directory
     results = tmp_path / "results"
@@ -91,7 +91,8 @@ def test_results_csv_is_the_deterministic_record(files: dict[str, str]) -> None:
 def test_rebuild_is_byte_identical(small_results_dir: Path, tmp_path: Path, files: dict[str, str]) -> None:
     for _ in range(2):  # the second time over its own files (listed in the manifest)
         write_leaderboards(ResultStore(small_results_dir).load(), tmp_path)
-        assert {p.name: p.read_text() for p in tmp_path.iterdir() if not p.name.startswith(".")} == files
+        assert {p.name: p.read_text() for p in tmp_path.iterdir() if p.is_file() and not p.name.startswith(".")} == files
+    assert sorted(p.name for p in (tmp_path / "figures").iterdir() if not p.name.startswith(".")) == ["comparison-ds1.png"]
 
 
 def test_failed_estimator_ranks_last(short_ds1: SimulatedSource, test_estimators: None) -> None:
