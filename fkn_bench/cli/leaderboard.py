@@ -2,14 +2,24 @@
 
 Reads the per-cell results that ``fkn-bench run --out DIR`` wrote and writes, under ``--out``, one
 Markdown table, HTML page and CSV per scenario, an index (README.md), the per-seed CSV of record
-(results.csv) and provenance.json. The output is a pure function of the results: rebuilding from
-the same results gives byte-identical files.
+(results.csv) and provenance.json, and under ``--out``/figures the comparison chart of each
+headline scenario with results (spin, free-tumble, ds1: ``comparison-<scenario>.png``). The text
+files are a pure function of the results: rebuilding from the same results gives byte-identical
+files; each chart holds, in its PNG text chunks, the command that draws it and the numbers it
+plots with their SHA-256, so it can be checked against the tables without comparing pixels.
+
+Each mean comes with its 95% Student-t confidence interval over the test episodes (seeds); an
+estimator that a two-sided Wilcoxon signed-rank test on the per-seed scores cannot separate from
+the one ranked above (p >= 0.05) shares its rank. The index leads with the prior families, then
+the paper's fixed-truth scenarios, each section ranked on its own
+(:mod:`fkn_bench.harness.leaderboard`).
 
 ``--out`` (default: the directory holding ``--results``) keeps a list of the files fkn-bench
-wrote there with their SHA-256 (``.fkn-bench-files.json``): a file is replaced only when
-fkn-bench wrote it and nobody edited it since, or when it already holds the new text; any other
-file in the way (your own README.md or results.csv) is refused in one line naming it, and nothing
-is written, unless ``--force``. Results that mix, for one scenario, another split, cut or scenario
+wrote there with their SHA-256 (``.fkn-bench-files.json``; ``figures/`` has its own list): a file
+is replaced only when fkn-bench wrote it and nobody edited it since, or when it already holds the
+new text; any other file in the way (your own README.md, results.csv or
+figures/comparison-ds1.png) is refused in one line naming it, and nothing is written, unless
+``--force``. Results that mix, for one scenario, another split, cut or scenario
 configuration are refused in one line: build those from one results directory each.
 
 Regenerate the committed leaderboards from scratch (cells already stored are reused; add --rerun
@@ -31,7 +41,8 @@ __all__ = ["add_parser", "run"]
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> None:
-    parser = add_command(subparsers, "leaderboard", "build leaderboards (Markdown, HTML, CSV) from stored results", __doc__)
+    parser = add_command(subparsers, "leaderboard", "build leaderboards (Markdown, HTML, CSV, comparison charts) from stored results",
+                         __doc__)
     parser.add_argument("--results", metavar="DIR",
                         help="results directory written by fkn-bench run --out (default: leaderboards/results, here "
                              "or in the fkn-bench checkout)")

@@ -9,6 +9,10 @@ print(Image.open('f.png').text)"``)::
     fkn-bench data          the plotted numbers as canonical JSON (:data:`DATA_KEY`)
     fkn-bench data sha256   SHA-256 of that JSON (:data:`FINGERPRINT_KEY`, :func:`fingerprint`)
 
+A PNG drawn by a command that does not write these chunks itself can be given them afterwards,
+pixels untouched (:func:`add_text`: tEXt chunks inserted before the image end); such a figure also
+carries :data:`NOTE_KEY` saying so.
+
 The fingerprint is over canonical JSON (sorted keys, no spaces, non-finite numbers refused), so
 anybody can recompute it from the same results: a figure whose fingerprint differs from the one
 computed from the results beside it was drawn from other numbers (:func:`figure_problems`).
@@ -19,6 +23,8 @@ from __future__ import annotations
 import hashlib
 import io
 import json
+import zlib
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -26,12 +32,14 @@ from matplotlib.figure import Figure
 
 from fkn_bench.io import write_bytes_atomic
 
-__all__ = ["COMMAND_KEY", "DATA_KEY", "FINGERPRINT_KEY", "fingerprint", "png_bytes", "write_png", "png_text",
-           "figure_problems"]
+__all__ = ["COMMAND_KEY", "DATA_KEY", "FINGERPRINT_KEY", "NOTE_KEY", "fingerprint", "png_bytes", "write_png", "png_text",
+           "add_text", "figure_problems"]
 
 COMMAND_KEY = "fkn-bench command"
 DATA_KEY = "fkn-bench data"
 FINGERPRINT_KEY = "fkn-bench data sha256"
+NOTE_KEY = "fkn-bench note"
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def _canonical(data: Any) -> str:
@@ -74,6 +82,24 @@ def png_text(source: str | Path | bytes) -> dict[str, str]:
             return {str(k): str(v) for k, v in getattr(image, "text", {}).items()}
     except UnidentifiedImageError:
         raise ValueError(f"{source if not isinstance(source, bytes) else 'the data'} is not a PNG file") from None
+
+
+def add_text(png: bytes, text: Mapping[str, str]) -> bytes:
+    """``png`` with a tEXt chunk per ``{keyword: value}`` (Latin-1, keyword 1-79 characters)
+    inserted before its IEND chunk; the image data is not touched. Raises ``ValueError`` for what
+    is no PNG or a keyword or value PNG cannot hold."""
+    if not png.startswith(_PNG_SIGNATURE) or png[-12:-8] != (0).to_bytes(4, "big") or png[-8:-4] != b"IEND":
+        raise ValueError("not a PNG file ending in its IEND chunk")
+    chunks = b""
+    for keyword, value in text.items():
+        if not 1 <= len(keyword) <= 79 or "\0" in keyword or "\0" in value:
+            raise ValueError(f"PNG text keyword {keyword!r}: 1-79 characters, no NUL")
+        try:
+            body = keyword.encode("latin-1") + b"\0" + value.encode("latin-1")
+        except UnicodeEncodeError:
+            raise ValueError(f"PNG text {keyword!r}: tEXt holds Latin-1 only") from None
+        chunks += len(body).to_bytes(4, "big") + b"tEXt" + body + zlib.crc32(b"tEXt" + body).to_bytes(4, "big")
+    return png[:-12] + chunks + png[-12:]
 
 
 def figure_problems(path: str | Path, data: Any = None) -> list[str]:

@@ -445,8 +445,9 @@ def _overview(section: str, scenarios: Sequence[str], ranked: dict[str, list[dic
         f"Overview: {SECTIONS[section][0].split(':')[0].lower()}",
         ["estimator", *scenarios], [[e, *(cells.get((e, s), _DASH) for s in scenarios)] for e in estimators],
         notes=["13-state RMSE, mean ± half width of its 95% confidence interval over the test episodes (lower is "
-               "better); bold: rank 1, and any estimator the paired test cannot separate from it; estimators by "
-               "their mean rank over this section's scenarios; – : not run."],
+               "better); bold: rank 1, which an estimator shares when the paired test cannot separate it from the "
+               "one ranked just above it (a chain of such ties from the first); estimators by their mean rank over "
+               "this section's scenarios; – : not run."],
     )
 
 

@@ -1,13 +1,18 @@
 """``fkn-bench leaderboard``: the committed leaderboards regenerate byte for byte from the committed
-results; errors for missing results."""
+results, and the committed figures were drawn from the same numbers; every figure README.md and the
+leaderboards show carries the command that draws it; errors for missing results."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import re
+from urllib.parse import unquote
+
 import pytest
 
 from fkn_bench.cli import main
+from fkn_bench.harness.figures import COMMAND_KEY, FINGERPRINT_KEY, figure_problems, png_text
 from fkn_bench.harness.leaderboard import REGENERATE_COMMAND
 
 REPO = Path(__file__).resolve().parents[2]
@@ -26,8 +31,37 @@ def test_committed_leaderboards_regenerate_identically(tmp_path: Path, capsys: p
     assert sorted(regenerated) == sorted(committed)
     for name in sorted(committed):
         assert regenerated[name] == committed[name], f"leaderboards/{name} differs from its regeneration"
+    figures = sorted(p.name for p in (tmp_path / "figures").iterdir() if not p.name.startswith("."))
+    assert "comparison-ds1.png" in figures
+    assert sorted(p.name for p in (LEADERBOARDS / "figures").glob("comparison-*.png")) == figures
+    for name in figures:  # pixels may differ between machines; the numbers they plot may not
+        assert png_text(LEADERBOARDS / "figures" / name).get(FINGERPRINT_KEY) == \
+            png_text(tmp_path / "figures" / name)[FINGERPRINT_KEY], \
+            f"leaderboards/figures/{name} was drawn from other numbers than leaderboards/results: redraw it with " \
+            f"`fkn-bench leaderboard`"
     written = capsys.readouterr().out.split()
-    assert len(written) == len(committed)
+    assert len(written) == len(committed) + len(figures)
+
+
+def _shown_figures() -> dict[Path, str]:
+    """Every PNG that README.md and the leaderboards' Markdown link to: ``{path: the file linking it}``."""
+    shown = {}
+    for page in [REPO / "README.md", *sorted(LEADERBOARDS.glob("*.md"))]:
+        for target in re.findall(r"\]\(([^)\s]+\.png)\)", page.read_text(encoding="utf-8")):
+            shown.setdefault((page.parent / unquote(target)).resolve(), str(page.relative_to(REPO)))
+    return shown
+
+
+def test_every_figure_shown_names_the_command_that_draws_it() -> None:
+    """Issue 39, item 8: leaderboards/figures/comparison-ds1.png, shown in README.md, had been drawn
+    from old results and copied in by hand."""
+    shown = _shown_figures()
+    assert LEADERBOARDS / "figures" / "comparison-ds1.png" in shown
+    problems = [f"{problem} (shown in {page})" for path, page in sorted(shown.items()) for problem in figure_problems(path)]
+    assert not problems, "\n".join(problems)
+    for path in shown:
+        if path.name.startswith("comparison-"):  # drawn from results: the fingerprint test above checks the numbers
+            assert png_text(path)[COMMAND_KEY] == "fkn-bench leaderboard" and FINGERPRINT_KEY in png_text(path)
 
 
 def test_committed_leaderboards_cover_every_named_scenario() -> None:
