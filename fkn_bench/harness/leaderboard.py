@@ -251,8 +251,7 @@ def _figure_link(scenario: str) -> str:
 
 
 # ---------------------------------------------------------------------------------------- tables
-def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]) -> Table:
-    tests = tie_tests(ranked)
+def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow], tests: Sequence[PairedTest | None]) -> Table:
     numbers = rank_numbers(ranked, tests)
     header = [
         "rank", "estimator", "13-state RMSE [95% CI]", "vs. above", "median [IQR]", "attitude (deg)", "position (m)", "rate (rad/s)",
@@ -378,25 +377,25 @@ def ranked_summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
     return rank([summarize_pair(results, e, scenario) for e in estimators])
 
 
-def _scenario_files(results: Results, scenario: str, ranked: Sequence[dict[str, Any]], figure: bool = False) -> dict[str, str]:
+def _scenario_files(results: Results, scenario: str, ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest | None],
+                    figure: bool = False) -> dict[str, str]:
     quoted = quoted_rows(scenario)
     runs = max(s["runs"] for s in ranked)
     intro = _scenario_intro(results, scenario, runs)
-    tables = [_ranking_table(ranked, quoted), _components_table(ranked, quoted), _consistency_table(ranked),
+    tables = [_ranking_table(ranked, quoted, tests), _components_table(ranked, quoted), _consistency_table(ranked),
               _settling_table(ranked)]
     title = f"fkn-bench leaderboard: {scenario}"
     shown = [_figure_link(scenario)] if figure else []
     markdown = f"# {title}\n\n" + "\n\n".join([*intro, *shown]) + "\n\n" + "\n".join(markdown_table(t) for t in tables)
     page = html_page(title, [p.replace("`", "") for p in intro], tables)
     stem = path_name(scenario)
-    return {f"{stem}.md": markdown, f"{stem}.html": page, f"{stem}.csv": _scenario_csv(ranked)}
+    return {f"{stem}.md": markdown, f"{stem}.html": page, f"{stem}.csv": _scenario_csv(ranked, tests)}
 
 
-def _scenario_csv(ranked: Sequence[dict[str, Any]]) -> str:
+def _scenario_csv(ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest | None]) -> str:
     """The ranking's deterministic columns; ``p_vs_above`` rounded to 3 significant digits (the
     test's decision does not hinge on more, and the file stays the same across SciPy versions)."""
     records = []
-    tests = tie_tests(ranked)
     for s, test, number in zip(ranked, tests, rank_numbers(ranked, tests)):
         st = s["statistics"]["state_rmse"]
         ci = s.get("state_rmse_ci") or (None, None)
@@ -426,14 +425,14 @@ NOTES_FILE = "NOTES.md"
 """Hand-written notes in a results directory, copied into the leaderboard index."""
 
 
-def _overview(section: str, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]]) -> Table:
+def _overview(section: str, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]],
+              tests: dict[str, list[PairedTest | None]]) -> Table:
     """The section's overview: estimators (by mean rank over the section's scenarios) x scenarios,
     each cell the mean 13-state RMSE +- its 95% interval's half width; bold: rank 1 (shared)."""
     positions: dict[str, list[int]] = {}
     cells: dict[tuple[str, str], str] = {}
     for scenario in scenarios:
-        tests = tie_tests(ranked[scenario])
-        for position, (summary, number) in enumerate(zip(ranked[scenario], rank_numbers(ranked[scenario], tests))):
+        for position, (summary, number) in enumerate(zip(ranked[scenario], rank_numbers(ranked[scenario], tests[scenario]))):
             positions.setdefault(summary["estimator"], []).append(position)
             text = _fmt(summary["state_rmse"], 4)
             if text != _DASH:
@@ -457,13 +456,14 @@ def _episodes(results: Results, scenarios: Sequence[str]) -> str:
     return f"{counts[0]}" if len(counts) == 1 else f"{counts[0]} to {counts[-1]}"
 
 
-def _section(results: Results, section: str, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]]) -> list[str]:
+def _section(results: Results, section: str, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]],
+             tests: dict[str, list[PairedTest | None]]) -> list[str]:
     heading, description = SECTIONS[section]
     lines = [f"## {heading}", "", description, ""]
     if not scenarios:
         return lines + ["No results for these scenarios in [`results/`](results/) yet.", ""]
     lines += [f"Test episodes (seeds) per estimator and scenario: {_episodes(results, scenarios)}.", "",
-              markdown_table(_overview(section, scenarios, ranked), level=3).rstrip("\n"), ""]
+              markdown_table(_overview(section, scenarios, ranked, tests), level=3).rstrip("\n"), ""]
     for scenario in figure_scenarios(scenarios):
         lines += [_figure_link(scenario), ""]
     if figure_scenarios(scenarios):
@@ -477,7 +477,8 @@ def _section(results: Results, section: str, scenarios: Sequence[str], ranked: d
     return lines + [""]
 
 
-def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]], notes: str | None) -> str:
+def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]],
+           tests: dict[str, list[PairedTest | None]], notes: str | None) -> str:
     sections = {key: [s for s in scenarios if scenario_section(results, s) == key] for key in SECTIONS}
     env_lines = [
         f"- fkn-bench {e.get('fkn_bench')}, commit {e.get('git_commit')}, Python {e.get('python')}, "
@@ -485,7 +486,7 @@ def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[di
         for e in _environments(results)
     ]
     settings = results.settings()
-    body = [line for key in SECTIONS if key != "other" or sections[key] for line in _section(results, key, sections[key], ranked)]
+    body = [line for key in SECTIONS if key != "other" or sections[key] for line in _section(results, key, sections[key], ranked, tests)]
     return "\n".join([
         "# fkn-bench leaderboards",
         "",
@@ -596,9 +597,10 @@ def _build(results: Results, notes: str | None, draw: bool = False) -> tuple[dic
     drawn = figure_scenarios(scenarios)
     files: dict[str, str] = {}
     ranked = _ranked(results, scenarios)
+    tests = {scenario: tie_tests(ranked[scenario]) for scenario in scenarios}
     for scenario in scenarios:
-        files.update(_scenario_files(results, scenario, ranked[scenario], figure=scenario in drawn))
-    files["README.md"] = _index(results, scenarios, ranked, notes)
+        files.update(_scenario_files(results, scenario, ranked[scenario], tests[scenario], figure=scenario in drawn))
+    files["README.md"] = _index(results, scenarios, ranked, tests, notes)
     files["results.csv"] = rows_to_csv(deterministic_rows(results.rows), float_format=CSV_FLOAT_FORMAT)
     files["provenance.json"] = _provenance(results, scenarios)
     return files, (_figures(ranked, drawn, LEADERBOARD_COMMAND) if draw else {})
