@@ -31,6 +31,8 @@ to the first command to recompute them)::
 from __future__ import annotations
 
 import argparse
+import csv
+import io
 import sys
 from pathlib import Path
 
@@ -54,7 +56,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--cross", action="store_true",
                         help="instead: run every learned or tuned estimator with every family's committed parameters "
                              "on every named scenario and write the cross-scenario table (cross-scenario.md/.csv)")
-    parser.add_argument("--seeds", type=int, default=20, metavar="N", help="--cross: seeds 0 .. N-1 (default: 20)")
+    parser.add_argument("--shift", action="store_true",
+                        help="instead: score each prior family's learned and tuned estimators, and manual-ekf, on "
+                             "shifted priors and write the shift table (shift.md/.csv)")
+    parser.add_argument("--seeds", type=int, default=None, metavar="N",
+                        help="--cross, --shift: test episodes 0 .. N-1 (default: 20 for --cross, 50 for --shift)")
     parser.set_defaults(handler=run)
 
 
@@ -63,8 +69,14 @@ def run(args: argparse.Namespace) -> int:
         args.results = str(default_leaderboards() / "results")
     if args.out is None:
         args.out = str(Path(args.results).parent)
+    if args.cross and args.shift:
+        raise UsageError("--cross and --shift write different tables: give one")
     if args.cross:
         return _cross(args)
+    if args.shift:
+        return _shift(args)
+    if args.seeds is not None:
+        raise UsageError("--seeds goes with --cross or --shift (the leaderboards take the stored results' seeds)")
     from fkn_bench.harness.leaderboard import NOTES_FILE, write_leaderboards
     from fkn_bench.harness.store import ResultStore, StoreError
 
@@ -84,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 CROSS_ESTIMATORS = ("flexkalmannet", "flexkalmannet-rigid-body", "nll-tuned-ekf", "direct-tuned-ekf")
-CROSS_FAMILIES = ("ds1", "ds2", "tumble", "default", "ds1-noise-step")
+CROSS_FAMILIES = ("spin", "free-tumble", "ds1", "ds2", "tumble", "default", "ds1-noise-step")
 
 
 def _cross(args: argparse.Namespace) -> int:
@@ -93,6 +105,7 @@ def _cross(args: argparse.Namespace) -> int:
     from fkn_bench.harness.tables import markdown_table
     from fkn_bench.scenarios import scenario_names
 
+    args.seeds = 20 if args.seeds is None else args.seeds
     if args.seeds < 1:
         raise UsageError(f"--seeds must be a positive integer (got {args.seeds})")
     names = ["cross-scenario.md", "cross-scenario.csv"]
@@ -104,6 +117,41 @@ def _cross(args: argparse.Namespace) -> int:
     with usage_errors(ValueError):
         paths = write_files(args.out, dict(zip(names, (header + markdown_table(table), table.to_csv()))),
                             force=args.force, what="the cross-scenario table")
+    for path in paths:
+        print(path)
+    return 0
+
+
+def _shift(args: argparse.Namespace) -> int:
+    from fkn_bench.harness.manifest import check_files, write_files
+    from fkn_bench.harness.shift import RATIO_TARGET, REFERENCE, SHIFTS, shift_misses, shift_scores, shift_table
+    from fkn_bench.harness.tables import markdown_table
+
+    args.seeds = 50 if args.seeds is None else args.seeds
+    if args.seeds < 2:
+        raise UsageError(f"--seeds must be an integer >= 2 (got {args.seeds})")
+    names = ["shift.md", "shift.csv"]
+    with usage_errors(ValueError):
+        check_files(args.out, names, force=args.force)  # before minutes of work
+    families = list(SHIFTS)
+    scores = shift_scores(families, args.seeds, progress=lambda what: print(f"[shift] {what}", file=sys.stderr))
+    tables = [shift_table(scores, family) for family in families]
+    misses = shift_misses(scores)
+    text = (f"# Shift table ({args.seeds} test episodes per cell)\n\n"
+            f"Regenerate: `fkn-bench leaderboard --shift --seeds {args.seeds}`\n\n"
+            "Each learned or tuned estimator runs with the parameters it learned on its prior family's training "
+            "episodes, on that family's test episodes (in-distribution) and on the same episodes drawn from shifted "
+            f"priors; {REFERENCE} (untrained) beside them. Targets: no lost track in distribution; on every shift "
+            f"at most {RATIO_TARGET:g}x the in-distribution score and no worse than {REFERENCE}.\n\n"
+            + "\n\n".join(markdown_table(t) for t in tables)
+            + "\n\n## Targets missed\n\n" + ("\n".join(f"- {m}" for m in misses) if misses else "None.") + "\n")
+    rows = [["family", "estimator", "column", "mean_rmse", "lost", "nees_flagged", "episodes"]]
+    rows += [[f, n, c, repr(v.mean), v.lost_count, v.inconsistent_count, len(v.rmse)] for (f, c, n), v in sorted(scores.items())]
+    buffer = io.StringIO()
+    csv.writer(buffer, lineterminator="\n").writerows(rows)
+    csv_text = buffer.getvalue()
+    with usage_errors(ValueError):
+        paths = write_files(args.out, dict(zip(names, (text, csv_text))), force=args.force, what="the shift table")
     for path in paths:
         print(path)
     return 0

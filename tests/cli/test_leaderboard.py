@@ -131,3 +131,16 @@ def test_a_file_fkn_bench_did_not_write_is_never_replaced(tmp_path: Path, capsys
     (tmp_path / "ds1.md").write_text("edited\n")
     assert main(["leaderboard", "--results", str(tmp_path / "ov")]) == 2
     assert f"{tmp_path}/ds1.md exists and fkn-bench did not write it (or it was edited since" in capsys.readouterr().err
+
+
+def test_shift_and_cross_options_are_checked_before_any_work(tmp_path, capsys) -> None:  # noqa: ANN001
+    from fkn_bench.cli import main
+
+    assert main(["leaderboard", "--shift", "--cross", "--out", str(tmp_path)]) == 2
+    assert "--cross and --shift" in capsys.readouterr().err
+    assert main(["leaderboard", "--seeds", "5", "--out", str(tmp_path)]) == 2
+    assert "--seeds goes with --cross or --shift" in capsys.readouterr().err
+    assert main(["leaderboard", "--shift", "--seeds", "1", "--out", str(tmp_path)]) == 2
+    (tmp_path / "shift.md").write_text("MINE\n")  # a file fkn-bench did not write is never replaced
+    assert main(["leaderboard", "--shift", "--seeds", "2", "--out", str(tmp_path)]) == 2
+    assert (tmp_path / "shift.md").read_text() == "MINE\n" and not (tmp_path / "shift.csv").exists()
