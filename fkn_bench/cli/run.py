@@ -16,7 +16,7 @@ identical for the same seeds whatever the backend or worker count.
 
 Examples::
 
-    fkn-bench run                                   # the best built-in estimator on ds1, 20 seeds
+    fkn-bench run                                   # the best built-in estimator on spin (a prior family), 20 test episodes
     fkn-bench run --estimator manual-ekf --scenario ds1 --scenario ds2 --seeds 50 --json
     fkn-bench run --all --seeds 20 --out leaderboards/results   # every estimator x scenario
     fkn-bench run --all --backend dask --workers 4              # on a local Dask cluster
@@ -45,7 +45,7 @@ from fkn_bench.cli.options import (add_command, add_scenario_file_option, check_
 
 __all__ = ["add_parser", "run", "DEFAULT_SCENARIO", "DEFAULT_SEEDS"]
 
-DEFAULT_SCENARIO = "ds1"
+DEFAULT_SCENARIO = "spin"
 DEFAULT_SEEDS = 20
 """Default seed count: with 20 runs the per-step 95% ANEES interval for the 12-dim error is
 [10.0, 14.2] (half-width ~17%), narrow enough for the chi-square test to separate a consistent
