@@ -1,6 +1,8 @@
-"""Long-run stability: 1e5 steps of ds1-flips (random quaternion sign flips, 1% gross outliers)
-through every baseline, batched estimate(): no NaN, and every 12x12 error covariance positive
-definite.
+"""Long-run stability: 3e4 steps of ds1-flips (3000 measurements, half of them sign-flipped, 1%
+gross outliers: the filters reach their steady state within about 100 updates, so this is thirty
+times that) through every baseline, batched estimate(): no NaN, and every 12x12 error covariance
+positive definite. (1e5 steps until 2026-11-27: 48 s of the test command's 292 s, for the same
+verdicts.)
 
 The EKF-family estimators (manual-ekf, nll-tuned-ekf, direct-tuned-ekf) differ only in their
 constant noise parameters, so one batched EKF run carries all three parameter sets side by side
@@ -20,7 +22,7 @@ from fkn_bench.scenarios import get_scenario
 
 BASELINES = ("sage-husa", "akhlaghi", "vbakf")
 EKF_PARAMETER_SETS = ("manual-ekf", "nll-tuned-ekf", "direct-tuned-ekf")
-STEPS = 100_000
+STEPS = 30_000
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +33,7 @@ def long_flips():  # noqa: ANN201
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", BASELINES)
-def test_no_nan_and_positive_definite_covariances_over_1e5_steps(name: str, long_flips) -> None:
+def test_no_nan_and_positive_definite_covariances_over_3e4_steps(name: str, long_flips) -> None:
     scenario, episodes = long_flips
     assert episodes.n_steps == STEPS and (episodes.measurements[episodes.valid][:, 0] < 0).any()
     result = make_estimator(name, scenario=scenario).estimate(episodes.measurements, episodes.valid, scenario.dt)
@@ -39,8 +41,8 @@ def test_no_nan_and_positive_definite_covariances_over_1e5_steps(name: str, long
         assert np.isfinite(array).all()
     error_covariances = result.error_covariances[0]
     assert np.isfinite(error_covariances).all()
-    for start in range(0, STEPS, 20_000):  # in chunks: eigvalsh of 1e5 12x12 matrices at once is large
-        assert np.linalg.eigvalsh(error_covariances[start : start + 20_000]).min() > 0
+    for start in range(0, STEPS, 10_000):  # in chunks: eigvalsh of many 12x12 matrices at once is large
+        assert np.linalg.eigvalsh(error_covariances[start : start + 10_000]).min() > 0
     # the estimate keeps tracking over the last 1000 steps, except Akhlaghi's (documented in
     # fkn_bench.baselines.akhlaghi: outliers inflate its residual-based R, and the sluggish
     # filter's own error then keeps R inflated: it drifts for long stretches, metres and tens of
@@ -52,13 +54,13 @@ def test_no_nan_and_positive_definite_covariances_over_1e5_steps(name: str, long
 
 
 @pytest.mark.slow
-def test_ekf_with_manual_and_tuned_parameters_stays_finite_and_positive_definite_over_1e5_steps(long_flips) -> None:
+def test_ekf_with_manual_and_tuned_parameters_stays_finite_and_positive_definite_over_3e4_steps(long_flips) -> None:
     """The batched EKF with each EKF estimator's parameters (a batch of three copies of the
     sequence): sign flips at half the measurements, 1% gross outliers, a measurement every 10
     steps; no NaN, the 13x13 covariance exactly symmetric, the 12-dim error covariance symmetric
     positive definite throughout, and the estimate still tracking at the end."""
     scenario, episodes = long_flips
-    assert episodes.valid.sum() == 10_000
+    assert episodes.valid.sum() == STEPS // 10
     noises = [make_estimator(name, scenario=scenario).noise_parameters() for name in EKF_PARAMETER_SETS]
     noise = NoiseParameters(*(torch.stack([getattr(n, f) for n in noises]) for f in ("process", "measurement", "initial")))
     batch = len(EKF_PARAMETER_SETS)
@@ -74,7 +76,7 @@ def test_ekf_with_manual_and_tuned_parameters_stays_finite_and_positive_definite
     for b, name in enumerate(EKF_PARAMETER_SETS):
         means, covariances = result.means[b].numpy(), result.covariances[b].numpy()
         updated = result.updated[b].numpy()
-        assert updated.sum() > 9_900, name  # nearly every measurement went in (outliers included)
+        assert updated.sum() > 0.99 * STEPS // 10, name  # nearly every measurement went in (outliers included)
         assert np.isfinite(means).all(), name
         smallest = np.inf
         for start in range(0, STEPS, 10_000):  # in chunks: the checks' temporaries stay small

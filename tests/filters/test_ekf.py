@@ -1,5 +1,5 @@
 """The EKF: against the plain KF on a linear model, against filterpy's EKF on the paper's model,
-sign alignment and the Joseph form. (The long run on hostile data, 1e5 steps, is in
+sign alignment and the Joseph form. (The long run on hostile data, 3e4 steps, is in
 tests/baselines/test_long_run.py, with the manual and the tuned parameters in one batch.)"""
 
 from __future__ import annotations
