@@ -28,6 +28,7 @@ from fkn_bench.harness.estimators import resolve_estimator
 from fkn_bench.harness.tables import Table
 from fkn_bench.metrics import MetricSettings, score_run
 from fkn_bench.scenarios import Scenario, get_scenario
+from fkn_bench.training.artifacts import artifact_path
 
 __all__ = ["Shift", "SHIFTS", "SHIFT_ESTIMATORS", "REFERENCE", "RATIO_TARGET", "ShiftScore", "shifted_scenario",
            "shift_scores", "shift_table", "shift_misses"]
@@ -130,7 +131,8 @@ def shift_scores(
 ) -> dict[tuple[str, str, str], ShiftScore]:
     """``{(family, column, estimator): ShiftScore}`` over test episodes ``0 .. seeds-1``; column
     ``"in-distribution"`` is the family's own scenario, the others the labels of :data:`SHIFTS`.
-    Estimators without parameters for the family are left out. ``steps``: episodes of that many
+    Every estimator but :data:`REFERENCE` runs with its committed parameters of the family
+    (``parameters=<estimator>-<family>.json``); those without any are left out. ``steps``: episodes of that many
     samples instead of the family's (a quick look; the table uses the family's)."""
     out: dict[tuple[str, str, str], ShiftScore] = {}
     names = [REFERENCE, *[e for e in estimators if e != REFERENCE]]
@@ -141,7 +143,13 @@ def shift_scores(
             scenario = scenario if steps is None else scenario.replace(n_steps=int(steps))
             episodes = generate_episodes(scenario, seeds, split="test")
             for name in names:
-                resolved = resolve_estimator(name, scenario)
+                options = {}
+                if name != REFERENCE:  # the family's own parameters (a shifted scenario is no named one,
+                    path = artifact_path(name, family)  # which would get the default mixture's)
+                    if not path.is_file():
+                        continue
+                    options = {"parameters": str(path)}
+                resolved = resolve_estimator(name, scenario, options)
                 if resolved.estimator is None:
                     continue
                 if progress is not None:

@@ -74,3 +74,22 @@ def test_missed_targets_are_named_with_their_numbers() -> None:
 def test_shifted_scenarios_are_valid_and_named_apart(family: str) -> None:
     names = {shifted_scenario(family, s).name for s in SHIFTS[family]}
     assert len(names) == len(SHIFTS[family]) and not names & set(PRIOR_FAMILIES[family])
+
+
+def test_each_estimator_runs_its_familys_parameters_on_every_shift(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A shifted prior is no named scenario, where a trained estimator would otherwise run the
+    default mixture's parameters: the table must score the family's own."""
+    from fkn_bench.harness import shift
+
+    asked: list[tuple[str, str, dict]] = []
+
+    def resolve(name, scenario, options=None):  # noqa: ANN001, ANN202
+        asked.append((name, scenario.name, dict(options or {})))
+        return type("Unavailable", (), {"estimator": None})()
+
+    monkeypatch.setattr(shift, "resolve_estimator", resolve)
+    shift_scores(["spin"], 1, estimators=("flexkalmannet", "no-such-estimator"), steps=50)
+    trained = [options for name, _, options in asked if name == "flexkalmannet"]
+    assert len(trained) == 1 + len(SHIFTS["spin"])
+    assert all(o["parameters"].endswith("flexkalmannet-spin.json") for o in trained)
+    assert {name for name, *_ in asked} == {REFERENCE, "flexkalmannet"}  # no parameters: left out
