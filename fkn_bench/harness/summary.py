@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from fkn_bench.harness.records import Results
-from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS, NEES_DOF, NIS_DOF, average_statistic, chi2_interval, summarize
+from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS, LOST_TRACK_REASONS, NEES_DOF, NIS_DOF, average_statistic, chi2_interval, summarize
 from fkn_bench.metrics.statistics import mean_interval
 from fkn_bench.types import STATE_NAMES
 
@@ -91,6 +91,10 @@ def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str,
     nis_runs = int(np.max(nis.count)) if nis is not None and nis.count.size else 0
     nis_lower, nis_upper = chi2_interval(NIS_DOF, nis_runs) if nis_runs else (np.nan, np.nan)
     diverged = _column(table, "stability", "diverged", runs)
+    lost = np.zeros(runs)  # lost track: any flag but the NEES test's (a failed run or an unknown flag counts)
+    for flag in (*LOST_TRACK_REASONS, "failed"):
+        lost = np.maximum(lost, np.nan_to_num(_column(table, "stability", flag, runs), nan=0.0))
+    lost = np.where(np.isnan(diverged), 1.0, lost)
     primary = _column(table, *PRIMARY_SCORE, runs)
     failed = _column(table, "stability", "failed", runs)
     source = cells[0].source
@@ -114,6 +118,7 @@ def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str,
         "settling_time_by_group_s": {g: mean(g, "settling_time") for g in GROUPS},
         "diverged_fraction": float(np.mean(np.nan_to_num(diverged, nan=1.0))) if runs else float("nan"),
         "divergence_reasons": {r: mean("stability", r) for r in DIVERGENCE_REASONS},
+        "lost_track_fraction": float(np.mean(lost)) if runs else float("nan"),
         "anees": anees.average if anees else float("nan"),
         "anees_bounds": [float(lower), float(upper)],
         "nees_in_bounds_fraction": anees.in_bounds_fraction if anees else float("nan"),

@@ -26,7 +26,7 @@ import numpy as np
 from fkn_bench.metrics.consistency import NEES_DOF, chi2_upper
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["DEFAULT_GROWTH_FLOORS", "DIVERGENCE_REASONS", "DivergenceFlags", "error_growth", "nees_high", "window_rms"]
+__all__ = ["DEFAULT_GROWTH_FLOORS", "DIVERGENCE_REASONS", "LOST_TRACK_REASONS", "DivergenceFlags", "error_growth", "nees_high", "window_rms"]
 
 DEFAULT_GROWTH_FLOORS: Mapping[str, float] = {
     "attitude": 20.0,  # deg: twice ds1's raw measurement error level (9.9 deg)
@@ -39,6 +39,9 @@ rad/s, m/s)."""
 
 DIVERGENCE_REASONS: tuple[str, ...] = ("non_finite", "cholesky_failed", "error_growth", "nees_high")
 """The flags of :class:`DivergenceFlags`, in the order of the module docstring."""
+LOST_TRACK_REASONS: tuple[str, ...] = ("non_finite", "cholesky_failed", "error_growth")
+"""The flags that mean the estimate lost the track (its error grew, or it or its covariance broke);
+``nees_high``, a filter sure of an estimate that is wrong, is a consistency verdict reported apart."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -49,6 +52,11 @@ class DivergenceFlags:
     cholesky_failed: ArrayB
     error_growth: ArrayB
     nees_high: ArrayB
+
+    @property
+    def lost_track(self) -> ArrayB:
+        """The union of :data:`LOST_TRACK_REASONS` (``nees_high`` left out)."""
+        return self.non_finite | self.cholesky_failed | self.error_growth
 
     @property
     def diverged(self) -> ArrayB:

@@ -26,7 +26,7 @@ BAD_INPUTS = [
      "--estimator-option parameters=nope.json: learned-parameter file not found: nope.json"),
     ("run --estimator manual-ekf --estimator-option foo=bar --seeds 1",
      "--estimator-option foo=bar: estimator 'manual-ekf' has no option 'foo'; valid options: description, gate, inertia,"),
-    ("run --estimator sage-husa --estimator-option alpha=3 --seeds 1",
+    ("run --estimator sage-husa --estimator-option alpha=3 --scenario ds1 --seeds 1",
      "--estimator-option alpha=3: unknown SageHusaEstimator options ['alpha']; valid: ['adapt', 'adapt_q',"),
     ("run --estimator flexkalmannet --estimator-option parameters= --seeds 1", "the learned-parameter file name is empty"),
     ("run --recording nope.mcap --estimator manual-ekf", "recording not found: nope.mcap"),
