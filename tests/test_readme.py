@@ -1,6 +1,6 @@
-"""README.md stays true: its leaderboard excerpt is copied from the committed ``leaderboards/ds1.md``
-(the same estimators in the same order with the same numbers), and the test command that
-``.ci/run`` extracts is the one README shows."""
+"""README.md stays true: its leaderboard excerpt is copied from the committed leaderboard it names
+(``Excerpt of [`leaderboards/<scenario>.md`]``: the same estimators in the same order with the same
+numbers), and the test command that ``.ci/run`` extracts is the one README shows."""
 
 from __future__ import annotations
 
@@ -31,20 +31,22 @@ def _column(header: str, row: dict[str, str]) -> str:
     return header if header in row else re.sub(r"\s*\(.*\)$", "", header)
 
 
-def test_leaderboard_excerpt_matches_the_committed_ds1_leaderboard() -> None:
-    excerpt = _markdown_table_after(README.read_text(), "Excerpt of")
-    committed = _markdown_table_after((REPO / "leaderboards" / "ds1.md").read_text(), "## Ranking")
+def test_leaderboard_excerpt_matches_the_committed_leaderboard_it_names() -> None:
+    text = README.read_text()
+    excerpt = _markdown_table_after(text, "Excerpt of")
+    (name,) = re.findall(r"Excerpt of\s+\[`leaderboards/([\w-]+\.md)`\]", text)
+    committed = _markdown_table_after((REPO / "leaderboards" / name).read_text(), "## Ranking")
     by_estimator = {row["estimator"]: row for row in committed}
     assert excerpt, "README has no leaderboard excerpt"
     ranked = [row["estimator"] for row in committed if row["rank"] != "–"]
     shown = [row["estimator"] for row in excerpt if row["rank"] != "–"]
-    assert shown == ranked[: len(shown)], "README's excerpt must show the top of the ds1 ranking in order"
+    assert shown == ranked[: len(shown)], f"README's excerpt must show the top of the {name} ranking in order"
     for row in excerpt:
-        assert row["estimator"] in by_estimator, f"{row['estimator']} is not on leaderboards/ds1.md"
+        assert row["estimator"] in by_estimator, f"{row['estimator']} is not on leaderboards/{name}"
         committed_row = by_estimator[row["estimator"]]
         for header, value in row.items():
             assert committed_row[_column(header, committed_row)] == value, (
-                f"README excerpt, {row['estimator']}, {header}: {value} but leaderboards/ds1.md has "
+                f"README excerpt, {row['estimator']}, {header}: {value} but leaderboards/{name} has "
                 f"{committed_row[_column(header, committed_row)]} (copy the regenerated table)"
             )
 

@@ -1,4 +1,6 @@
-"""``fkn-bench scenarios``: list the registered scenarios, or show one in full."""
+"""``fkn-bench scenarios``: list the registered scenarios (the prior families first, each episode
+drawing its own truth; then the paper's fixed-truth scenarios and the others), or show one in full
+with its stated prior."""
 
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ def run(args: argparse.Namespace) -> int:
         lines = scenario.to_dict() | {"config_hash": scenario.config_hash()} | {f"prior.{k}": v for k, v in prior.items()}
         document: Any = scenario.to_dict() | {"config_hash": scenario.config_hash(), "prior": prior}
     else:  # every scenario: name and description
-        scenarios = list_scenarios()
+        scenarios = sorted(list_scenarios(), key=lambda s: "prior" not in s.tags)  # stable: registration order within
         document = [s.to_dict() for s in scenarios]
         lines = {s.name: s.description for s in scenarios}
     if args.json:
