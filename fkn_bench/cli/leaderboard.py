@@ -25,7 +25,7 @@ configuration are refused in one line: build those from one results directory ea
 Regenerate the committed leaderboards from scratch (cells already stored are reused; add --rerun
 to the first command to recompute them)::
 
-    fkn-bench run --all --seeds 20 --out leaderboards/results --no-progress && fkn-bench leaderboard
+    fkn-bench run --all --out leaderboards/results --no-progress && fkn-bench leaderboard
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ Examples::
 
     fkn-bench run                                   # the best built-in estimator on spin (a prior family), 20 test episodes
     fkn-bench run --estimator manual-ekf --scenario ds1 --scenario ds2 --seeds 50 --json
-    fkn-bench run --all --seeds 20 --out leaderboards/results   # every estimator x scenario
+    fkn-bench run --all --out leaderboards/results            # every estimator x scenario, each its test episodes
     fkn-bench run --all --backend dask --workers 4              # on a local Dask cluster
     fkn-bench run --recording run.mcap --estimator manual-ekf    # replay a recording (MCAP)
 
@@ -63,8 +63,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help=f"scenario to run on (repeatable; default: {DEFAULT_SCENARIO})")
     parser.add_argument("--all", action="store_true",
                         help="every available estimator on every named scenario (--estimator/--scenario narrow it)")
-    parser.add_argument("--seeds", type=int, default=DEFAULT_SEEDS, metavar="N",
-                        help=f"run seeds 0 .. N-1 (default: {DEFAULT_SEEDS})")
+    parser.add_argument("--seeds", type=int, default=None, metavar="N",
+                        help="run seeds (test episodes) 0 .. N-1 (default: each scenario's own test_episodes: 50 on "
+                             f"the prior families' headline scenarios, 10 on their stress variants, {DEFAULT_SEEDS} on "
+                             f"the paper's; {DEFAULT_SEEDS} on a dataset or a recording)")
     parser.add_argument("--split", default="test", choices=SPLITS, help="episode split to score (default: test)")
     parser.add_argument("--cut", type=int, default=100, metavar="STEPS",
                         help="first scored step of each run: the paper's loss cut (default: 100)")
@@ -241,6 +243,9 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.harness.grid import estimator_label
     from fkn_bench.io import to_jsonable
 
+    per_scenario = args.seeds is None  # simulated scenarios: each its own test_episodes
+    if per_scenario:
+        args.seeds = DEFAULT_SEEDS
     _check_arguments(args)
     load_scenario_files(args)
     seeds: Any = None  # range(--seeds), or a dataset's own seeds
@@ -263,7 +268,15 @@ def run(args: argparse.Namespace) -> int:
     resolved = _estimators(args, scenarios)
     for line in _parameter_sources(resolved):
         print(line, file=sys.stderr)
-    cells = build_grid(resolved, sources, range(args.seeds) if seeds is None else seeds, settings=MetricSettings(cut=args.cut))
+    settings = MetricSettings(cut=args.cut)
+    if per_scenario and not (args.dataset or args.recording):  # each scenario its own number of test episodes
+        counts = {source.scenario.name: source.scenario.test_episodes for source in sources}
+        cells = [cell for n in dict.fromkeys(counts.values())
+                 for cell in build_grid([r for r in resolved if counts[r.scenario] == n],
+                                        [s for s in sources if counts[s.scenario.name] == n], range(n), settings=settings)]
+        args.seeds = next(iter(counts.values())) if len(set(counts.values())) == 1 else counts
+    else:
+        cells = build_grid(resolved, sources, range(args.seeds) if seeds is None else seeds, settings=settings)
     store = _store(args) if args.out else None
     backend = make_backend(args.backend, workers=args.workers, scheduler=args.scheduler)
     try:

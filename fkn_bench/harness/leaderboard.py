@@ -106,7 +106,7 @@ __all__ = [
 RESULTS_DIR = "leaderboards/results"
 """The committed per-cell results (``fkn-bench run --out``), relative to the repository root."""
 LEADERBOARD_COMMAND = "fkn-bench leaderboard"
-REGENERATE_COMMAND = f"fkn-bench run --all --seeds 20 --out {RESULTS_DIR} --no-progress && {LEADERBOARD_COMMAND}"
+REGENERATE_COMMAND = f"fkn-bench run --all --out {RESULTS_DIR} --no-progress && {LEADERBOARD_COMMAND}"
 """Rebuilds the committed leaderboards: runs every available estimator on every named scenario
 (cells already in ``leaderboards/results`` with the same configuration are reused; add
 ``--rerun`` to recompute them), then rebuilds the tables."""

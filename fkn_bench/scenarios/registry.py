@@ -268,12 +268,14 @@ _PRIOR = dict(
     omega0_axis="uniform",
     position0_std=1.0,
     velocity0_std=0.01,
+    test_episodes=50,
     tags=("prior",),
 )
 """What the two prior families share: every split whole episodes from disjoint seed pools, 300 s
 episodes (3000 samples at 10 Hz, a measurement every second), a uniformly random attitude and rate
 axis, a start within about a metre of the paper's position (N(0, 1 m^2) per axis) and a drift of
-N(0, (1 cm/s)^2) per axis (about 1.6 cm/s typical speed, 5 m over an episode)."""
+N(0, (1 cm/s)^2) per axis (about 1.6 cm/s typical speed, 5 m over an episode); scored on 50 test
+episodes (their stress variants on 10)."""
 
 SPIN = _DS1.replace(
     name="spin",
@@ -326,7 +328,7 @@ for _family in (SPIN, FREE_TUMBLE):
     _members = [_family.name]
     for _suffix, _what, _fields in _STRESS:
         register_scenario(_family.replace(name=f"{_family.name}-{_suffix}", description=f"{_family.name} with {_what}",
-                                          tags=("prior", "stress"), **_fields))
+                                          tags=("prior", "stress"), test_episodes=10, **_fields))
         _members.append(f"{_family.name}-{_suffix}")
     PRIOR_FAMILIES[_family.model_family] = tuple(_members)
 

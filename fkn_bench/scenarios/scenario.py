@@ -133,7 +133,9 @@ class Scenario:
         train, val and test: every sequence trained on or evaluated is calm, noisy, calm; see
         :meth:`noise_factor`).
     Bookkeeping
-        ``dataset_seed`` is the seed of the training data set; ``model_family`` names the
+        ``dataset_seed`` is the seed of the training data set; ``test_episodes`` the number of
+        test episodes (seeds ``0 .. test_episodes - 1``) ``fkn-bench run`` scores without
+        ``--seeds`` (not part of the configuration hash: it generates nothing); ``model_family`` names the
         committed learned model that applies to this scenario (``"ds1"`` or ``"ds2"`` for the
         constant rates, ``"tumble"`` for free tumbling).
     """
@@ -174,6 +176,7 @@ class Scenario:
     kick_decay: float = 5.0
     free_substeps: int = 1
     dataset_seed: int = 0
+    test_episodes: int = 20
     model_family: str = "ds1"
     tags: tuple[str, ...] = field(default_factory=tuple)
 
@@ -229,7 +232,7 @@ class Scenario:
         set_(self, "kick_decay", float(self.kick_decay))
         _check(_is_finite_number(self.dt) and self.dt > 0, "dt", "a finite number > 0 (s)", self.dt)
         set_(self, "dt", float(self.dt))
-        for name, low in (("n_steps", 2), ("measurement_every", 1), ("burst_length", 0),
+        for name, low in (("n_steps", 2), ("measurement_every", 1), ("burst_length", 0), ("test_episodes", 1),
                           ("free_substeps", 1), ("dataset_seed", 0), ("kick_length", 0)):
             value = getattr(self, name)
             _check(isinstance(value, int) and not isinstance(value, bool) and value >= low,
@@ -372,12 +375,12 @@ class Scenario:
         return cls(**dict(data))
 
     def config_hash(self) -> str:
-        """Short SHA-256 of the generating configuration (name, description and tags excluded;
+        """Short SHA-256 of the generating configuration (name, description, tags and test_episodes excluded;
         fields added since the first release are left out at their default value, so that the
         hashes of earlier configurations, which artefacts and stored results carry, still hold)."""
         payload = {
             k: v for k, v in self.to_dict().items()
-            if k not in ("name", "description", "tags") and _LATER_DEFAULTS.get(k, _NO_DEFAULT) != v
+            if k not in ("name", "description", "tags", "test_episodes") and _LATER_DEFAULTS.get(k, _NO_DEFAULT) != v
         }
         return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:16]
 

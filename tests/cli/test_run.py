@@ -274,3 +274,16 @@ def test_a_second_run_into_one_out_is_refused_in_one_line(capsys: pytest.Capture
         err = _one_line_error(capsys, "--estimator", "manual-ekf", "--scenario", "tiny", "--scenario-file", tiny,
                               "--seeds", "1", "--out", str(tmp_path))
     assert f"fkn-bench run: error: {tmp_path} is in use by another fkn-bench process" in err
+
+
+def test_without_seeds_each_scenario_scores_its_own_test_episodes(capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
+    two = tmp_path / "two.toml"
+    two.write_text("[scenario.one]\nbase = \"ds1\"\nn_steps = 300\ntest_episodes = 1\n"
+                   "[scenario.three]\nbase = \"ds1\"\nn_steps = 300\ntest_episodes = 3\n")
+    document = _run_json(capsys, "--estimator", "manual-ekf", "--scenario", "one", "--scenario", "three",
+                         "--scenario-file", str(two), "--no-progress", "--cut", "10")
+    assert document["seeds"] == {"one": 1, "three": 3}
+    assert {r["scenario"]: r["seeds"] for r in document["results"]} == {"one": [0], "three": [0, 1, 2]}
+    given = _run_json(capsys, "--estimator", "manual-ekf", "--scenario", "one", "--scenario", "three",
+                      "--scenario-file", str(two), "--no-progress", "--cut", "10", "--seeds", "2")
+    assert given["seeds"] == 2 and all(r["seeds"] == [0, 1] for r in given["results"])
