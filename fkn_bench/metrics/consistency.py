@@ -100,8 +100,18 @@ def normalized_squares(vectors: ArrayF, covariances: ArrayF, mask: ArrayB | None
     use = m & pd & np.all(np.isfinite(x), axis=-1)
     values = np.full(x.shape[:2], np.nan)
     if use.any():
-        xu = x[use]
-        values[use] = np.einsum("ki,ki->k", xu, np.linalg.solve(C[use], xu[..., None])[..., 0])
+        xu, Cu = x[use], C[use]
+        try:
+            values[use] = np.einsum("ki,ki->k", xu, np.linalg.solve(Cu, xu[..., None])[..., 0])
+        except np.linalg.LinAlgError:  # one matrix that factorised but is singular to working precision
+            forms = np.full(len(xu), np.nan)  # (LAPACK's LU fails where Cholesky passed): that one has no NEES,
+            for k in range(len(xu)):          # and counts as not positive definite, like a failed Cholesky
+                try:
+                    forms[k] = xu[k] @ np.linalg.solve(Cu[k], xu[k])
+                except np.linalg.LinAlgError:
+                    pass
+            values[use] = forms
+            pd[use] &= np.isfinite(forms)
     return QuadraticForm(values=values, positive_definite=pd | ~m)
 
 
