@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
 __all__ = ["Scenario", "ConfigError", "ASTROBEE_INERTIA", "ASTROBEE_MASS", "SPLITS", "MAX_RATE", "SEED_POOLS",
-           "POOL_SIZE"]
+           "POOL_SIZE", "PRIOR_EPISODES"]
 
 ASTROBEE_INERTIA: tuple[float, float, float] = (0.153428, 0.142714, 0.162303)
 """Astrobee flight GNC principal moments of inertia, kg m^2 (nasa/astrobee,
@@ -37,6 +37,12 @@ SPLITS: tuple[str, ...] = ("train", "val", "test", "full")
 
 POOL_SIZE = 2**61
 """Episodes per split of an episode-split scenario (``split_mode = "episodes"``)."""
+PRIOR_EPISODES = 32
+"""The fewest episodes of each pool (train, val) that fit anything to an episode-split scenario:
+the training data of its learned filters (:mod:`fkn_bench.training.data`: 96 windows of 800 samples
+from 300 s episodes, validated on 32 more) and the oracle EKF's noise, where the paper's protocol
+has one recording of one fixed truth."""
+
 SEED_POOLS: dict[str, int] = {"test": 0, "full": 0, "train": 2**62, "val": 2**62 + POOL_SIZE}
 """First episode seed of each split's pool in an episode-split scenario: episode ``i`` of split
 ``s`` is the episode of seed ``SEED_POOLS[s] + i``. Test (and full) episodes are seeds

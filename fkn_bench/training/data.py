@@ -34,7 +34,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from fkn_bench.scenarios import Scenario, get_scenario
+from fkn_bench.scenarios import PRIOR_EPISODES, Scenario, get_scenario
 
 __all__ = ["PRIOR_EPISODES", "Sequences", "TrainingData", "episodes_of", "training_data"]
 
@@ -63,12 +63,6 @@ class Sequences:
     def to(self, device: torch.device | str) -> Sequences:
         """The sequences on ``device`` (themselves when already there)."""
         return Sequences(self.measurements.to(device), self.mask.to(device), self.truth.to(device))
-
-
-PRIOR_EPISODES = 32
-"""The fewest episodes of each pool (train, val) in an episode-split scenario's data set: 32
-truths drawn from the prior for training (96 windows of 800 samples from 300 s episodes) and 32
-for validation, where the paper's protocol has four episodes of one fixed truth."""
 
 
 def episodes_of(scenario: Scenario, episodes: int) -> int:

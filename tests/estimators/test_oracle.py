@@ -55,3 +55,18 @@ def test_model_prediction_is_the_filters_model() -> None:
     expected = PoseTwistModel().predict(torch.from_numpy(x), 0.1).numpy()
     np.testing.assert_allclose(model_prediction(x, 0.1), expected, rtol=0, atol=1e-15)
     np.testing.assert_allclose(model_prediction(x.reshape(2, 3, 13), 0.1), expected.reshape(2, 3, 13), rtol=0, atol=1e-15)
+
+
+def test_a_prior_familys_oracle_pools_its_training_episodes() -> None:
+    """Every episode of free-tumble has its own rate: the oracle's process noise is the RMS
+    residual over PRIOR_EPISODES training episodes, not one drawn rate's."""
+    from fkn_bench.envs import generate_episodes
+    from fkn_bench.scenarios import PRIOR_EPISODES
+
+    short = get_scenario("free-tumble", n_steps=60)
+    q_std, _ = oracle_noise(short)
+    truth = generate_episodes(short, PRIOR_EPISODES, split="train").truth
+    residual = truth[:, 1:] - model_prediction(truth[:, :-1], short.dt)
+    np.testing.assert_allclose(q_std[7:10], np.sqrt((residual[..., 7:10] ** 2).mean(axis=(0, 1))), rtol=1e-12)
+    one = np.sqrt((residual[0, :, 7:10] ** 2).mean(axis=0))
+    assert not np.allclose(q_std[7:10], one, rtol=0.1)  # the first episode alone is another rate's
