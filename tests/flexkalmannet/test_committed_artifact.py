@@ -80,8 +80,8 @@ measurement_every = 6
 def test_default_artifact_holds_on_a_replayed_free_tumble(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     """An independent free tumble (another inertia and rate, Astrobee's 62.5 Hz) written to MCAP
     and replayed: ``flexkalmannet`` on a recording runs the committed mixture-trained ``default``
-    artefact, which must not diverge where the ds1-trained one did on every seed (the free-tumble
-    issue measured 38 deg attitude RMSE and 100% divergence there)."""
+    artefact, which must not lose the track where the ds1-trained one did on every seed (the
+    free-tumble issue measured 38 deg attitude RMSE and 100% divergence there)."""
     import json
 
     from fkn_bench.cli import main
@@ -96,9 +96,11 @@ def test_default_artifact_holds_on_a_replayed_free_tumble(tmp_path: Path, capsys
                  "--seeds", "3", "--json", "--no-progress"]) == 0
     results = {r["estimator"]: r for r in json.loads(capsys.readouterr().out)["results"]}
     learned, manual = results["flexkalmannet"], results["manual-ekf"]
-    assert {"ds1", "tumble-fast"} <= set(learned["trained_on"].split("+"))  # the mixture: constant rate and tumbles
-    assert learned["diverged_fraction"] == 0.0
+    assert set(learned["trained_on"].split("+")) == {"spin", "free-tumble"}  # the mixture of the prior families
+    assert learned["lost_track_fraction"] == 0.0 and manual["lost_track_fraction"] == 0.0
     assert learned["attitude_rmse_deg"] < 1.5 * manual["attitude_rmse_deg"]
+    # (the prior-trained default is overconfident here, ANEES 87 with the NEES flag on every seed,
+    # where the earlier ds1+ds2+tumbles default had 2.8: the leaderboards' notes say so)
 
 
 def test_committed_time_varying_network_follows_the_noise_step() -> None:

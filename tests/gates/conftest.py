@@ -6,7 +6,8 @@ worker that runs its file.
 
 Every estimator but ``manual-ekf`` is gated on part of the named scenarios (:data:`GATED_ON`):
 ``manual-ekf`` gates the EKF and the measurement stream's shared handling (dropouts, gaps, sign
-flips, noise) on every scenario; the UKF and MEKF are gated on :data:`STREAM_SCENARIOS`, the
+flips, noise) on every scenario, the prior families' included; every committed file of the prior
+families (``spin``, ``free-tumble``) is gated once, on its family's headline scenario; the UKF and MEKF are gated on :data:`STREAM_SCENARIOS`, the
 adaptive filters' code (their papers' settings, ``*-default``) on its three stream variants and
 their tuned settings once per committed file; the rigid-body EKF (known and estimated inertia) on ds1 and two free
 tumbles, FlexKalmanNet on it once per committed parameter file, the rigid-body UKF and MEKF on two
@@ -32,6 +33,7 @@ from pathlib import Path
 import pytest
 
 from fkn_bench.gates import accuracy
+from fkn_bench.scenarios import PRIOR_FAMILIES
 
 RESULTS = Path(__file__).resolve().parents[2] / "leaderboards" / "results"
 
@@ -44,6 +46,9 @@ FREE_TUMBLES = ("tumble-fast", "tumble-flip", "tumble-slow", "tumble-inertia-err
 STREAM_SCENARIOS = ("ds1", "ds1-noise5x", "ds1-gap100", "ds1-flips", "tumble-fast")
 """ds1 and the variants whose measurement stream differs most (5x noise, 100-step gaps, sign flips
 and outliers), and a free tumble: where a filter variant's own handling of the stream is gated."""
+
+PRIOR_HEADLINES = tuple(PRIOR_FAMILIES)
+"""The prior families' headline scenarios (spin, free-tumble): where their committed files are gated."""
 
 GATED_ON = {
     "rigid-body-ekf": ("ds1", "tumble-slow", "tumble-flip"),
@@ -71,6 +76,10 @@ GATED_ON = {
 }
 for _name in ("flexkalmannet", "nll-tuned-ekf", "direct-tuned-ekf", "sage-husa", "akhlaghi", "vbakf", "kalmannet"):
     GATED_ON[_name] += ("ds1-noise-step",)  # the committed files of the ds1-noise-step family, once each
+for _name in ("flexkalmannet", "flexkalmannet-rigid-body", "flexkalmannet-tv", "nll-tuned-ekf", "direct-tuned-ekf",
+              "sage-husa", "akhlaghi", "vbakf", "kalmannet", "recursive-kalmannet"):
+    GATED_ON[_name] += PRIOR_HEADLINES  # the committed files of the prior families, once each
+
 """The estimators on the rigid-body model, and Recursive KalmanNet, are gated on part of the named
 scenarios (module docstring)."""
 
