@@ -31,8 +31,6 @@ to the first command to recompute them)::
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import sys
 from pathlib import Path
 
@@ -125,8 +123,7 @@ def _cross(args: argparse.Namespace) -> int:
 
 def _shift(args: argparse.Namespace) -> int:
     from fkn_bench.harness.manifest import check_files, write_files
-    from fkn_bench.harness.shift import RATIO_TARGET, REFERENCE, SHIFTS, shift_misses, shift_scores, shift_table
-    from fkn_bench.harness.tables import markdown_table
+    from fkn_bench.harness.shift import SHIFTS, shift_documents, shift_scores
 
     args.seeds = 50 if args.seeds is None else args.seeds
     if args.seeds < 2:
@@ -134,25 +131,10 @@ def _shift(args: argparse.Namespace) -> int:
     names = ["shift.md", "shift.csv"]
     with usage_errors(ValueError):
         check_files(args.out, names, force=args.force)  # before minutes of work
-    families = list(SHIFTS)
-    scores = shift_scores(families, args.seeds, progress=lambda what: print(f"[shift] {what}", file=sys.stderr))
-    tables = [shift_table(scores, family) for family in families]
-    misses = shift_misses(scores)
-    text = (f"# Shift table ({args.seeds} test episodes per cell)\n\n"
-            f"Regenerate: `fkn-bench leaderboard --shift --seeds {args.seeds}`\n\n"
-            "Each learned or tuned estimator runs with the parameters it learned on its prior family's training "
-            "episodes, on that family's test episodes (in-distribution) and on the same episodes drawn from shifted "
-            f"priors; {REFERENCE} (untrained) beside them. Targets: no lost track in distribution; on every shift "
-            f"at most {RATIO_TARGET:g}x the in-distribution score and no worse than {REFERENCE}.\n\n"
-            + "\n\n".join(markdown_table(t) for t in tables)
-            + "\n\n## Targets missed\n\n" + ("\n".join(f"- {m}" for m in misses) if misses else "None.") + "\n")
-    rows = [["family", "estimator", "column", "mean_rmse", "lost", "nees_flagged", "episodes"]]
-    rows += [[f, n, c, repr(v.mean), v.lost_count, v.inconsistent_count, len(v.rmse)] for (f, c, n), v in sorted(scores.items())]
-    buffer = io.StringIO()
-    csv.writer(buffer, lineterminator="\n").writerows(rows)
-    csv_text = buffer.getvalue()
+    scores = shift_scores(list(SHIFTS), args.seeds, progress=lambda what: print(f"[shift] {what}", file=sys.stderr))
     with usage_errors(ValueError):
-        paths = write_files(args.out, dict(zip(names, (text, csv_text))), force=args.force, what="the shift table")
+        paths = write_files(args.out, dict(zip(names, shift_documents(scores, args.seeds))), force=args.force,
+                            what="the shift table")
     for path in paths:
         print(path)
     return 0

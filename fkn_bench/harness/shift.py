@@ -16,6 +16,8 @@ fixed, untrained tuning) beside it. The targets (issue 39): no estimator worse t
 from __future__ import annotations
 
 import copy
+import csv
+import io
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -25,13 +27,13 @@ import numpy as np
 
 from fkn_bench.envs import generate_episodes
 from fkn_bench.harness.estimators import resolve_estimator
-from fkn_bench.harness.tables import Table
+from fkn_bench.harness.tables import Table, markdown_table
 from fkn_bench.metrics import MetricSettings, score_run
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.training.artifacts import artifact_path
 
 __all__ = ["Shift", "SHIFTS", "SHIFT_ESTIMATORS", "REFERENCE", "RATIO_TARGET", "ShiftScore", "shifted_scenario",
-           "shift_scores", "shift_table", "shift_misses"]
+           "shift_scores", "shift_table", "shift_misses", "shift_documents"]
 
 RATIO_TARGET = 1.25
 """The largest shifted-to-in-distribution RMSE ratio the targets allow."""
@@ -120,7 +122,7 @@ def _score(estimator: Any, scenario: Scenario, episodes: Any, settings: MetricSe
                        settings=settings)
     rmse = np.asarray(scores.state_rmse, dtype=float)
     flags = scores.divergence
-    lost = np.asarray(flags.non_finite | flags.cholesky_failed | flags.error_growth, dtype=bool) | ~np.isfinite(rmse)
+    lost = np.asarray(flags.lost_track, dtype=bool) | ~np.isfinite(rmse)
     return ShiftScore(tuple(float(v) for v in rmse), tuple(bool(v) for v in lost),
                       tuple(bool(v) for v in np.asarray(flags.nees_high, dtype=bool)))
 
@@ -158,6 +160,12 @@ def shift_scores(
     return out
 
 
+def _number(value: float, digits: int = 4) -> str:
+    """``value`` with ``digits`` decimals, or in 3 significant digits when it is large (a filter
+    that blew up) or not finite."""
+    return f"{value:.{digits}f}" if abs(value) < 1e3 else f"{value:.3g}"
+
+
 def shift_misses(scores: Mapping[tuple[str, str, str], ShiftScore]) -> list[str]:
     """The targets missed, one sentence each with the numbers: a lost track in distribution, a
     shifted score above :data:`RATIO_TARGET` times the in-distribution one or above manual-ekf's."""
@@ -173,7 +181,7 @@ def shift_misses(scores: Mapping[tuple[str, str, str], ShiftScore]) -> list[str]
         reference = scores.get((family, column, REFERENCE))
         ratio = score.mean / own.mean if own is not None and own.mean > 0 else math.nan
         if not ratio <= RATIO_TARGET:
-            misses.append(f"{name} on {family} / {column}: {ratio:.2f}x its in-distribution score "
+            misses.append(f"{name} on {family} / {column}: {_number(ratio, 2)}x its in-distribution score "
                           f"({score.mean:.4g} vs {own.mean if own else math.nan:.4g})")
         if reference is not None and not score.mean <= reference.mean:
             misses.append(f"{name} on {family} / {column}: {score.mean:.4g}, worse than {REFERENCE}'s "
@@ -192,7 +200,7 @@ def shift_table(scores: Mapping[tuple[str, str, str], ShiftScore], family: str) 
         if own is None:
             continue
         lost = f", {own.lost_count} lost" if own.lost_count else ""
-        cells = [f"{own.mean:.4f}{lost}", f"{own.inconsistent_count}/{len(own.rmse)}"]
+        cells = [f"{_number(own.mean)}{lost}", f"{own.inconsistent_count}/{len(own.rmse)}"]
         for column in columns[2:]:
             score, reference = scores.get((family, column, name)), scores.get((family, column, REFERENCE))
             if score is None:
@@ -201,7 +209,7 @@ def shift_table(scores: Mapping[tuple[str, str, str], ShiftScore], family: str) 
             ratio = score.mean / own.mean if own.mean > 0 else math.nan
             missed = name != REFERENCE and (not ratio <= RATIO_TARGET
                                             or (reference is not None and not score.mean <= reference.mean))
-            cells.append(f"{ratio:.2f}x ({score.mean:.4f}){' !' if missed else ''}")
+            cells.append(f"{_number(ratio, 2)}x ({_number(score.mean)}){' !' if missed else ''}")
         rows.append([name, *cells])
     notes = [f"{s.label}: {s.description}" for s in SHIFTS[family]] + [
         f"In-distribution: the mean 13-state RMSE over the test episodes of {family} (from the loss cut), with the "
@@ -213,3 +221,27 @@ def shift_table(scores: Mapping[tuple[str, str, str], ShiftScore], family: str) 
     ]
     return Table(f"{family}: trained on the family's prior, scored on shifted priors", ["estimator", *columns], rows,
                  notes, align=["l"] + ["r"] * len(columns), name=f"shift-{family}")
+
+
+def shift_documents(scores: Mapping[tuple[str, str, str], ShiftScore], seeds: int) -> tuple[str, str]:
+    """``shift.md`` (a table per family, then the missed targets) and ``shift.csv`` (one row per
+    family, column and estimator: mean RMSE, lost tracks, NEES flags, episodes) of ``scores``."""
+    families = [family for family in SHIFTS if any(f == family for f, _, _ in scores)]
+    misses = shift_misses(scores)
+    text = (f"# Shift table ({seeds} test episodes per cell)\n\n"
+            f"Regenerate: `fkn-bench leaderboard --shift --seeds {seeds}`\n\n"
+            "Each learned or tuned estimator runs with the parameters it learned on its prior family's training "
+            "episodes, on that family's test episodes (in-distribution) and on the same episodes drawn from shifted "
+            f"priors; {REFERENCE} (untrained) beside them. Targets: no lost track in distribution; on every shift "
+            f"at most {RATIO_TARGET:g}x the in-distribution score and no worse than {REFERENCE}. A shift that takes "
+            "information away (half the measurement rate, three times the noise) raises every filter's error, "
+            f"{REFERENCE}'s too: there the ratio beside {REFERENCE}'s own is what tells a filter that generalises "
+            "from one that does not.\n\n"
+            + "\n\n".join(markdown_table(shift_table(scores, family)) for family in families)
+            + "\n\n## Targets missed\n\n" + ("\n".join(f"- {m}" for m in misses) if misses else "None.") + "\n")
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["family", "estimator", "column", "mean_rmse", "lost", "nees_flagged", "episodes"])
+    writer.writerows([f, n, c, repr(v.mean), v.lost_count, v.inconsistent_count, len(v.rmse)]
+                     for (f, c, n), v in sorted(scores.items()))
+    return text, buffer.getvalue()
