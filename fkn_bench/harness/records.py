@@ -95,6 +95,9 @@ class Results:
 
     def __init__(self, records: Iterable[CellRecord]) -> None:
         self.records: list[CellRecord] = sorted(records, key=lambda r: (r.label, r.scenario, r.seeds))
+        self._by_pair: dict[tuple[str, str], list[CellRecord]] = {}  # (label, scenario) -> records, in order
+        for record in self.records:
+            self._by_pair.setdefault((record.label, record.scenario), []).append(record)
 
     def __len__(self) -> int:
         return len(self.records)
@@ -119,7 +122,7 @@ class Results:
 
     def cells(self, estimator: str, scenario: str) -> list[CellRecord]:
         """The records of one pair (``estimator``: a label), in seed order."""
-        return [r for r in self.records if r.label == estimator and r.scenario == scenario]
+        return list(self._by_pair.get((estimator, scenario), ()))
 
     def seeds(self, estimator: str, scenario: str) -> list[int]:
         return [s for r in self.cells(estimator, scenario) for s in r.seeds]

@@ -116,7 +116,9 @@ def normalized_squares(vectors: ArrayF, covariances: ArrayF, mask: ArrayB | None
 
 
 def _chi2_ppf(probability: float, dof: ArrayF) -> ArrayF:
-    return 2.0 * gammaincinv(0.5 * np.asarray(dof, dtype=np.float64), probability)
+    dof = np.asarray(dof, dtype=np.float64)
+    unique, where = np.unique(dof, return_inverse=True)  # per-step run counts repeat: one quantile each
+    return (2.0 * gammaincinv(0.5 * unique, probability))[where].reshape(dof.shape)
 
 
 def chi2_interval(dof: int, runs: int | ArrayF, confidence: float = 0.95) -> tuple[ArrayF, ArrayF]:
