@@ -11,15 +11,15 @@ its own scenarios) repeat the leaderboards' numbers.
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Sequence
 
 import numpy as np
 
 from fkn_bench.envs import generate_episodes
 from fkn_bench.harness.estimators import resolve_estimator
+from fkn_bench.harness.shift import episode_scores
 from fkn_bench.harness.tables import Table
-from fkn_bench.metrics import MetricSettings, score_run
+from fkn_bench.metrics import MetricSettings
 from fkn_bench.scenarios import get_scenario
 from fkn_bench.training.artifacts import artifact_path
 
@@ -44,11 +44,11 @@ def cross_scores(
                 resolved = resolve_estimator(estimator_name, scenario, {"parameters": str(path)})
                 if resolved.estimator is None:
                     continue
-                estimates = copy.deepcopy(resolved.estimator).estimate(episodes.measurements, episodes.valid, scenario.dt)
-                scores = score_run(episodes.truth, estimates.means, scenario.dt,
-                                   error_covariances=estimates.error_covariances, settings=settings)
-                rmse = float(np.mean(np.where(np.isfinite(scores.state_rmse), scores.state_rmse, np.nan)))
-                out[estimator_name, family, name] = (rmse, float(np.mean(scores.divergence.diverged)))
+                scores = episode_scores(resolved.estimator, scenario, episodes, settings)
+                rmse = np.asarray(scores.rmse)
+                diverged = np.asarray(scores.lost) | np.asarray(scores.inconsistent)  # every divergence flag
+                out[estimator_name, family, name] = (float(np.mean(np.where(np.isfinite(rmse), rmse, np.nan))),
+                                                     float(np.mean(diverged)))
     return out
 
 

@@ -33,7 +33,7 @@ from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.training.artifacts import artifact_path
 
 __all__ = ["Shift", "SHIFTS", "SHIFT_ESTIMATORS", "REFERENCE", "RATIO_TARGET", "ShiftScore", "shifted_scenario",
-           "shift_scores", "shift_table", "shift_misses", "shift_documents"]
+           "shift_scores", "shift_table", "shift_misses", "shift_documents", "episode_scores"]
 
 RATIO_TARGET = 1.25
 """The largest shifted-to-in-distribution RMSE ratio the targets allow."""
@@ -116,7 +116,9 @@ class ShiftScore:
         return int(sum(self.inconsistent))
 
 
-def _score(estimator: Any, scenario: Scenario, episodes: Any, settings: MetricSettings | None) -> ShiftScore:
+def episode_scores(estimator: Any, scenario: Scenario, episodes: Any, settings: MetricSettings | None = None) -> ShiftScore:
+    """A copy of ``estimator`` run on ``episodes`` of ``scenario`` and scored per episode (the
+    leaderboards' metric settings by default): the shift and cross-scenario tables' one scoring."""
     estimates = copy.deepcopy(estimator).estimate(episodes.measurements, episodes.valid, scenario.dt)
     scores = score_run(episodes.truth, estimates.means, scenario.dt, error_covariances=estimates.error_covariances,
                        settings=settings)
@@ -156,7 +158,7 @@ def shift_scores(
                     continue
                 if progress is not None:
                     progress(f"{family} / {column} / {name}")
-                out[family, column, name] = _score(resolved.estimator, scenario, episodes, settings)
+                out[family, column, name] = episode_scores(resolved.estimator, scenario, episodes, settings)
     return out
 
 
