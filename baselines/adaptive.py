@@ -48,7 +48,8 @@ from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
 from fkn_bench.filters.base import FilterState, KalmanFilter, count_rejections, gate_threshold
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
-from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
+from fkn_bench.models.base import StateSpaceModel
+from fkn_bench.models.pose_twist import PoseTwistModel
 from fkn_bench.linalg import symmetrize
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -301,7 +302,7 @@ class AdaptiveKalmanFilter:
 
     Args:
         rule: the method's :class:`NoiseRule`.
-        model: a :class:`~fkn_bench.filters.models.StateSpaceModel` (run on numpy arrays; default
+        model: a :class:`~fkn_bench.models.base.StateSpaceModel` (run on numpy arrays; default
             the paper's pose-and-twist model).
         q_std, r_std, p0_std: starting standard deviations of ``Q``, ``R`` and ``P0`` (default:
             the model layout's, for the pose model the paper's manual tuning).

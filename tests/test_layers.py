@@ -46,9 +46,9 @@ PACKAGE_DIRS = {"fkn_bench": REPO / "fkn_bench", "fkn_bench.envs": REPO / "envs"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("", "geometry", "io", "linalg", "types", "runtime", "provenance"),
+    ("models",),
     ("envs", "scenarios", "recordings"),
     ("metrics",),
-    ("models",),
     ("filters",),
     ("estimators",),
     ("training",),

@@ -13,7 +13,7 @@
 
 All initialise from the first measurement with ``P0`` standard deviations ``0.1`` (quaternion
 components, m), ``0.2`` rad/s and ``0.003`` m/s (the MEKF: 0.2 rad attitude); see
-:data:`fkn_bench.filters.models.PAPER_MANUAL_LAYOUT` for the reasons.
+:data:`fkn_bench.models.pose_twist.PAPER_MANUAL_LAYOUT` for the reasons.
 """
 
 from __future__ import annotations

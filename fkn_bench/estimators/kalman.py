@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
-from fkn_bench.filters import MODELS, VARIANTS, NoiseParameters, make_filter, make_model
+from fkn_bench.filters import VARIANTS, make_filter
 from fkn_bench.filters.pose import (
     error_covariance_from_state,
     pose_innovation,
@@ -24,6 +24,8 @@ from fkn_bench.filters.pose import (
     with_unit_quaternion,
 )
 from fkn_bench.linalg import symmetrize
+from fkn_bench.models.noise import NoiseParameters
+from fkn_bench.models.registry import DEFAULT_MODEL, make_model, model_spec
 from fkn_bench.runtime import torch_threads
 from fkn_bench.types import ArrayB, ArrayF
 
@@ -81,7 +83,7 @@ class KalmanEstimator(RecursiveEstimator):
 
     Keyword-only arguments:
         variant: ``"ekf"``, ``"ukf"`` or ``"mekf"``.
-        model: the process model (:data:`fkn_bench.filters.MODELS`): ``"constant-velocity"``
+        model: the process model (:func:`fkn_bench.models.model_names`): ``"constant-velocity"``
             (the paper's), ``"rigid-body"`` (torque free, known ``inertia``) or
             ``"rigid-body-ratios"`` (inertia ratios estimated; ``inertia`` is their prior mean).
             The rigid-body models run on the EKF and the UKF; with estimated ratios ``q_std`` and
@@ -89,7 +91,7 @@ class KalmanEstimator(RecursiveEstimator):
             ``inertia_ratios`` ``(B, T, 2)``.
         inertia: principal moments ``(Jx, Jy, Jz)`` in kg m^2 (rigid-body models only).
         q_std, r_std, p0_std: standard deviations in the variant's layout (default: its manual
-            tuning; see :data:`fkn_bench.filters.models.PAPER_MANUAL_LAYOUT` and
+            tuning; see :data:`fkn_bench.models.pose_twist.PAPER_MANUAL_LAYOUT` and
             :data:`fkn_bench.filters.MEKF_MANUAL_LAYOUT`).
         q_cov, r_cov, p0_cov: full covariance matrices instead (symmetric positive definite);
             give either the standard deviations or the matrix of an entry, not both.
@@ -103,7 +105,7 @@ class KalmanEstimator(RecursiveEstimator):
         self,
         *,
         variant: str = "ekf",
-        model: str = "constant-velocity",
+        model: str = DEFAULT_MODEL,
         inertia: Sequence[float] | None = None,
         q_std: Sequence[float] | None = None,
         r_std: Sequence[float] | None = None,
@@ -117,8 +119,7 @@ class KalmanEstimator(RecursiveEstimator):
     ) -> None:
         if variant not in VARIANTS:
             raise ValueError(f"unknown filter variant {variant!r}; valid variants: {', '.join(VARIANTS)}")
-        if model not in MODELS:
-            raise ValueError(f"unknown process model {model!r}; valid models: {', '.join(MODELS)}")
+        model_spec(model)  # (ValueError naming the valid models)
         self.variant_name, self.model_name = variant, model
         self.inertia = None if inertia is None else tuple(float(v) for v in inertia)
         self.filter = make_filter(variant, model=make_model(model, inertia=self.inertia))
@@ -213,7 +214,7 @@ class KalmanEstimator(RecursiveEstimator):
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:
         config: dict[str, Any] = {"variant": self.variant_name}
-        if self.model_name != "constant-velocity":
+        if self.model_name != DEFAULT_MODEL:
             config.update(model=self.model_name, inertia=None if self.inertia is None else list(self.inertia))
         for index, entry in enumerate(("q", "r", "p0")):
             matrix = self._numpy_noise[index]

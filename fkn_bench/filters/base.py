@@ -43,8 +43,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from fkn_bench.filters.models import StateSpaceModel
-from fkn_bench.filters.parameters import NoiseLayout, NoiseParameters
+from fkn_bench.models.base import StateSpaceModel
+from fkn_bench.models.noise import NoiseLayout, NoiseParameters
 from fkn_bench.linalg import namespace, symmetrize
 
 __all__ = ["KalmanFilter", "FilterResult", "FilterState", "check_dt", "gate_threshold", "GATE_REINITIALISE_AFTER",
@@ -252,7 +252,7 @@ class _StepOutputs:
 class KalmanFilter(ABC):
     """A filter variant: one step's ``predict`` and ``update`` on a batch, and the recursion.
 
-    Subclasses set ``name``, ``model`` (a :class:`~fkn_bench.filters.models.StateSpaceModel`) and
+    Subclasses set ``name``, ``model`` (a :class:`~fkn_bench.models.base.StateSpaceModel`) and
     ``layout`` (the :class:`NoiseLayout` of their ``Q``, ``R`` and ``P0``).
     """
 

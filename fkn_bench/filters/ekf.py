@@ -4,7 +4,7 @@ Predict ``x- = f(x+)``, ``P- = F P+ F^T + Q`` with the model's analytic Jacobian
 with gain ``K = P- H^T S^-1``, ``S = H P- H^T + R``, and the
 Joseph form ``P+ = (I - K H) P- (I - K H)^T + K R K^T`` (Bucy & Joseph 1968; Simon, Optimal State
 Estimation, 2006, eq. 5.19), which stays symmetric positive semi-definite for any gain. The model
-then aligns, renormalises and projects (see :class:`~fkn_bench.filters.models.PoseTwistModel`).
+then aligns, renormalises and projects (see :class:`~fkn_bench.models.pose_twist.PoseTwistModel`).
 When the model measures a slice of the state (``H = [I 0]``), products with ``H`` are slices.
 
 The step runs on torch tensors (batched, differentiable: :meth:`KalmanFilter.run`) and on numpy
@@ -28,7 +28,8 @@ import numpy as np
 
 from fkn_bench.filters import kernels
 from fkn_bench.filters.base import FilterState, KalmanFilter
-from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
+from fkn_bench.models.base import StateSpaceModel
+from fkn_bench.models.pose_twist import PoseTwistModel
 from fkn_bench.filters.structured import pose_predict, pose_predict_steps, pose_update
 from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, solve_spd, symmetrize, zeros
 
@@ -196,12 +197,12 @@ value, alternating): B = 32: 0.70; 0.72, B = 64: 0.86; 0.77, B = 96: 0.92; 0.94,
 
 
 class ExtendedKalmanFilter(KalmanFilter):
-    """EKF over any :class:`~fkn_bench.filters.models.StateSpaceModel` (default: the paper's).
+    """EKF over any :class:`~fkn_bench.models.base.StateSpaceModel` (default: the paper's).
 
     Keyword-only arguments:
         model: the state-space model (default :class:`PoseTwistModel`).
 
-    With :class:`PoseTwistModel` itself (not a subclass, whose transition may differ) and torch
+    With a model that offers ``"structured-ekf"`` (:class:`PoseTwistModel`) and torch
     batches of at least :data:`STRUCTURED_MIN_BATCH` rows, ``predict`` and ``update`` run the
     structured step (:func:`~fkn_bench.filters.structured.pose_predict`,
     :func:`~fkn_bench.filters.structured.pose_update`), and so do CPU float64 batches of any size,
@@ -214,7 +215,7 @@ class ExtendedKalmanFilter(KalmanFilter):
     def __init__(self, *, model: StateSpaceModel | None = None) -> None:
         self.model = model if model is not None else PoseTwistModel()
         self.layout = self.model.layout
-        self._structured = type(self.model) is PoseTwistModel
+        self._structured = "structured-ekf" in self.model.offers
 
     def _structured_step(self, state: FilterState) -> bool:
         """Whether this step runs :mod:`fkn_bench.filters.structured` (the pose-twist model's own

@@ -774,7 +774,8 @@ def warm_up() -> list[str]:
     names of the EKF kernels compiled. Raises ``RuntimeError`` when the kernels cannot run here (numba
     missing, or switched off by ``FKN_BENCH_KERNELS=0``)."""
     from fkn_bench.envs import generate_episodes
-    from fkn_bench.filters import NoiseParameters, make_filter
+    from fkn_bench.filters import make_filter
+    from fkn_bench.models.noise import NoiseParameters
 
     probe = torch.zeros(1, dtype=torch.float64)
     if not supports(probe):

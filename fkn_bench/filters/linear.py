@@ -4,7 +4,7 @@
 ``P- = A P+ A^T + Q``; update ``K = P- H^T (H P- H^T + R)^-1``, ``x+ = x- + K (y - H x-)``,
 ``P+ = (I - K H) P-`` (Kalman 1960; Simon, Optimal State Estimation, 2006, eqs. 5.17-5.19).
 Deliberately independent of torch and of the rest of the core: the tests check that the EKF and
-the UKF on a :class:`~fkn_bench.filters.models.LinearGaussianModel` reproduce it. The covariances
+the UKF on a :class:`~fkn_bench.models.linear.LinearGaussianModel` reproduce it. The covariances
 it returns are symmetrised (:func:`fkn_bench.linalg.symmetrize`; the textbook ``(I - K H) P-`` is
 symmetric only to rounding).
 """

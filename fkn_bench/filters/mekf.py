@@ -13,7 +13,7 @@ m/s per step (process) and rad, m (measurement).
 Predict (world-frame rate ``w``, constant over a step): ``q' = exp(w dt / 2) (x) q``,
 ``r' = r + v dt``; error transition ``dtheta' = R(w dt) dtheta + dt J(w dt) dw``,
 ``dr' = dr + dt dv`` with ``J`` the left Jacobian of SO(3).
-Other process models (e.g. :class:`~fkn_bench.filters.rigid_body.RigidBodyModel`) are propagated
+Other process models (e.g. :class:`~fkn_bench.models.rigid_body.RigidBodyModel`) are propagated
 by the model itself: the mean is ``f(x)`` (renormalised) and the error transition is the model's
 Jacobian ``F`` seen through the error: ``Phi = T(q') F M(q)``, with ``M`` the additive perturbation of
 an error (``dq = 1/2 [0, dtheta] (x) q = 1/2 Theta(q) dtheta``, the identity elsewhere) and ``T``
@@ -34,8 +34,9 @@ import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.ekf import joseph_update
-from fkn_bench.filters.models import PoseTwistModel
-from fkn_bench.filters.parameters import NoiseLayout
+from fkn_bench.models.base import StateSpaceModel
+from fkn_bench.models.noise import NoiseLayout
+from fkn_bench.models.pose_twist import PoseTwistModel
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import add_matmul, broadcast, constant, dot, eye, namespace, symmetrize, zeros
 from fkn_bench.types import ERROR_NAMES
@@ -94,11 +95,11 @@ class MultiplicativeEKF(KalmanFilter):
 
     name = "mekf"
 
-    def __init__(self, *, model: PoseTwistModel | None = None) -> None:
+    def __init__(self, *, model: StateSpaceModel | None = None) -> None:
         self.model = model if model is not None else PoseTwistModel()
-        if not isinstance(self.model, PoseTwistModel):
+        if "pose-state" not in self.model.offers:
             raise ValueError(f"the multiplicative EKF needs a pose-twist state [q, r, w, v, ...] (got {type(self.model).__name__})")
-        self._exact = type(self.model) is PoseTwistModel  # the constant rate: exact exponential propagation
+        self._exact = "exact-rotation" in self.model.offers  # the constant rate: exact exponential propagation
         self.layout = MEKF_MANUAL_LAYOUT if self._exact else _error_layout(self.model.layout, self.model.state_dim - 13)
 
     @property

@@ -1,15 +1,11 @@
-"""Filter parameters: noise covariances as values, and declarations of which are learnable.
+"""Learnable filter parameters: which noise entries a fit may change.
 
-* :class:`NoiseParameters` holds what a filter consumes: process noise ``Q``, measurement noise
-  ``R`` and initial covariance ``P0`` as covariance matrices (torch tensors). Leading axes:
-  ``()`` shared by every sequence, ``(B,)`` one per sequence, or ``(B, T)`` one per step
-  (time-varying, e.g. FlexKalmanNet's adaptive mode).
-* :class:`NoiseLayout` names the components of ``Q``, ``R`` and ``P0`` of a filter variant, with
-  units and defaults (the paper's manual tuning, FlexKalmanNet section 4.3).
-* :class:`ParameterSet` declares which entries are learnable (diagonal standard deviations,
-  full Cholesky factors) and maps an unconstrained vector ``(..., size)`` through a positivity map
-  (``log``: ``s = exp(u)``, or ``softplus``) to :class:`NoiseParameters`; it converts to and
-  from a plain, JSON-compatible dict with units.
+The noise values (:class:`~fkn_bench.models.noise.NoiseParameters`) and their names and units
+(:class:`~fkn_bench.models.noise.NoiseLayout`) belong to the models (:mod:`fkn_bench.models.noise`).
+:class:`ParameterSet` declares which entries are learnable (diagonal standard deviations, full
+Cholesky factors) and maps an unconstrained vector ``(..., size)`` through a positivity map
+(``log``: ``s = exp(u)``, or ``softplus``) to :class:`NoiseParameters`; it converts to and from a
+plain, JSON-compatible dict with units.
 """
 
 from __future__ import annotations
@@ -26,10 +22,9 @@ from torch import Tensor
 
 from fkn_bench.config_values import accepts, describe_kind
 from fkn_bench.linalg import symmetrize
+from fkn_bench.models.noise import NoiseLayout, NoiseParameters
 
 __all__ = [
-    "NoiseParameters",
-    "NoiseLayout",
     "ParameterSet",
     "Positivity",
     "LEARNABLE_ENTRIES",
@@ -40,89 +35,6 @@ Positivity = Literal["log", "softplus"]
 LEARNABLE_ENTRIES: tuple[str, ...] = ("q_std", "r_std", "p0_std", "q_chol", "r_chol")
 """Names a :class:`ParameterSet` can learn: diagonal standard deviations of ``Q``, ``R`` and
 ``P0``, or full lower-triangular Cholesky factors of ``Q`` or ``R``."""
-
-
-@dataclass(frozen=True)
-class NoiseParameters:
-    """Covariances consumed by a filter (see module docstring for the leading axes).
-
-    Attributes:
-        process: ``Q`` ``(..., nq, nq)``.
-        measurement: ``R`` ``(..., m, m)``.
-        initial: ``P0`` ``(..., n, n)`` used when a filter initialises from a measurement.
-    """
-
-    process: Tensor
-    measurement: Tensor
-    initial: Tensor
-
-    @classmethod
-    def from_std(
-        cls,
-        q_std: Tensor | Sequence[float],
-        r_std: Tensor | Sequence[float],
-        p0_std: Tensor | Sequence[float],
-        *,
-        dtype: torch.dtype = torch.float64,
-    ) -> NoiseParameters:
-        """Diagonal covariances from standard deviations (``(..., k)`` each; exactly symmetric),
-        on the device of a tensor given (a sequence: torch's default device)."""
-
-        def diag(std: Tensor | Sequence[float]) -> Tensor:
-            t = std.to(dtype) if isinstance(std, Tensor) else torch.as_tensor(std, dtype=dtype)
-            return torch.diag_embed(t * t)
-
-        return cls(diag(q_std), diag(r_std), diag(p0_std))
-
-    def to(self, dtype: torch.dtype, device: torch.device | str | None = None) -> NoiseParameters:
-        """The parameters in ``dtype`` (and on ``device``; None: where they are), differentiably."""
-        return NoiseParameters(*(m.to(device=device, dtype=dtype) for m in (self.process, self.measurement, self.initial)))
-
-    def at_step(self, t: int) -> NoiseParameters:
-        """The parameters of step ``t`` when they are time-varying (``(B, T, k, k)``)."""
-        pick = lambda m: m[:, t] if m.dim() == 4 else m  # noqa: E731
-        return NoiseParameters(pick(self.process), pick(self.measurement), pick(self.initial))
-
-    def steps(self) -> list[NoiseParameters]:
-        """The parameters of every step, ``T`` of them (:meth:`at_step` for all ``t`` at once).
-
-        One ``unbind`` per matrix: its backward stacks the steps' gradients once, where ``T``
-        separate selections each allocate and fill a gradient of the whole ``(B, T, k, k)``
-        tensor (quadratic in ``T``: 48% of a time-varying training epoch was that ``fill_``)."""
-        steps = next(m.shape[1] for m in (self.process, self.measurement, self.initial) if m.dim() == 4)
-        split = lambda m: m.unbind(1) if m.dim() == 4 else (m,) * steps  # noqa: E731
-        return [NoiseParameters(*parts) for parts in zip(split(self.process), split(self.measurement), split(self.initial))]
-
-    @property
-    def time_varying(self) -> bool:
-        return any(m.dim() == 4 for m in (self.process, self.measurement, self.initial))
-
-
-@dataclass(frozen=True)
-class NoiseLayout:
-    """Component names, units and default standard deviations of a variant's ``Q``, ``R``, ``P0``."""
-
-    q_labels: tuple[str, ...]
-    q_units: tuple[str, ...]
-    q_default: tuple[float, ...]
-    r_labels: tuple[str, ...]
-    r_units: tuple[str, ...]
-    r_default: tuple[float, ...]
-    p0_labels: tuple[str, ...]
-    p0_units: tuple[str, ...]
-    p0_default: tuple[float, ...]
-
-    def labels(self, entry: str) -> tuple[str, ...]:
-        return {"q": self.q_labels, "r": self.r_labels, "p0": self.p0_labels}[entry.split("_")[0]]
-
-    def units(self, entry: str) -> tuple[str, ...]:
-        return {"q": self.q_units, "r": self.r_units, "p0": self.p0_units}[entry.split("_")[0]]
-
-    def default(self, entry: str) -> tuple[float, ...]:
-        return {"q": self.q_default, "r": self.r_default, "p0": self.p0_default}[entry.split("_")[0]]
-
-    def default_noise(self, dtype: torch.dtype = torch.float64) -> NoiseParameters:
-        return NoiseParameters.from_std(self.q_default, self.r_default, self.p0_default, dtype=dtype)
 
 
 def _inverse_positivity(value: Tensor, positivity: Positivity) -> Tensor:

@@ -1,4 +1,4 @@
-"""The EKF step of :class:`~fkn_bench.filters.models.PoseTwistModel` on torch batches, written for
+"""The EKF step of :class:`~fkn_bench.models.pose_twist.PoseTwistModel` on torch batches, written for
 the model's structure (the large-batch hot path of :class:`~fkn_bench.filters.ekf.ExtendedKalmanFilter`,
 from :data:`~fkn_bench.filters.ekf.STRUCTURED_MIN_BATCH` rows).
 

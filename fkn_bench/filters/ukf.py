@@ -28,7 +28,8 @@ import numpy as np
 
 from fkn_bench.filters.base import FilterState, KalmanFilter
 from fkn_bench.filters.ekf import linear_measurement_update
-from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
+from fkn_bench.models.base import StateSpaceModel
+from fkn_bench.models.pose_twist import PoseTwistModel
 from fkn_bench.linalg import cholesky, constant, eye, namespace, symmetrize
 
 __all__ = ["UnscentedKalmanFilter", "sigma_point_weights"]
@@ -76,7 +77,7 @@ def _safe_cholesky(P: Array) -> Array:
 
 
 class UnscentedKalmanFilter(KalmanFilter):
-    """UKF over any :class:`~fkn_bench.filters.models.StateSpaceModel` with a linear measurement.
+    """UKF over any :class:`~fkn_bench.models.base.StateSpaceModel` with a linear measurement.
 
     Keyword-only arguments:
         model: the state-space model (default :class:`PoseTwistModel`).

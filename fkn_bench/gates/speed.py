@@ -405,7 +405,7 @@ def episodes_for(scenario: str, batch: int, steps: int) -> tuple[ArrayF, ArrayB,
 
 
 def manual_noise(variant: str) -> Any:
-    """The manual tuning's :class:`~fkn_bench.filters.NoiseParameters` of ``variant``."""
+    """The manual tuning's :class:`~fkn_bench.models.noise.NoiseParameters` of ``variant``."""
     from fkn_bench.estimators import make_estimator
 
     return make_estimator(f"manual-{variant}").noise_parameters()
@@ -431,7 +431,7 @@ def forward_backward_workload(variant_filter: Any, noise: Any, z: Any, mask: Any
     mean squared estimate with respect to them: the forward + backward work of training."""
     import torch
 
-    from fkn_bench.filters import NoiseParameters
+    from fkn_bench.models.noise import NoiseParameters
 
     log_std = torch.log(torch.diagonal(noise.process)).mul(0.5).clone().requires_grad_(True)
 

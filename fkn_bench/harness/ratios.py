@@ -1,4 +1,5 @@
-"""How fast an estimator that estimates inertia ratios finds them: error over time, and a figure.
+"""How fast an estimator that estimates inertia ratios finds them: error over time (drawn by
+:func:`fkn_bench.reporting.plots.ratio_figure`).
 
 The estimator (e.g. ``rigid-body-ekf-ratios``) reports the log ratios ``k = [ln(Jx/Jy),
 ln(Jy/Jz)]`` in ``Estimates.extras["inertia_ratios"]``; the truth is each seed's body
@@ -17,13 +18,12 @@ import numpy as np
 
 from fkn_bench.envs import generate_episodes
 from fkn_bench.envs.episodes import true_inertia
-from fkn_bench.filters.rigid_body import inertia_ratios
 from fkn_bench.harness.estimators import ResolvedEstimator
-from fkn_bench.plotting import legend_below, new_figure
+from fkn_bench.models.rigid_body import inertia_ratios
 from fkn_bench.scenarios import Scenario
 from fkn_bench.types import ArrayF
 
-__all__ = ["RatioConvergence", "ratio_convergence", "ratio_figure"]
+__all__ = ["RatioConvergence", "ratio_convergence"]
 
 
 @dataclass(frozen=True)
@@ -71,24 +71,3 @@ def ratio_convergence(resolved: ResolvedEstimator, scenario: Scenario, seeds: in
     if estimates.initialised is not None:
         errors = np.where(estimates.initialised, errors, np.nan)
     return RatioConvergence(resolved.name, scenario.name, episodes.seeds, episodes.times, errors)
-
-
-def ratio_figure(results: list[RatioConvergence], *, threshold: float = 0.02, at: float = 600.0):  # noqa: ANN201
-    """Inertia-ratio error ``max |k_est - k_true|`` (-, log scale) over time (s) per scenario: the
-    median and the 10-90% band over seeds, the threshold and the time at which it is checked
-    marked; the legend below the axes."""
-    figure = new_figure(9.0, 4.4)
-    ax = figure.add_subplot(1, 1, 1)
-    for result in results:
-        median = np.nanmedian(result.errors, axis=0)
-        low, high = np.nanpercentile(result.errors, [10, 90], axis=0)
-        share = result.share_below(threshold, at)
-        line = ax.semilogy(result.times, median, label=f"{result.scenario} (median; {share:.0%} of "
-                                                       f"{len(result.seeds)} seeds < {threshold} at {at:g} s)")[0]
-        ax.fill_between(result.times, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
-    ax.axhline(threshold, color="k", linestyle="--", linewidth=0.8, label=f"threshold {threshold:g}")
-    ax.axvline(at, color="k", linestyle=":", linewidth=0.8, label=f"checked at {at:g} s")
-    ax.set(xlabel="time since the first sample (s)", ylabel="max |k_est - k_true| (-)",
-           title=f"{results[0].estimator}: inertia-ratio error (band: 10-90% of seeds)")
-    legend_below(figure, ax.get_legend_handles_labels()[0], ncols=1 if len(results) > 1 else 3)
-    return figure

@@ -5,7 +5,7 @@ with their declarations :data:`TRAINABLE` and :data:`RECURSIVE_TRAINABLE`.
 
 The process model is the config's (``process_model``: the paper's constant rate by default, or the
 rigid body) unless ``build_model`` is given another
-:class:`~fkn_bench.filters.models.StateSpaceModel` (KalmanNet uses only its common interface).
+:class:`~fkn_bench.models.base.StateSpaceModel` (KalmanNet uses only its common interface).
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from typing import Any
 
 import torch
 
-from fkn_bench.filters.models import StateSpaceModel
+from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.kalmannet.config import KalmanNetConfig, RecursiveKalmanNetConfig
 from fkn_bench.kalmannet.recursion import KalmanNet, ManifoldRecursion
 from fkn_bench.kalmannet.recursive import RecursiveKalmanNet

@@ -23,7 +23,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from fkn_bench.filters import ExtendedKalmanFilter, LinearGaussianModel, NoiseParameters, make_filter
+from fkn_bench.filters import ExtendedKalmanFilter, make_filter
+from fkn_bench.models.linear import LinearGaussianModel
+from fkn_bench.models.noise import NoiseParameters
 from fkn_bench.kalmannet.checkpoint import build_model
 from fkn_bench.kalmannet.config import KalmanNetConfig
 from fkn_bench.kalmannet.recursion import KalmanNet

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from fkn_bench.filters.models import StateSpaceModel
+from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import namespace
 

@@ -48,7 +48,7 @@ import torch
 from torch import Tensor
 
 from fkn_bench.filters.base import check_dt
-from fkn_bench.filters.models import StateSpaceModel
+from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.kalmannet.manifolds import Manifold, manifold_for
 from fkn_bench.kalmannet.network import GainNetwork, Hidden, normalize_features
 from fkn_bench.training.data import Sequences
@@ -121,7 +121,7 @@ class ManifoldRecursion(SequenceModel):
     and :meth:`update`; :meth:`recurse` runs them over a batch of sequences.
 
     Args:
-        model: the process and measurement model (any :class:`~fkn_bench.filters.models.StateSpaceModel`).
+        model: the process and measurement model (any :class:`~fkn_bench.models.base.StateSpaceModel`).
         manifold: ``"auto"``, ``"pose-tangent"`` or ``"euclidean"``; or a :class:`Manifold`.
         detach_every: truncated back-propagation through time (None: full; see :class:`KalmanNet`).
     """
@@ -215,7 +215,7 @@ class KalmanNet(ManifoldRecursion):
     Args:
         model: the process and measurement model; only its ``predict``, ``measure``, ``align``,
             ``normalize``, ``sanitize``, ``initial_state``, ``prior_state``, ``state_dim`` and
-            ``measurement_dim`` are used (any :class:`~fkn_bench.filters.models.StateSpaceModel`).
+            ``measurement_dim`` are used (any :class:`~fkn_bench.models.base.StateSpaceModel`).
         manifold: ``"auto"`` (pose tangent space for the 13-state pose model, else Euclidean),
             ``"pose-tangent"`` or ``"euclidean"``; or a :class:`Manifold`.
         in_mult, out_mult: the paper's input and output multipliers of the gain network.

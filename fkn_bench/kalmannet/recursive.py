@@ -80,7 +80,7 @@ from torch.nn import functional
 from fkn_bench.filters import ExtendedKalmanFilter
 from fkn_bench.filters.base import FilterState
 from fkn_bench.filters.mekf import MEKF_MANUAL_LAYOUT, MultiplicativeEKF
-from fkn_bench.filters.models import StateSpaceModel
+from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.kalmannet.manifolds import Manifold, PoseTangent
 from fkn_bench.kalmannet.recursion import ManifoldRecursion
 from fkn_bench.linalg import symmetrize
@@ -191,7 +191,7 @@ class RecursiveKalmanNet(ManifoldRecursion):
 
     Args:
         model: the process and measurement model; on the pose tangent space a pose-twist model
-            (:class:`~fkn_bench.filters.models.PoseTwistModel` or the rigid body), whose error
+            (:class:`~fkn_bench.models.pose_twist.PoseTwistModel` or the rigid body), whose error
             transition the multiplicative EKF forms.
         manifold: ``"auto"``, ``"pose-tangent"`` or ``"euclidean"``; or a :class:`Manifold`.
         in_mult, hidden_mult, out_mult: the branches' widths (:class:`GRUBranch`).

@@ -30,6 +30,7 @@ import torch
 from fkn_bench.config_values import check_arguments, init_annotations
 from fkn_bench.estimators.kalman import KalmanEstimator
 from fkn_bench.io import read_json, write_json_atomic
+from fkn_bench.models.registry import DEFAULT_MODEL
 from fkn_bench.scenarios import Scenario
 from fkn_bench.training.checkpoint import checked_document
 
@@ -207,7 +208,7 @@ def deployed_estimator_config(model: Any, settings: Any) -> dict[str, Any]:
     with torch.no_grad():
         noise = model.parameter_set.to_noise(model.deployed_raw())
     config: dict[str, Any] = {"variant": settings.variant}
-    if settings.process_model != "constant-velocity":
+    if settings.process_model != DEFAULT_MODEL:
         inertia = settings.inertia
         config.update(model=settings.process_model, inertia=None if inertia is None else list(inertia))
     for entry, matrix in (("q", noise.process), ("r", noise.measurement), ("p0", noise.initial)):

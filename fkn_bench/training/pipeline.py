@@ -51,6 +51,7 @@ import pandas as pd
 import torch
 
 from fkn_bench.io import atomic_path, directory_lock, read_toml, remove_temporaries
+from fkn_bench.models.registry import model_spec
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario, get_scenario
 from fkn_bench.training.artifacts import deployed_estimator_config, run_provenance, write_artifact
@@ -258,7 +259,7 @@ def _fit(estimator: str, scenario: str | Scenario | Sequence[str | Scenario], co
     if family is None:
         family = scenario.model_family if len({s.model_family for s in scenarios}) == 1 else "default"
     config = declared.config(config or {}) if config is None or isinstance(config, Mapping) else config
-    if config.train_config().process_model == "rigid-body" and config.train_config().inertia is None:
+    if model_spec(config.train_config().process_model).inertia == "required" and config.train_config().inertia is None:
         config = dataclasses.replace(config, inertia=scenario.inertia)  # deployed with the inertia trained on
     settings: TrainConfig = config.train_config()
     began = time.perf_counter()

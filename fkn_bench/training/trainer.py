@@ -45,8 +45,9 @@ from typing import Any, ClassVar
 import torch
 from torch import Tensor, nn
 
-from fkn_bench.filters import MODELS, VARIANTS, KalmanFilter, ParameterSet, make_filter, make_model
+from fkn_bench.filters import VARIANTS, KalmanFilter, ParameterSet, make_filter
 from fkn_bench.limits import check_memory
+from fkn_bench.models.registry import DEFAULT_MODEL, make_model, model_names, model_spec
 from fkn_bench.runtime import parse_device, resolve_device, torch_threads
 from fkn_bench.training.data import Sequences, TrainingData
 from fkn_bench.training.objectives import OBJECTIVES, innovation_nll, state_mse
@@ -150,7 +151,7 @@ class TrainConfig:
 
     Attributes:
         variant: the filter variant trained through (ekf, ukf, mekf).
-        process_model: the filter's process model (:data:`fkn_bench.filters.MODELS`:
+        process_model: the filter's process model (:func:`fkn_bench.models.model_names`:
             ``constant-velocity``, the paper's; ``rigid-body``; ``rigid-body-ratios``).
         inertia: principal moments (kg m^2) of the rigid-body models: known inertia
             (``rigid-body``; None takes the training scenario's when training starts) or the prior
@@ -210,11 +211,11 @@ class TrainConfig:
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
             raise ValueError(f"variant must be one of {list(VARIANTS)} (got {self.variant!r})")
-        if self.process_model not in MODELS:
-            raise ValueError(f"process_model must be one of {list(MODELS)} (got {self.process_model!r})")
+        if self.process_model not in model_names():
+            raise ValueError(f"process_model must be one of {list(model_names())} (got {self.process_model!r})")
         if self.inertia is not None:
             self.inertia = tuple(float(v) for v in self.inertia)  # type: ignore[assignment]
-        if not (self.process_model == "rigid-body" and self.inertia is None):  # else: the scenario's
+        if not (model_spec(self.process_model).inertia == "required" and self.inertia is None):  # else: the scenario's
             self.build_filter()  # the variant takes the model, and the model its inertia (else ValueError)
         if self.window < 2 or self.loss_cut >= self.window:
             raise ValueError(f"need window >= 2 and loss_cut < window (got {self.window}, {self.loss_cut})")
@@ -250,7 +251,7 @@ class TrainConfig:
         values = asdict(self)
         if self.device == "cpu":
             del values["device"]
-        if self.process_model == "constant-velocity" and self.inertia is None:
+        if self.process_model == DEFAULT_MODEL and self.inertia is None:
             del values["process_model"], values["inertia"]
         elif values["inertia"] is not None:
             values["inertia"] = list(values["inertia"])
@@ -260,7 +261,7 @@ class TrainConfig:
         """The filter variant on the process model; a known-inertia model without ``inertia``
         takes ``scenario.inertia``."""
         inertia = self.inertia
-        if inertia is None and self.process_model == "rigid-body" and scenario is not None:
+        if inertia is None and model_spec(self.process_model).inertia == "required" and scenario is not None:
             inertia = scenario.inertia
         return make_filter(self.variant, model=make_model(self.process_model, inertia=inertia))
 

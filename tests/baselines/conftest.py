@@ -62,7 +62,7 @@ class ConstantVelocity:
     def torch_model(self):  # noqa: ANN201
         import torch
 
-        from fkn_bench.filters import LinearGaussianModel
+        from fkn_bench.models import LinearGaussianModel
 
         return LinearGaussianModel(torch.from_numpy(self.A), torch.from_numpy(self.H))
 

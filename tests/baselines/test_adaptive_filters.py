@@ -17,7 +17,7 @@ from fkn_bench.baselines.vbakf import VBAKFEstimator
 from fkn_bench.envs import generate_episodes
 from fkn_bench.estimators import estimator_spec, load_estimator, make_estimator
 from fkn_bench.estimators.conformance import HostileInput, check_input_rules, hostile_measurements
-from fkn_bench.filters import PoseTwistModel
+from fkn_bench.models import PoseTwistModel
 from fkn_bench.filters.pose import error_covariance_from_state
 from fkn_bench.scenarios import get_scenario
 

@@ -16,7 +16,8 @@ import torch
 
 from fkn_bench.envs import generate_episodes
 from fkn_bench.estimators import make_estimator
-from fkn_bench.filters import ExtendedKalmanFilter, NoiseParameters
+from fkn_bench.filters import ExtendedKalmanFilter
+from fkn_bench.models import NoiseParameters
 from fkn_bench.filters.pose import error_covariance_from_state
 from fkn_bench.scenarios import get_scenario
 

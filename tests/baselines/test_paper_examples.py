@@ -1,6 +1,6 @@
 """Each adaptive filter on its own paper's example (issue 21, item 1), through the project's code
 path: :class:`~fkn_bench.baselines.adaptive.AdaptiveKalmanFilter` with the method's rule on a
-:class:`~fkn_bench.filters.models.LinearGaussianModel` (numpy, batched).
+:class:`~fkn_bench.models.linear.LinearGaussianModel` (numpy, batched).
 
 Examples
 --------
@@ -71,7 +71,7 @@ from fkn_bench.baselines.adaptive import AdaptiveKalmanFilter
 from fkn_bench.baselines.akhlaghi import AkhlaghiRule
 from fkn_bench.baselines.sage_husa import SageHusaRule
 from fkn_bench.baselines.vbakf import VBAKFRule
-from fkn_bench.filters.models import LinearGaussianModel
+from fkn_bench.models import LinearGaussianModel
 
 # ------------------------------------------ Huang et al. (2018), target-tracking simulation
 T, TS = 1.0, 1000  # sampling period, the paper's run length (in the noise profile)

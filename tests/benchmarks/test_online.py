@@ -53,7 +53,7 @@ def test_online_update_step(benchmark: Any, name: str) -> None:
 
 def _first_states() -> tuple[Any, ...]:
     """``(dt, Q, R, P0, x0 (13,), measurement (7,))`` of ds1 seed 0 for the one-step benchmarks."""
-    from fkn_bench.filters.models import PoseTwistModel
+    from fkn_bench.models import PoseTwistModel
 
     z, m, dt = episodes_for("ds1", 1, STEPS)
     noise = make_estimator("manual-ekf").noise_parameters()

@@ -224,7 +224,7 @@ def test_body_frame_initial_rate_and_per_seed_inertia() -> None:
     np.testing.assert_array_equal(true_inertia(scenario, [2]), inertia[2:3])
     np.testing.assert_array_equal(true_inertia(get_scenario("tumble-fast"), [5, 6]), np.tile(ASTROBEE_INERTIA, (2, 1)))
     # the nominal inertia is wrong for the truth: a known-inertia prediction drifts from it
-    from fkn_bench.filters.rigid_body import RigidBodyModel
+    from fkn_bench.models.rigid_body import RigidBodyModel
 
     episodes = generate_episodes(scenario, [0], split="test")
     truth = episodes.truth[0]

@@ -6,7 +6,7 @@ import numpy as np
 import torch
 
 from fkn_bench.estimators.oracle import PROCESS_FLOOR, model_prediction, oracle_noise
-from fkn_bench.filters import PoseTwistModel
+from fkn_bench.models import PoseTwistModel
 from fkn_bench.scenarios import get_scenario
 
 # an error rotation of 0.1 rad per axis moves each unit-quaternion component by

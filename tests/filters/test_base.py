@@ -16,12 +16,12 @@ from fkn_bench.filters import (
     FilterState,
     KalmanFilter,
     MultiplicativeEKF,
-    NoiseParameters,
     ParameterSet,
     UnscentedKalmanFilter,
     make_filter,
 )
 from fkn_bench.geometry.quaternion import angle_between
+from fkn_bench.models import NoiseParameters
 
 ALL_VARIANTS = ("ekf", "ukf", "mekf")
 

@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 import torch
 
-from fkn_bench.filters import MODELS, VARIANTS, FilterState, NoiseParameters, make_filter, make_model
+from fkn_bench.filters import VARIANTS, FilterState, make_filter
+from fkn_bench.models import NoiseParameters, make_model, model_names
 
 
 @pytest.fixture
@@ -42,7 +43,7 @@ def _episodes(batch: int = 4, steps: int = 40) -> tuple[torch.Tensor, torch.Tens
     return torch.from_numpy(z), torch.from_numpy(mask)
 
 
-@pytest.mark.parametrize("model_name", MODELS)
+@pytest.mark.parametrize("model_name", model_names())
 @pytest.mark.parametrize("variant", sorted(VARIANTS))
 def test_run_and_gradient_make_no_tensor_off_the_inputs_device(
     gpu_path: None, on_meta: None, variant: str, model_name: str

@@ -10,7 +10,8 @@ import torch
 from filterpy.kalman import ExtendedKalmanFilter as FilterpyEKF
 
 from fkn_bench.envs import generate_episodes
-from fkn_bench.filters import ExtendedKalmanFilter, FilterState, LinearGaussianModel, PoseTwistModel, make_filter
+from fkn_bench.filters import ExtendedKalmanFilter, FilterState, make_filter
+from fkn_bench.models import LinearGaussianModel, PoseTwistModel
 from fkn_bench.filters.ekf import joseph_update
 from fkn_bench.filters.linear import linear_kalman_filter
 from fkn_bench.filters.pose import error_covariance_from_state

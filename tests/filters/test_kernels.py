@@ -9,7 +9,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from fkn_bench.filters import FilterState, PoseTwistModel, kernels
+from fkn_bench.filters import FilterState, kernels
+from fkn_bench.models import PoseTwistModel
 from fkn_bench.filters.structured import _PosePredict, _PosePredictSteps, _predict_forward, g_sparsity, pose_update
 
 

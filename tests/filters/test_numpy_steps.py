@@ -9,7 +9,7 @@ import torch
 
 from fkn_bench.envs import generate_episodes
 from fkn_bench.filters import VARIANTS, ExtendedKalmanFilter, FilterState, make_filter
-from fkn_bench.filters.models import PoseTwistModel
+from fkn_bench.models import PoseTwistModel
 from fkn_bench.linalg import _CONSTANTS
 from fkn_bench.scenarios import get_scenario
 

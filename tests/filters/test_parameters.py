@@ -8,8 +8,9 @@ import json
 import pytest
 import torch
 
-from fkn_bench.filters import MEKF_MANUAL_LAYOUT, NoiseParameters, ParameterSet
-from fkn_bench.filters.models import PAPER_MANUAL_LAYOUT
+from fkn_bench.filters import MEKF_MANUAL_LAYOUT, ParameterSet
+from fkn_bench.models import NoiseParameters
+from fkn_bench.models import PAPER_MANUAL_LAYOUT
 from fkn_bench.filters.parameters import LEARNABLE_ENTRIES
 from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES
 

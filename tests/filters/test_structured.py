@@ -13,7 +13,8 @@ import dataclasses
 import pytest
 import torch
 
-from fkn_bench.filters import FilterState, NoiseParameters, PoseTwistModel, make_filter
+from fkn_bench.filters import FilterState, make_filter
+from fkn_bench.models import NoiseParameters, PoseTwistModel
 from fkn_bench.filters import ekf, kernels
 from fkn_bench.filters.ekf import ekf_predict, linear_measurement_update
 from fkn_bench.filters.structured import _BatchLastProduct, _PosePredict, pose_predict, pose_update

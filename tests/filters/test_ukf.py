@@ -9,7 +9,8 @@ import torch
 
 import fkn_bench.filters.ukf as ukf_module
 from fkn_bench.envs import generate_episodes
-from fkn_bench.filters import FilterState, LinearGaussianModel, NoiseParameters, UnscentedKalmanFilter, make_filter
+from fkn_bench.filters import FilterState, UnscentedKalmanFilter, make_filter
+from fkn_bench.models import LinearGaussianModel, NoiseParameters
 from fkn_bench.filters.linear import linear_kalman_filter
 from fkn_bench.filters.ukf import sigma_point_weights
 

@@ -12,7 +12,7 @@ import torch
 from fkn_bench.estimators import make_estimator
 from fkn_bench.estimators.conformance import check_input_rules, hostile_measurements
 from fkn_bench.estimators.registry import estimator_spec
-from fkn_bench.filters.models import PoseTwistModel, StateSpaceModel
+from fkn_bench.models import PoseTwistModel, StateSpaceModel
 from fkn_bench.kalmannet import TRAINABLE, KalmanNetConfig, KalmanNetEstimator, build_model
 from fkn_bench.metrics import score_run
 from fkn_bench.runtime import torch_threads

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from fkn_bench.filters import LinearGaussianModel, PoseTwistModel
+from fkn_bench.models import LinearGaussianModel, PoseTwistModel
 from fkn_bench.kalmannet import Euclidean, PoseTangent, manifold_for
 
 

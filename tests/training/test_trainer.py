@@ -74,7 +74,7 @@ def test_invalid_configs_are_refused(data: TrainingData) -> None:
 
 
 def test_the_process_model_option() -> None:
-    from fkn_bench.filters import PoseTwistModel, RigidBodyModel
+    from fkn_bench.models import PoseTwistModel, RigidBodyModel
     from fkn_bench.scenarios import ASTROBEE_INERTIA, get_scenario
 
     default = TrainConfig()

@@ -7,9 +7,9 @@ import pytest
 import torch
 
 from fkn_bench.envs.dynamics import FreeTumble
-from fkn_bench.filters import ExtendedKalmanFilter, MultiplicativeEKF, UnscentedKalmanFilter, make_model
-from fkn_bench.filters.models import PoseTwistModel
-from fkn_bench.filters.rigid_body import (
+from fkn_bench.filters import ExtendedKalmanFilter, MultiplicativeEKF, UnscentedKalmanFilter
+from fkn_bench.models import PoseTwistModel, make_model
+from fkn_bench.models.rigid_body import (
     RigidBodyModel,
     euler_coefficients,
     inertia_ratios,
@@ -121,7 +121,7 @@ def test_ratio_model_states_and_layout() -> None:
 @pytest.mark.parametrize("variant", [ExtendedKalmanFilter, UnscentedKalmanFilter])
 def test_filters_run_on_the_rigid_body_models(variant: type) -> None:
     from fkn_bench.envs import generate_episodes
-    from fkn_bench.filters import NoiseParameters
+    from fkn_bench.models import NoiseParameters
 
     episodes = generate_episodes("tumble-fast", 2, split="test")
     z, m = torch.from_numpy(episodes.measurements[:, :300]), torch.from_numpy(episodes.valid[:, :300])
@@ -155,7 +155,7 @@ def test_the_multiplicative_ekf_runs_any_pose_twist_model() -> None:
     """The MEKF maps a model's additive Jacobian to its error state; on an isotropic body (the
     constant rate) it stays close to the MEKF's exact constant-rate propagation."""
     from fkn_bench.envs import generate_episodes
-    from fkn_bench.filters import NoiseParameters
+    from fkn_bench.models import NoiseParameters
 
     episodes = generate_episodes("ds1", 2, split="test")
     z, m = torch.from_numpy(episodes.measurements[:, :400]), torch.from_numpy(episodes.valid[:, :400])
@@ -175,7 +175,7 @@ def test_the_multiplicative_ekf_runs_any_pose_twist_model() -> None:
 def test_non_physical_ratios_are_evaluated_at_the_physical_boundary() -> None:
     """A physical body has |p_i| <= 1 (triangle inequality of its moments); log ratios outside
     that region give p clipped to [-1, 1], with zero derivative where clipped."""
-    from fkn_bench.filters.rigid_body import _coefficients_and_derivative
+    from fkn_bench.models.rigid_body import _coefficients_and_derivative
 
     physical = np.array([inertia_ratios(ASTROBEE_INERTIA), inertia_ratios((1.0, 1.0, 1.9))])
     p, dp = _coefficients_and_derivative(physical)

@@ -8,8 +8,8 @@ import pytest
 import torch
 from torch.autograd.functional import jacobian
 
-from fkn_bench.filters import LinearGaussianModel, PoseTwistModel
-from fkn_bench.filters.models import PAPER_MANUAL_LAYOUT
+from fkn_bench.models import LinearGaussianModel, PoseTwistModel
+from fkn_bench.models import PAPER_MANUAL_LAYOUT
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES
 

@@ -1,22 +1,10 @@
-"""State-space models, written once for numpy arrays (online, one sequence) and torch tensors
-(batched, differentiable): the paper's pose-and-twist model and a linear model.
+"""The paper's pose-and-twist model (FlexKalmanNet, section 2, eqs. 6-11).
 
-A model tells a filter how the state moves (``transition``: the mean ``f(x)`` and its Jacobian
-``F``), what is measured (a linear ``H``; ``observed`` names the measured slice when
-``H = [I 0]``), and how to keep states and measurements well-formed (``sanitize``, ``align``,
-``normalize``). Filters (:mod:`fkn_bench.filters.ekf`, ``ukf``, ``mekf``) are generic over models;
-nothing in a filter knows about quaternions except through these hooks. Every hook takes arrays
-with a leading batch axis (``(B, n)`` states, ``(B, m)`` measurements) of either library and
-returns the same library's arrays (:func:`fkn_bench.linalg.namespace`).
-
-:class:`PoseTwistModel` is FlexKalmanNet's model (section 2, eqs. 6-11): state
-``[q(4), r(3), w(3), v(3)]`` (Hamilton, scalar-first ``wxyz``) with world-frame ``w``,
-measurement ``[q, r]``::
+State ``[q(4), r(3), w(3), v(3)]`` (Hamilton, scalar-first ``wxyz``; ``q`` rotates body to world;
+position ``r`` in m and velocity ``v`` in m/s in the world frame; world-frame angular rate ``w`` in
+rad/s), measurement ``[q, r]``::
 
     r' = r + v dt,   v' = v,   q' = q + dt/2 Theta(q) w,   w' = w,   y = [q, r] = H x, H = [I7 0]
-
-:class:`LinearGaussianModel` (``x' = A x``, ``y = H x``) reduces any filter to the textbook
-Kalman filter; the tests use it to check the EKF and UKF against a plain KF.
 """
 
 from __future__ import annotations
@@ -26,15 +14,13 @@ from typing import Any
 
 import numpy as np
 
-from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, dot, eye, namespace, sum_last, zeros
+from fkn_bench.models.base import Array, StateSpaceModel, prior_array
+from fkn_bench.models.noise import NoiseLayout
 from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES, STATE_UNITS
 
-__all__ = ["StateSpaceModel", "PoseTwistModel", "LinearGaussianModel", "PAPER_MANUAL_LAYOUT"]
-
-Array = Any
-"""A numpy array or a torch tensor."""
+__all__ = ["PoseTwistModel", "PAPER_MANUAL_LAYOUT"]
 
 PAPER_MANUAL_LAYOUT = NoiseLayout(
     q_labels=STATE_NAMES,
@@ -55,88 +41,6 @@ PAPER_MANUAL_LAYOUT = NoiseLayout(
 )
 """Components, units and defaults (the paper's manual tuning) of the additive pose-twist model."""
 
-
-class StateSpaceModel:
-    """Interface of a model (see module docstring). Subclasses set the attributes below; ``H``
-    is a float64 numpy array (:meth:`measurement_matrix` gives it in an array's namespace)."""
-
-    state_dim: int
-    measurement_dim: int
-    H: np.ndarray
-    observed: slice | None = None
-    layout: NoiseLayout
-
-    def _constants(self) -> dict:
-        """This model's cache of constant arrays (see :func:`fkn_bench.linalg.constant`)."""
-        return self.__dict__.setdefault("_cache", {})
-
-    def predict(self, x: Array, dt: float) -> Array:
-        """Mean propagation ``f(x)`` of ``(B, n)`` states over ``dt`` seconds."""
-        return self.transition(x, dt)[0]
-
-    def jacobian(self, x: Array, dt: float) -> Array:
-        """``F = df/dx`` ``(B, n, n)`` at ``x``."""
-        return self.transition(x, dt)[1]
-
-    def transition(self, x: Array, dt: float) -> tuple[Array, Array]:
-        """``(f(x), F)`` together."""
-        raise NotImplementedError
-
-    def measurement_matrix(self, like: Array) -> Array:
-        """``H (m, n)`` in the namespace and dtype of ``like``."""
-        return constant(like, "H", lambda: self.H, self._constants())
-
-    def measure(self, x: Array) -> Array:
-        """``H x`` for states ``(B, n)``."""
-        if self.observed is not None:
-            return x[:, self.observed]
-        return x @ self.measurement_matrix(x).swapaxes(0, 1)
-
-    def sanitize(self, measurements: Array, mask: Array) -> tuple[Array, Array]:
-        """Clean inputs once per sequence: drop non-finite measurements from the mask (zeros in
-        their place)."""
-        xp = namespace(measurements)
-        mask = mask & xp.all(xp.isfinite(measurements), axis=-1)
-        return xp.where(mask[..., None], measurements, 0.0), mask
-
-    def align(self, z: Array, x_pred: Array) -> Array:
-        """Measurement made comparable with the prediction (identity by default)."""
-        return z
-
-    def normalize(self, x: Array) -> tuple[Array, slice | None, Array | None]:
-        """Posterior state projected onto the state's manifold, and the projection's Jacobian.
-
-        The Jacobian is the identity except on one diagonal block: returns ``(x, block, N)``
-        with ``N (B, b, b)`` the Jacobian on ``block`` (``None, None``: identity everywhere).
-        """
-        return x, None, None
-
-    def null_direction(self, x: Array) -> Array | None:
-        """Unit direction ``(B, n)`` that :meth:`normalize`'s projection removes from the
-        covariance (``None``: none), so that square-root filters can regularise along it."""
-        return None
-
-    def initial_state(self, z: Array) -> Array:
-        """State ``(B, n)`` initialised from measurements ``(B, m)``."""
-        raise NotImplementedError
-
-    def prior_state(self, batch: int, dtype: Any) -> Array:
-        """State ``(B, n)`` reported before a sequence's first measurement (a CPU torch tensor
-        for a torch ``dtype``, which the filters move to their inputs' device; else a numpy
-        array)."""
-        return _prior(batch, self.state_dim, dtype, first=0.0)
-
-
-def _prior(batch: int, n: int, dtype: Any, *, first: float) -> Array:
-    """``(B, n)`` zeros but ``first`` in the first column: a CPU torch tensor for a torch
-    ``dtype``, else a numpy array."""
-    x = np.zeros((batch, n))
-    x[:, 0] = first
-    if type(dtype).__module__.startswith("torch"):
-        import torch
-
-        return torch.from_numpy(x).to(dtype)
-    return x.astype(dtype, copy=False)
 
 
 def _pose_row_basis() -> np.ndarray:
@@ -174,6 +78,7 @@ class PoseTwistModel(StateSpaceModel):
     measurement_dim = 7
     observed = slice(0, 7)
     layout = PAPER_MANUAL_LAYOUT
+    offers = frozenset({"pose-state", "structured-ekf", "exact-rotation"})
     H = np.concatenate((np.eye(7), np.zeros((7, 6))), axis=1)
 
     def __init__(self, *, min_quaternion_norm: float = 1e-6, max_abs_position: float = 1e9) -> None:
@@ -292,7 +197,7 @@ class PoseTwistModel(StateSpaceModel):
         return namespace(z).concat((z[:, :7], zeros(z, (z.shape[0], 6))), axis=1)
 
     def prior_state(self, batch: int, dtype: Any) -> Array:
-        return _prior(batch, 13, dtype, first=1.0)
+        return prior_array(batch, 13, dtype, first=1.0)
 
 
 def _pose_constants(dt: float) -> np.ndarray:
@@ -301,28 +206,3 @@ def _pose_constants(dt: float) -> np.ndarray:
     A = np.eye(13)
     A[4:7, 10:13] = dt * np.eye(3)
     return np.concatenate((A, A.T, (0.5 * dt) * _POSE_BASIS), axis=1)
-
-
-class LinearGaussianModel(StateSpaceModel):
-    """``x' = A x``, ``y = H x`` (``A`` and ``H`` fixed matrices; ``dt`` is ignored).
-
-    The layout labels components ``x0, x1, ...`` and ``y0, ...``; defaults are unit standard
-    deviations. ``initial_state`` solves ``H x = z`` in the least-squares sense.
-    """
-
-    def __init__(self, A: Array, H: Array, *, layout: NoiseLayout | None = None) -> None:
-        self.A, self.H = (np.array(a.detach().numpy() if hasattr(a, "detach") else a, dtype=np.float64) for a in (A, H))
-        n, m = self.A.shape[0], self.H.shape[0]
-        if self.A.shape != (n, n) or self.H.shape != (m, n):
-            raise ValueError(f"A must be (n, n) and H (m, n); got {tuple(self.A.shape)} and {tuple(self.H.shape)}")
-        self.state_dim, self.measurement_dim = n, m
-        xs, ys = tuple(f"x{i}" for i in range(n)), tuple(f"y{i}" for i in range(m))
-        default = NoiseLayout(xs, ("1",) * n, (1.0,) * n, ys, ("1",) * m, (1.0,) * m, xs, ("1",) * n, (1.0,) * n)
-        self.layout = layout if layout is not None else default
-
-    def transition(self, x: Array, dt: float) -> tuple[Array, Array]:
-        A = constant(x, "A", lambda: self.A, self._constants())
-        return x @ A.swapaxes(0, 1), namespace(x).broadcast_to(A, (x.shape[0],) + self.A.shape)
-
-    def initial_state(self, z: Array) -> Array:
-        return z @ constant(z, "pinv-H^T", lambda: np.linalg.pinv(self.H).T, self._constants())

@@ -41,14 +41,14 @@ from typing import Any
 
 import numpy as np
 
-from fkn_bench.filters.models import PAPER_MANUAL_LAYOUT, PoseTwistModel, _prior
-from fkn_bench.filters.parameters import NoiseLayout
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import constant, eye, namespace, zeros
+from fkn_bench.models.base import Array, prior_array
+from fkn_bench.models.noise import NoiseLayout
+from fkn_bench.models.pose_twist import PAPER_MANUAL_LAYOUT, PoseTwistModel
 
 __all__ = ["RigidBodyModel", "RIGID_BODY_LAYOUT", "RIGID_BODY_RATIO_LAYOUT", "inertia_ratios", "moments_from_ratios", "euler_coefficients"]
 
-Array = Any
 
 MAX_SUBSTEPS = 64
 """The most Runge-Kutta steps a prediction interval is refined to (see ``_stable_substeps``)."""
@@ -144,8 +144,10 @@ class RigidBodyModel(PoseTwistModel):
             isotropic, ``k = 0``).
         estimate_ratios: augment the state with ``k = [ln(Jx/Jy), ln(Jy/Jz)]`` (15 states).
         substeps: Runge-Kutta steps per prediction interval.
-        min_quaternion_norm, max_abs_position: see :class:`~fkn_bench.filters.models.PoseTwistModel`.
+        min_quaternion_norm, max_abs_position: see :class:`~fkn_bench.models.pose_twist.PoseTwistModel`.
     """
+
+    offers = frozenset({"pose-state"})  # (its transition is not the structured step's)
 
     def __init__(
         self,
@@ -331,7 +333,7 @@ class RigidBodyModel(PoseTwistModel):
         return x + self._ratio_offset(z) if self.estimate_ratios else x
 
     def prior_state(self, batch: int, dtype: Any) -> Array:
-        x = _prior(batch, self.state_dim, dtype, first=1.0)
+        x = prior_array(batch, self.state_dim, dtype, first=1.0)
         return x + self._ratio_offset(x) if self.estimate_ratios else x
 
     def _ratio_offset(self, like: Array) -> Array:
