@@ -54,6 +54,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("training",),
     ("flexkalmannet", "kalmannet", "baselines"),
     ("harness",),
+    ("reporting",),
     ("reproduce", "sweep", "gates"),
     ("cli", "__main__"),
 )

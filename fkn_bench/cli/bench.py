@@ -182,7 +182,7 @@ def _machine(document: dict[str, Any]) -> str:
 
 def format_summary(document: dict[str, Any], *, source: str = "") -> str:
     """The summary table of :func:`summarize_benchmarks` as text, with the machine."""
-    from fkn_bench.harness.report import text_table
+    from fkn_bench.reporting.report import text_table
 
     rows = summarize_benchmarks(document)
     header = ("benchmark", "rounds", "median", "mean", "stddev", "steps", "steps/s", "of limit", "what")

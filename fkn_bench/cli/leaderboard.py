@@ -12,7 +12,7 @@ Each mean comes with its 95% Student-t confidence interval over the test episode
 estimator that a two-sided Wilcoxon signed-rank test on the per-seed scores cannot separate from
 the one ranked above (p >= 0.05) shares its rank. The index leads with the prior families, then
 the paper's fixed-truth scenarios, each section ranked on its own
-(:mod:`fkn_bench.harness.leaderboard`).
+(:mod:`fkn_bench.reporting.leaderboard`).
 
 ``--out`` (default: the directory holding ``--results``) keeps a list of the files fkn-bench
 wrote there with their SHA-256 (``.fkn-bench-files.json``; ``figures/`` has its own list): a file
@@ -75,8 +75,8 @@ def run(args: argparse.Namespace) -> int:
         return _shift(args)
     if args.seeds is not None:
         raise UsageError("--seeds goes with --cross or --shift (the leaderboards take the stored results' seeds)")
-    from fkn_bench.harness.leaderboard import NOTES_FILE, write_leaderboards
     from fkn_bench.harness.store import ResultStore, StoreError
+    from fkn_bench.reporting.leaderboard import NOTES_FILE, write_leaderboards
 
     try:
         results = ResultStore(args.results).load()
@@ -99,9 +99,10 @@ CROSS_FAMILIES = ("ds1", "ds2", "tumble", "default", "ds1-noise-step")
 
 
 def _cross(args: argparse.Namespace) -> int:
-    from fkn_bench.harness.cross import cross_scores, cross_table
-    from fkn_bench.harness.manifest import check_files, write_files
-    from fkn_bench.harness.tables import markdown_table
+    from fkn_bench.harness.cross import cross_scores
+    from fkn_bench.reporting.cross import cross_table
+    from fkn_bench.reporting.manifest import check_files, write_files
+    from fkn_bench.reporting.tables import markdown_table
     from fkn_bench.scenarios import get_scenario, scenario_names
 
     args.seeds = 20 if args.seeds is None else args.seeds
@@ -122,8 +123,9 @@ def _cross(args: argparse.Namespace) -> int:
 
 
 def _shift(args: argparse.Namespace) -> int:
-    from fkn_bench.harness.manifest import check_files, write_files
-    from fkn_bench.harness.shift import SHIFTS, shift_documents, shift_scores
+    from fkn_bench.harness.shift import SHIFTS, shift_scores
+    from fkn_bench.reporting.manifest import check_files, write_files
+    from fkn_bench.reporting.shift import shift_documents
 
     args.seeds = 50 if args.seeds is None else args.seeds
     if args.seeds < 2:

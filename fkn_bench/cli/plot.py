@@ -11,7 +11,7 @@ the share of seeds below 0.02 at 600 s.
 
 Every PNG names, in its text chunk ``fkn-bench command``, the command that draws it (these
 options, ``--out`` left out); a comparison chart also holds the numbers it plots and their SHA-256
-(:mod:`fkn_bench.harness.figures`), as the leaderboards' own charts do.
+(:mod:`fkn_bench.reporting.figures`), as the leaderboards' own charts do.
 
 Examples::
 
@@ -77,14 +77,14 @@ def run(args: argparse.Namespace) -> int:
     from fkn_bench.estimators import UnknownEstimatorError
     from fkn_bench.harness.estimators import SelectionError, select_estimators
     from fkn_bench.harness.grid import path_name
-    from fkn_bench.harness.leaderboard import ranked_summaries, scenario_order
-    from fkn_bench.harness.plots import (comparison_chart, comparison_data, errors_figure, save_figure, states_figure,
-                                         uncertainty_figure)
-    from fkn_bench.harness.reference import quoted_rows
     from fkn_bench.harness.sources import SimulatedSource
     from fkn_bench.harness.store import ResultStore, StoreError
     from fkn_bench.harness.trace import trace
     from fkn_bench.metrics import MetricSettings
+    from fkn_bench.reporting.leaderboard import ranked_summaries, scenario_order
+    from fkn_bench.reporting.plots import (comparison_chart, comparison_data, errors_figure, save_figure, states_figure,
+                                           uncertainty_figure)
+    from fkn_bench.reporting.reference import quoted_rows
     from fkn_bench.scenarios import get_scenario
 
     check_minimum(args, seed=0, steps=2, cut=0, seeds=1)
@@ -124,8 +124,8 @@ def run(args: argparse.Namespace) -> int:
 def _ratios(args: argparse.Namespace, scenario) -> int:  # noqa: ANN001
     from fkn_bench.harness.estimators import resolve_estimator
     from fkn_bench.harness.grid import path_name
-    from fkn_bench.harness.plots import save_figure
-    from fkn_bench.harness.ratios import ratio_convergence, ratio_figure
+    from fkn_bench.harness.ratios import ratio_convergence
+    from fkn_bench.reporting.plots import ratio_figure, save_figure
 
     with usage_errors(ValueError):
         result = ratio_convergence(resolve_estimator(args.estimator or "rigid-body-ekf-ratios", scenario), scenario,

@@ -238,9 +238,9 @@ def run(args: argparse.Namespace) -> int:
         make_backend,
         run_grid,
         summarize_results,
-        summary_text,
     )
     from fkn_bench.harness.grid import estimator_label
+    from fkn_bench.reporting import summary_text
     from fkn_bench.io import to_jsonable
 
     per_scenario = args.seeds is None  # simulated scenarios: each its own test_episodes

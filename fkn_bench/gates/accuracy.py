@@ -41,7 +41,7 @@ from typing import Any
 
 import pandas as pd
 
-from fkn_bench.harness.leaderboard import REGENERATE_COMMAND, RESULTS_DIR
+from fkn_bench.reporting.leaderboard import REGENERATE_COMMAND, RESULTS_DIR
 
 __all__ = [
     "ACCEPT_COMMAND",
@@ -193,7 +193,7 @@ class AccuracyReport:
     def table(self, estimator: str | None = None, *, limit: int = 60) -> str:
         """The differences as an aligned text table (at most ``limit`` rows, worst first within
         each pair)."""
-        from fkn_bench.harness.report import text_table
+        from fkn_bench.reporting.report import text_table
 
         rows = self.differences_of(estimator)
         if not rows:

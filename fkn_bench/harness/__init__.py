@@ -1,6 +1,8 @@
 """The benchmark harness: joins estimators, episodes and metrics into a grid of cells
-(estimator x source x seed chunk), runs it on a backend, stores the results, and summarises them
-(summaries over seeds, leaderboards, figures); each submodule's docstring says its part.
+(estimator x source x seed chunk), runs it on a backend, stores the cells, and summarises them over
+seeds; beside the grid, the runs that tables and figures need (one seed kept whole, inertia-ratio
+convergence, the shift and cross-scenario scores). Each submodule's docstring says its part;
+tables, leaderboards and figures are drawn from these results by :mod:`fkn_bench.reporting`.
 
 Names are re-exported lazily (:mod:`fkn_bench.lazy`): importing the package, e.g. for
 :data:`BACKENDS`, imports no submodule until one of its names is used.
@@ -36,7 +38,6 @@ _EXPORTS = {
     "chunk_seeds": ".grid",
     "CellRecord": ".records",
     "Results": ".records",
-    "summary_text": ".report",
     "COLUMNS": ".rows",
     "deterministic_rows": ".rows",
     "GridRun": ".runner",
@@ -70,7 +71,6 @@ if TYPE_CHECKING:  # what the names are, for type checkers and IDEs
     )
     from fkn_bench.harness.grid import ONLINE_STEPS, SEED_CHUNK, CellSpec, build_grid, chunk_seeds
     from fkn_bench.harness.records import CellRecord, Results
-    from fkn_bench.harness.report import summary_text
     from fkn_bench.harness.rows import COLUMNS, deterministic_rows
     from fkn_bench.harness.runner import GridRun, run_grid
     from fkn_bench.harness.sources import EpisodeSource, RecordingSource, SimulatedSource
@@ -117,5 +117,4 @@ __all__ = [
     "select_estimators",
     "summarize_pair",
     "summarize_results",
-    "summary_text",
 ]

@@ -1,5 +1,6 @@
 """Trained on X, scored on Y: each learned or tuned estimator with each family's committed
-parameters on every named scenario.
+parameters on every named scenario (the scores of the cross-scenario table, which
+:func:`fkn_bench.reporting.cross.cross_table` lays out).
 
 A learned filter is fitted to a family's data (constant rate ``ds1``, ``ds2``; free tumbling
 ``tumble``; the ``default`` mixture; ``ds1-noise-step``, non-stationary noise); the leaderboards
@@ -18,12 +19,11 @@ import numpy as np
 from fkn_bench.envs import generate_episodes
 from fkn_bench.harness.estimators import resolve_estimator
 from fkn_bench.harness.shift import episode_scores
-from fkn_bench.harness.tables import Table
 from fkn_bench.metrics import MetricSettings
 from fkn_bench.scenarios import get_scenario
 from fkn_bench.training.artifacts import artifact_path
 
-__all__ = ["cross_scores", "cross_table"]
+__all__ = ["cross_scores"]
 
 
 def cross_scores(
@@ -50,23 +50,3 @@ def cross_scores(
                 out[estimator_name, family, name] = (float(np.mean(np.where(np.isfinite(rmse), rmse, np.nan))),
                                                      float(np.mean(diverged)))
     return out
-
-
-def cross_table(scores: dict[tuple[str, str, str], tuple[float, float]], scenarios: Sequence[str]) -> Table:
-    """One row per (estimator, training family), one column per scored scenario."""
-    rows = []
-    for estimator, family in sorted({(e, f) for e, f, _ in scores}):
-        cells = []
-        for scenario in scenarios:
-            value = scores.get((estimator, family, scenario))
-            cells.append("–" if value is None else f"{value[0]:.4f}" + (f" ({value[1]:.0%} div.)" if value[1] else ""))
-        rows.append([estimator, family, *cells])
-    notes = [
-        "13-state RMSE (mean over seeds, test split, from the loss cut) of each estimator with the committed "
-        "parameters of each training family; (N% div.): share of seeds that diverged. Families: ds1, ds2 (the "
-        "paper's constant rates), tumble (free tumbling: tumble-fast, tumble-flip, tumble-slow), default (the "
-        "mixture used on recordings and user scenarios), ds1-noise-step (ds1 with a 5x measurement-noise step "
-        "and torque bursts).",
-    ]
-    return Table("Trained on a family (rows), scored on a scenario (columns)", ["estimator", "trained on", *scenarios],
-                 rows, notes, align=["l", "l"] + ["r"] * len(scenarios), name="cross-scenario")

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from fkn_bench.harness.reference import (
+from fkn_bench.reporting.reference import (
     PAPER_CLAIMS,
     PAPER_LEARNED,
     PAPER_LEARNED_STD,

@@ -2,7 +2,7 @@
 
 The pipeline draws the other figures with the project's figure functions: the two training
 figures of :mod:`fkn_bench.training.plots` (loss curves, the 20 learned standard deviations
-over epochs) and the state figure of :mod:`fkn_bench.harness.plots` (estimate, measurement and
+over epochs) and the state figure of :mod:`fkn_bench.reporting.plots` (estimate, measurement and
 truth of the four state groups). :func:`omega_uncertainty_figure` is the paper's uncertainty
 figure: the three angular-rate components with the estimate's 2-sigma band over the first samples
 of a run.

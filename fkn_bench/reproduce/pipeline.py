@@ -39,9 +39,9 @@ from fkn_bench.estimators import Estimator, make_estimator
 from fkn_bench.filters import make_filter
 from fkn_bench.flexkalmannet import FlexKalmanNetConfig, FlexKalmanNetEstimator, train_flexkalmannet
 from fkn_bench.training.plots import plot_losses, plot_parameters
-from fkn_bench.harness.plots import save_figure, states_figure
-from fkn_bench.harness.reference import PAPER_TITLE
 from fkn_bench.io import directory_lock, read_json, remove_temporaries, write_json_atomic
+from fkn_bench.reporting.plots import save_figure, states_figure
+from fkn_bench.reporting.reference import PAPER_TITLE
 from fkn_bench.reproduce import figures as figs
 from fkn_bench.reproduce.differences import Context, differences
 from fkn_bench.reproduce.evaluation import Evaluation, evaluate, run_trace

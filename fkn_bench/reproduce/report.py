@@ -2,7 +2,7 @@
 (``index.html``) from the same blocks, plus one CSV per table (``tables/<name>.csv``).
 
 Blocks: :class:`Heading`, :class:`Paragraph` (plain text; ``**bold**`` and backticks are kept in
-Markdown and rendered in HTML), :class:`Bullets`, :class:`~fkn_bench.harness.tables.Table` (the
+Markdown and rendered in HTML), :class:`Bullets`, :class:`~fkn_bench.reporting.tables.Table` (the
 leaderboards' table; its ``name`` is the CSV file stem) and :class:`FigureRef` (a PNG in the report
 directory). Every file is written atomically.
 """
@@ -15,8 +15,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from fkn_bench.harness.tables import Table, markdown_table
 from fkn_bench.io import write_text_atomic
+from fkn_bench.reporting.tables import Table, markdown_table
 
 __all__ = ["Heading", "Paragraph", "Bullets", "Table", "FigureRef", "Block", "render_markdown", "render_html", "write_report"]
 

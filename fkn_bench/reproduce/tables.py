@@ -1,6 +1,6 @@
-"""The paper's result tables, ours beside the quoted ones, as :class:`~fkn_bench.harness.tables.Table`.
+"""The paper's result tables, ours beside the quoted ones, as :class:`~fkn_bench.reporting.tables.Table`.
 
-Quoted values come from :mod:`fkn_bench.harness.reference` (per-variable RMSE, training results,
+Quoted values come from :mod:`fkn_bench.reporting.reference` (per-variable RMSE, training results,
 learned standard deviations) and :data:`fkn_bench.flexkalmannet.config.PAPER_TABLE` (the
 hyperparameter table); columns that hold them say "paper (quoted)". Tables the paper does not
 have (cross-data-set runs, robustness runs in numbers) say so in their title.
@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
 from fkn_bench.flexkalmannet.config import DEVIATIONS, PAPER_TABLE, FlexKalmanNetConfig
-from fkn_bench.harness.reference import PAPER_LEARNED, PAPER_LEARNED_STD, PAPER_MANUAL, PAPER_TRAINING_RESULTS
+from fkn_bench.reporting.reference import PAPER_LEARNED, PAPER_LEARNED_STD, PAPER_MANUAL, PAPER_TRAINING_RESULTS
 from fkn_bench.reproduce.evaluation import Evaluation
 from fkn_bench.reproduce.report import Table
 from fkn_bench.types import STATE_NAMES

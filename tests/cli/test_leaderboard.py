@@ -12,8 +12,8 @@ from urllib.parse import unquote
 import pytest
 
 from fkn_bench.cli import main
-from fkn_bench.harness.figures import COMMAND_KEY, FINGERPRINT_KEY, figure_problems, png_text
-from fkn_bench.harness.leaderboard import REGENERATE_COMMAND
+from fkn_bench.reporting.figures import COMMAND_KEY, FINGERPRINT_KEY, figure_problems, png_text
+from fkn_bench.reporting.leaderboard import REGENERATE_COMMAND
 
 REPO = Path(__file__).resolve().parents[2]
 LEADERBOARDS = REPO / "leaderboards"
@@ -102,7 +102,7 @@ def test_the_committed_manifest_lists_every_generated_file(capsys: pytest.Captur
     import hashlib
     import json
 
-    from fkn_bench.harness.manifest import MANIFEST
+    from fkn_bench.reporting.manifest import MANIFEST
 
     listed = json.loads((LEADERBOARDS / MANIFEST).read_text())["files"]
     for name, data in _files(LEADERBOARDS).items():

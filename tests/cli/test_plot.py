@@ -42,9 +42,9 @@ def test_run_figures_and_comparison(tmp_path: Path, tiny: str, capsys: pytest.Ca
         assert Path(path).read_bytes()[:8] == PNG_MAGIC
     # issue 39, item 8: each names the command that draws it; the chart holds the numbers it plots
     from fkn_bench.harness import ResultStore
-    from fkn_bench.harness.figures import COMMAND_KEY, figure_problems, png_text
-    from fkn_bench.harness.leaderboard import ranked_summaries
-    from fkn_bench.harness.plots import comparison_data
+    from fkn_bench.reporting.figures import COMMAND_KEY, figure_problems, png_text
+    from fkn_bench.reporting.leaderboard import ranked_summaries
+    from fkn_bench.reporting.plots import comparison_data
 
     states = png_text(out / "manual-ekf-tiny-seed1-states.png")[COMMAND_KEY]
     assert states == ("fkn-bench plot --estimator manual-ekf --scenario tiny --seed 1 --split test --cut 100 --steps 80 "

@@ -1,15 +1,15 @@
-"""Inertia-ratio convergence of the ratio-estimating rigid-body EKF (harness.ratios, plot --ratios)."""
+"""Inertia-ratio convergence of the ratio-estimating rigid-body EKF (harness.ratios, plot --ratios;
+its figure: tests/reporting/test_plots.py)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from fkn_bench.cli import main
 from fkn_bench.harness.estimators import resolve_estimator
-from fkn_bench.harness.ratios import ratio_convergence, ratio_figure
+from fkn_bench.harness.ratios import ratio_convergence
 from fkn_bench.scenarios import get_scenario
 
 
@@ -20,7 +20,6 @@ def test_ratio_error_falls_on_a_free_tumble() -> None:
     start, end = result.errors[:, 0].min(), result.errors[:, -1].max()  # the first sample is measured
     assert start > 0.1 > 0.02 > end  # from the isotropic prior (0.129 off) to the body's ratios
     assert result.share_below(0.02, 200.0) == 1.0 and result.share_below(0.02, 0.0) == 0.0
-    assert len(ratio_figure([result]).axes) == 1
 
 
 def test_estimators_without_ratios_are_refused() -> None:

@@ -1,4 +1,4 @@
-"""Summaries over seeds of stored results, and the run table."""
+"""Summaries over seeds of stored results (the run table that shows them: tests/reporting/test_report.py)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fkn_bench.harness import ResultStore, build_grid, run_grid, summarize_pair, summarize_results, summary_text
-from fkn_bench.harness.report import format_number, text_table
+from fkn_bench.harness import ResultStore, build_grid, run_grid, summarize_pair, summarize_results
 from fkn_bench.harness.sources import SimulatedSource
 from fkn_bench.metrics import NEES_DOF, chi2_interval
+from fkn_bench.reporting import summary_text
 from fkn_bench.types import STATE_NAMES
 
 JSON_KEYS = {
@@ -53,40 +53,6 @@ def test_failed_runs_count_as_diverged(short_ds1: SimulatedSource, test_estimato
     assert nan["diverged_fraction"] == 1.0 and nan["divergence_reasons"]["non_finite"] == 1.0
     text = summary_text([raising, nan])
     assert "Failures:" in text and "raising / ds1" in text
-
-
-def test_summary_text_has_one_line_per_pair(small_results_dir: Path) -> None:
-    summaries = summarize_results(ResultStore(small_results_dir).load())
-    lines = summary_text(summaries).splitlines()
-    assert lines[0].startswith("estimator / scenario") and lines[2].startswith("manual-ekf / ds1")
-    assert sum(" / ds" in line for line in lines[2:6]) == 4
-
-
-@pytest.mark.parametrize("width", [80, 120])
-def test_summary_text_fits_a_terminal(small_results_dir: Path, width: int) -> None:
-    """Issue 20, item 7: the table was ~150 columns wide; on a terminal it is stacked to fit, each
-    part led by the estimator and scenario, and the legend wrapped; every value still appears."""
-    summaries = summarize_results(ResultStore(small_results_dir).load())
-    wide, narrow = summary_text(summaries), summary_text(summaries, width=width)
-    assert max(map(len, wide.splitlines())) > 120
-    assert max(map(len, narrow.splitlines())) <= width
-    header = wide.splitlines()[0].split("  ")
-    assert all(column.strip() in narrow for column in header if column.strip())
-    assert narrow.count("manual-ekf / ds1") >= 2  # the row names lead every part
-
-
-def test_format_number() -> None:
-    assert format_number(0.0197812) == "0.01978"
-    assert format_number(5.4034, 3) == "5.40"
-    assert format_number(1234.5, 3) == "1234"
-    assert format_number(2e-6, 3) == "2.00e-06"
-    assert format_number(float("nan")) == "-" and format_number(None) == "-"
-    assert format_number(0) == "0"
-
-
-def test_text_table_alignment() -> None:
-    table = text_table(["name", "x"], [["a", "1"], ["long", "22"]])
-    assert table.splitlines() == ["name   x", "----  --", "a      1", "long  22"]
 
 
 def test_a_seed_whose_score_is_not_finite_is_counted_not_dropped(short_ds1: SimulatedSource, test_estimators: None,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from fkn_bench.harness.reference import PAPER_LEARNED_STD
+from fkn_bench.reporting.reference import PAPER_LEARNED_STD
 from fkn_bench.reproduce.differences import Context, differences
 from fkn_bench.reproduce.evaluation import Evaluation
 from fkn_bench.types import STATE_NAMES

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from fkn_bench.cli import main
-from fkn_bench.harness.reference import PAPER_LEARNED_STD, PAPER_ROWS, PAPER_TRAINING_RESULTS
+from fkn_bench.reporting.reference import PAPER_LEARNED_STD, PAPER_ROWS, PAPER_TRAINING_RESULTS
 from fkn_bench.reproduce.report import Bullets, FigureRef, Heading, Paragraph, Table, render_html, render_markdown
 from fkn_bench.reproduce.tables import TIMING_COLUMNS
 from fkn_bench.types import STATE_NAMES

@@ -10,10 +10,10 @@ import pandas as pd
 import pytest
 
 from fkn_bench.harness import ResultStore, build_grid, run_grid
-from fkn_bench.harness.leaderboard import REGENERATE_COMMAND, build_leaderboards, rank, write_leaderboards
-from fkn_bench.harness.reference import PAPER_ROWS, quoted_rows
 from fkn_bench.harness.sources import SimulatedSource
-from fkn_bench.harness.tables import Table, html_table, markdown_table
+from fkn_bench.reporting.leaderboard import REGENERATE_COMMAND, build_leaderboards, rank, write_leaderboards
+from fkn_bench.reporting.reference import PAPER_ROWS, quoted_rows
+from fkn_bench.reporting.tables import Table, html_table, markdown_table
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +64,7 @@ def test_index_and_provenance(files: dict[str, str]) -> None:
 def test_notes_written_by_people_become_a_section_of_the_index(small_results_dir: Path, files: dict[str, str],
                                                                 capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
     from fkn_bench.cli import main
-    from fkn_bench.harness.leaderboard import NOTES_FILE
+    from fkn_bench.reporting.leaderboard import NOTES_FILE
 
     assert "## Notes" not in files["README.md"]
     noted = build_leaderboards(ResultStore(small_results_dir).load(), notes="### Finding\n\nA number (`cmd`).\n")

@@ -5,7 +5,7 @@ Ranking: by the primary score, the 13-state RMSE (:data:`fkn_bench.harness.summa
 mean over seeds, lower is better; equal means by estimator name; estimators without a score (every
 run failed) last. Divergence rates, consistency and cost are shown beside it, never folded into
 it. The paper's numbers appear as labelled, unranked "(quoted)" rows where they apply
-(:mod:`fkn_bench.harness.reference`).
+(:mod:`fkn_bench.reporting.reference`).
 
 Statistics (:mod:`fkn_bench.metrics.statistics`): every mean comes with its 95% Student-t
 confidence interval over the test episodes (seeds), "n/a" when fewer than two episodes were scored
@@ -21,11 +21,11 @@ scenarios (the other registered ones: ds1, ds2, their variants, tumble-*), then 
 scenario; each section has its own overview, its estimators ordered by their mean rank in it. A
 section without results says so.
 
-Figures (:mod:`fkn_bench.harness.figures`): for the headline scenarios with results
+Figures (:mod:`fkn_bench.reporting.figures`): for the headline scenarios with results
 (:func:`figure_scenarios`: each prior family's headline scenario, then ds1) a comparison chart,
 ``figures/comparison-<scenario>.png``, drawn from the same summaries as the tables; its PNG text
 chunks name the command that draws it (:data:`LEADERBOARD_COMMAND`) and hold the plotted numbers
-(:func:`fkn_bench.harness.plots.comparison_data`) with their SHA-256, so a test recomputes the
+(:func:`fkn_bench.reporting.plots.comparison_data`) with their SHA-256, so a test recomputes the
 fingerprint from the results and finds a figure drawn from other numbers.
 
 Every file is a pure function of the stored results (no dates, no machine facts of the process
@@ -49,7 +49,7 @@ configuration) or metric settings (``cut``) are refused in one line
 (:meth:`~fkn_bench.harness.records.Results.check_comparable`): build such leaderboards from one
 results directory per split and cut.
 
-Writing (:func:`write_leaderboards`) follows :mod:`fkn_bench.harness.manifest`: a file is
+Writing (:func:`write_leaderboards`) follows :mod:`fkn_bench.reporting.manifest`: a file is
 replaced only when fkn-bench wrote it (listed in ``.fkn-bench-files.json`` with its SHA-256, and
 not edited since; ``figures/`` has its own list) or it already holds the new text; anybody else's
 ``README.md``, ``results.csv`` or ``figures/comparison-ds1.png`` is refused in one line unless
@@ -67,20 +67,20 @@ from urllib.parse import quote
 
 import pandas as pd
 
-from fkn_bench.harness.figures import png_bytes
 from fkn_bench.harness.grid import path_name
-from fkn_bench.harness.manifest import check_files, write_files
-from fkn_bench.harness.plots import comparison_chart, comparison_data
 from fkn_bench.harness.records import Results
-from fkn_bench.harness.reference import QuotedRow, quoted_rows
-from fkn_bench.harness.report import format_number, format_percent
 from fkn_bench.harness.rows import deterministic_rows
 from fkn_bench.harness.store import rows_to_csv
 from fkn_bench.harness.summary import GROUP_RMSE_KEYS, summarize_pair
-from fkn_bench.harness.tables import Table, html_page, markdown_table
 from fkn_bench.io import to_jsonable
 from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS
 from fkn_bench.metrics.statistics import ALPHA, INTERVAL_METHOD, TEST_METHOD, PairedTest, paired_test
+from fkn_bench.reporting.figures import png_bytes
+from fkn_bench.reporting.manifest import check_files, write_files
+from fkn_bench.reporting.plots import comparison_chart, comparison_data
+from fkn_bench.reporting.reference import QuotedRow, quoted_rows
+from fkn_bench.reporting.report import format_number, format_percent
+from fkn_bench.reporting.tables import Table, html_page, markdown_table
 from fkn_bench.types import STATE_NAMES
 
 __all__ = [
@@ -577,7 +577,7 @@ def build_leaderboards(results: Results, notes: str | None = None) -> dict[str, 
 def build_figures(results: Results, *, command: str = LEADERBOARD_COMMAND) -> dict[str, bytes]:
     """The comparison charts of :func:`figure_scenarios` as ``{file name: PNG bytes}`` (names under
     :data:`FIGURES_DIR`), each PNG naming ``command`` and holding its plotted numbers
-    (:func:`fkn_bench.harness.figures.png_bytes`)."""
+    (:func:`fkn_bench.reporting.figures.png_bytes`)."""
     if not len(results):
         raise ValueError("no results to draw figures from")
     results.check_comparable()
@@ -615,7 +615,7 @@ def write_leaderboards(results: Results, out_dir: str | Path, notes: str | None 
     """Build and write every leaderboard file (atomically) under ``out_dir`` and the figures under
     ``out_dir/figures``, replacing only files fkn-bench wrote there unless ``force`` (module
     docstring); returns the paths. Raises
-    :class:`~fkn_bench.harness.manifest.ForeignFileError` (nothing written) for a file in the way."""
+    :class:`~fkn_bench.reporting.manifest.ForeignFileError` (nothing written) for a file in the way."""
     files, figures = _build(results, notes, draw=True)
     figure_dir = Path(out_dir) / FIGURES_DIR
     check_files(figure_dir, sorted(figures), force=force)  # before any table is written

@@ -13,12 +13,12 @@ import pandas as pd
 import pytest
 
 from fkn_bench.harness import Results, ResultStore
-from fkn_bench.harness.figures import COMMAND_KEY, FINGERPRINT_KEY, figure_problems, png_bytes, png_text
-from fkn_bench.harness.leaderboard import (LEADERBOARD_COMMAND, build_figures, build_leaderboards, rank_numbers,
+from fkn_bench.reporting.figures import COMMAND_KEY, FINGERPRINT_KEY, figure_problems, png_bytes, png_text
+from fkn_bench.reporting.leaderboard import (LEADERBOARD_COMMAND, build_figures, build_leaderboards, rank_numbers,
                                            ranked_summaries, tie_tests, write_leaderboards)
-from fkn_bench.harness.manifest import ForeignFileError
-from fkn_bench.harness.plots import comparison_chart, comparison_data
-from fkn_bench.harness.reference import quoted_rows
+from fkn_bench.reporting.manifest import ForeignFileError
+from fkn_bench.reporting.plots import comparison_chart, comparison_data
+from fkn_bench.reporting.reference import quoted_rows
 
 
 def _summary(name: str, scores: list[float], mean: float | None = None) -> dict:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from fkn_bench.harness.figures import (COMMAND_KEY, DATA_KEY, FINGERPRINT_KEY, NOTE_KEY, add_text, figure_problems,
+from fkn_bench.reporting.figures import (COMMAND_KEY, DATA_KEY, FINGERPRINT_KEY, NOTE_KEY, add_text, figure_problems,
                                        fingerprint, png_bytes, png_text, write_png)
 from fkn_bench.plotting import new_figure
 

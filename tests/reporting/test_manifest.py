@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from fkn_bench.harness.manifest import MANIFEST, ForeignFileError, check_files, write_files
+from fkn_bench.reporting.manifest import MANIFEST, ForeignFileError, check_files, write_files
 
 FILES = {"README.md": "# index\n", "ds1.md": "# ds1\n", "results.csv": "a,b\n1,2\n"}
 

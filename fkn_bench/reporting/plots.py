@@ -17,15 +17,16 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from fkn_bench.geometry import quaternion as quat
-from fkn_bench.harness.figures import write_png
-from fkn_bench.harness.reference import QuotedRow
+from fkn_bench.harness.ratios import RatioConvergence
 from fkn_bench.harness.trace import Trace
 from fkn_bench.metrics import GROUP_UNITS, GROUPS, MetricSettings, group_errors, moving_rms, settling_time
-from fkn_bench.plotting import STATE_RMSE_UNIT, legend_beside, new_figure, save_png
+from fkn_bench.plotting import STATE_RMSE_UNIT, legend_below, legend_beside, new_figure, save_png
+from fkn_bench.reporting.figures import write_png
+from fkn_bench.reporting.reference import QuotedRow
 from fkn_bench.types import STATE_GROUPS, STATE_NAMES
 
-__all__ = ["states_figure", "uncertainty_figure", "errors_figure", "COMPARISON_DIGITS", "comparison_data", "comparison_figure",
-           "comparison_chart", "save_figure", "new_figure"]
+__all__ = ["states_figure", "uncertainty_figure", "errors_figure", "ratio_figure", "COMPARISON_DIGITS", "comparison_data",
+           "comparison_figure", "comparison_chart", "save_figure", "new_figure"]
 
 _GROUP_LABELS = {
     "attitude": "orientation q (-)",
@@ -161,6 +162,27 @@ def errors_figure(trace: Trace, *, settings: MetricSettings | None = None, steps
     return figure
 
 
+def ratio_figure(results: list[RatioConvergence], *, threshold: float = 0.02, at: float = 600.0) -> Figure:
+    """Inertia-ratio error ``max |k_est - k_true|`` (-, log scale) over time (s) per scenario: the
+    median and the 10-90% band over seeds, the threshold and the time at which it is checked
+    marked; the legend below the axes."""
+    figure = new_figure(9.0, 4.4)
+    ax = figure.add_subplot(1, 1, 1)
+    for result in results:
+        median = np.nanmedian(result.errors, axis=0)
+        low, high = np.nanpercentile(result.errors, [10, 90], axis=0)
+        share = result.share_below(threshold, at)
+        line = ax.semilogy(result.times, median, label=f"{result.scenario} (median; {share:.0%} of "
+                                                       f"{len(result.seeds)} seeds < {threshold} at {at:g} s)")[0]
+        ax.fill_between(result.times, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+    ax.axhline(threshold, color="k", linestyle="--", linewidth=0.8, label=f"threshold {threshold:g}")
+    ax.axvline(at, color="k", linestyle=":", linewidth=0.8, label=f"checked at {at:g} s")
+    ax.set(xlabel="time since the first sample (s)", ylabel="max |k_est - k_true| (-)",
+           title=f"{results[0].estimator}: inertia-ratio error (band: 10-90% of seeds)")
+    legend_below(figure, ax.get_legend_handles_labels()[0], ncols=1 if len(results) > 1 else 3)
+    return figure
+
+
 def _rmse_label(name: str, diverged: float, value: float, off_scale: bool) -> str:
     """An estimator's tick label, with its diverged share and its RMSE when the bar is off the scale."""
     notes = [f"{100 * diverged:.0f}% diverged"] if diverged > 0 else []
@@ -259,7 +281,7 @@ def comparison_chart(data: dict[str, Any]) -> Figure:
 def save_figure(figure: Figure, path: str | Path, *, dpi: int = 100, command: str | None = None, data: Any = None) -> Path:
     """Write ``figure`` as PNG atomically (:func:`fkn_bench.plotting.save_png`); returns the path.
     With ``command`` (the command that draws it) the PNG's text chunks name it, and hold ``data``
-    (the numbers it plots) with their fingerprint when given (:mod:`fkn_bench.harness.figures`)."""
+    (the numbers it plots) with their fingerprint when given (:mod:`fkn_bench.reporting.figures`)."""
     if command is None:
         return save_png(figure, path, dpi=dpi)
     return write_png(figure, path, command=command, data=data, dpi=dpi)
