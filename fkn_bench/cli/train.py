@@ -40,8 +40,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                                          "else 'default': the artefact used where no family applies)")
     parser.add_argument("--filter", dest="variant", choices=("ekf", "ukf", "mekf"), help="filter variant")
     parser.add_argument("--model", dest="process_model", metavar="MODEL",
-                        help="process model: constant-velocity (the paper's), rigid-body (the scenario's "
-                             "inertia) or rigid-body-ratios (inertia ratios estimated)")
+                        help="process model, any registered in fkn_bench.models (built in: constant-velocity, "
+                             "the paper's; rigid-body, the scenario's inertia; rigid-body-ratios, inertia ratios estimated)")
     parser.add_argument("--objective", choices=("supervised", "nll", "gaussian-nll"),
                         help="training objective (gaussian-nll: estimators with a covariance of their own, "
                              "recursive-kalmannet)")
