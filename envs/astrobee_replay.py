@@ -20,7 +20,7 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
     The ground truth comes from an MCAP recording: an fkn-bench recording (``fkn-bench record``),
     an Astrobee simulation log (``<robot>/loc/truth/pose``, 62.5 Hz) or any ROS 1 / ROS 2 /
     Foxglove JSON pose topic. It is resampled onto the scenario's time grid (slerp for the
-    attitude; see :mod:`fkn_bench.recordings.replay`). Measurements are either a recorded pose
+    attitude; see :mod:`fkn_bench.envs.replay`). Measurements are either a recorded pose
     topic, used as is, or synthesised from the truth with the scenario's noise model, seeded by
     the episode seed. Everything else follows ``AstrobeeTumble-v0``.
 
@@ -43,7 +43,7 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
       Astrobee's ``<robot>/loc/truth/pose``.
     * ``measurement_topic``: pose topic used as measurements; None synthesises them.
     * ``twist_topic``, ``scenario``, ``dt``, ``repair``, ``time_source``, ``twist_frame``,
-      ``quaternion_tolerance``: as :func:`fkn_bench.recordings.read_recording` (every keyword
+      ``quaternion_tolerance``: as :func:`fkn_bench.envs.replay.read_recording` (every keyword
       that it takes; its defaults).
     * ``expose_truth``: put the true 13-dim state in ``info["truth"]``.
     * ``reward_weights``, ``render_mode`` (``None``, ``"ansi"``, ``"rgb_array"``, ``"human"``): as
@@ -52,7 +52,7 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
     ## Seeding
 
     ``reset(seed=s)`` synthesises measurements with episode seed ``s`` (the same as
-    ``fkn_bench.recordings.load_episodes(path, seed=s)``); an unseeded ``reset`` draws the episode
+    ``fkn_bench.envs.replay.load_episodes(path, seed=s)``); an unseeded ``reset`` draws the episode
     seed from ``self.np_random``. Recorded measurements are the same for every seed.
     """
 
@@ -65,7 +65,7 @@ class AstrobeeReplayEnv(AstrobeeTumbleEnv):
         render_mode: str | None = None,
         **recording_options: Any,
     ) -> None:
-        from fkn_bench.recordings.replay import read_recording
+        from fkn_bench.envs.replay import read_recording
 
         self._check_render_mode(render_mode)  # before reading the recording
         self.trajectory = read_recording(path, **recording_options)

@@ -47,10 +47,12 @@ PACKAGE_DIRS = {"fkn_bench": REPO / "fkn_bench", "fkn_bench.envs": REPO / "envs"
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("", "geometry", "io", "linalg", "types", "runtime", "provenance"),
     ("models",),
-    ("envs", "scenarios", "recordings"),
+    ("recordings",),
+    ("envs", "scenarios"),
     ("metrics",),
     ("filters",),
     ("estimators",),
+    ("exporters",),
     ("training",),
     ("flexkalmannet", "kalmannet", "baselines"),
     ("harness",),

@@ -4,7 +4,7 @@ datasets recorded from Gymnasium environments).
 One Minari episode per seed, as ``AstrobeeTumble-v0`` reset with that seed gives it: the pose
 observations, the actions of a behaviour estimator (``--estimator``, default the paper's manual
 EKF) and their rewards, the true state in ``infos["truth"]``; the scenario, split, seeds and
-provenance in the dataset's metadata (``fkn_bench.harness.datasets``). Score any estimator on it
+provenance in the dataset's metadata (``fkn_bench.exporters.datasets``). Score any estimator on it
 with ``fkn-bench run --dataset DIR/ID`` (the same scores as on the scenario), or load it with
 Minari: ``MINARI_DATASETS_PATH=DIR`` and ``minari.load_dataset(ID)``.
 
@@ -56,7 +56,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.estimators import UnknownEstimatorError
-    from fkn_bench.harness import write_dataset
+    from fkn_bench.exporters import write_dataset
     from fkn_bench.scenarios import get_scenario
 
     check_minimum(args, seeds=1)

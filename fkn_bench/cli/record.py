@@ -43,7 +43,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.estimators import EstimatorFileError, UnknownEstimatorError
-    from fkn_bench.harness.recording import record
+    from fkn_bench.exporters.recording import record
     from fkn_bench.io import WriteError, remove_temporaries
     from fkn_bench.scenarios import get_scenario
 

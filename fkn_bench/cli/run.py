@@ -170,7 +170,7 @@ def _scenarios(args: argparse.Namespace) -> list[Any]:
 
 def _dataset_source(args: argparse.Namespace) -> Any:
     """The source of ``--dataset`` (its problems are usage errors naming the directory)."""
-    from fkn_bench.harness import DatasetError, DatasetSource
+    from fkn_bench.exporters import DatasetError, DatasetSource
 
     if args.scenario or args.all or args.recording:
         raise UsageError("--dataset replaces --scenario, --all and --recording")

@@ -20,11 +20,6 @@ _EXPORTS = {
     "LocalBackend": ".backends",
     "make_backend": ".backends",
     "run_cell": ".cell",
-    "DatasetError": ".datasets",
-    "DatasetWarning": ".datasets",
-    "DatasetSource": ".datasets",
-    "read_dataset": ".datasets",
-    "write_dataset": ".datasets",
     "ResolvedEstimator": ".estimators",
     "Selection": ".estimators",
     "SelectionError": ".estimators",
@@ -60,7 +55,6 @@ __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS, globals())
 if TYPE_CHECKING:  # what the names are, for type checkers and IDEs
     from fkn_bench.harness.backends import BACKENDS, DaskBackend, LocalBackend, make_backend
     from fkn_bench.harness.cell import run_cell
-    from fkn_bench.harness.datasets import DatasetError, DatasetSource, DatasetWarning, read_dataset, write_dataset
     from fkn_bench.harness.estimators import (
         ResolvedEstimator,
         Selection,
@@ -80,11 +74,6 @@ if TYPE_CHECKING:  # what the names are, for type checkers and IDEs
 
 __all__ = [
     "BACKENDS",
-    "DatasetError",
-    "DatasetWarning",
-    "DatasetSource",
-    "read_dataset",
-    "write_dataset",
     "COLUMNS",
     "CellChecksumError",
     "CellRecord",

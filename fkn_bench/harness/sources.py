@@ -91,7 +91,8 @@ def _read_recording(path: str, options: tuple[tuple[str, Any], ...]) -> Any:
     ``fkn-bench run`` prints), and every worker process reads the file again."""
     import warnings
 
-    from fkn_bench.recordings import RecordingRepairWarning, read_recording
+    from fkn_bench.envs.replay import read_recording
+    from fkn_bench.recordings import RecordingRepairWarning
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RecordingRepairWarning)
@@ -100,7 +101,7 @@ def _read_recording(path: str, options: tuple[tuple[str, Any], ...]) -> Any:
 
 @dataclass(frozen=True)
 class RecordingSource:
-    """Episodes replayed from an MCAP recording (:func:`fkn_bench.recordings.read_recording`).
+    """Episodes replayed from an MCAP recording (:func:`fkn_bench.envs.replay.read_recording`).
 
     The whole recording is one episode. Seeds seed the synthesised measurements when no
     measurement topic is given; with recorded measurements every seed gives the same data. The
@@ -115,7 +116,7 @@ class RecordingSource:
     options: tuple[tuple[str, Any], ...] = ()
 
     def trajectory(self) -> Any:
-        """The recording as read (:class:`~fkn_bench.recordings.RecordedTrajectory`: scenario,
+        """The recording as read (:class:`~fkn_bench.envs.replay.RecordedTrajectory`: scenario,
         report, episodes per seed), cached per process."""
         return _read_recording(self.path, self.options)
 

@@ -2,7 +2,7 @@
 
 One file holds one episode (:func:`write_recording` for arrays, :func:`record_episode` for an
 :class:`~fkn_bench.envs.Episodes` row and its :class:`~fkn_bench.estimators.Estimates`;
-:func:`fkn_bench.harness.recording.record` generates an episode, runs an estimator and records both).
+:func:`fkn_bench.exporters.recording.record` generates an episode, runs an estimator and records both).
 
 Topics (:class:`RecordingTopics`; a ``namespace`` such as ``/honey`` is prepended to each), all
 with ``header.frame_id = "world"``:
@@ -133,7 +133,7 @@ class RecordingSummary:
         size_bytes: file size.
         write_seconds: wall time of encoding and writing.
         topics: the topic names used.
-        timings: extra wall times (:func:`fkn_bench.harness.recording.record` adds
+        timings: extra wall times (:func:`fkn_bench.exporters.recording.record` adds
             ``generate_seconds``, ``estimate_seconds``).
     """
 

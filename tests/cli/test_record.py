@@ -10,7 +10,8 @@ import pytest
 
 from fkn_bench.cli import main
 from fkn_bench.envs import generate_episodes
-from fkn_bench.recordings import list_topics, load_episodes, read_metadata
+from fkn_bench.envs.replay import load_episodes
+from fkn_bench.recordings import list_topics, read_metadata
 from fkn_bench.scenarios import registry
 
 

@@ -14,8 +14,9 @@ from gymnasium.utils.env_checker import check_env
 import fkn_bench  # noqa: F401  (registers the environments)
 from fkn_bench.envs.astrobee_replay import AstrobeeReplayEnv
 from fkn_bench.envs.astrobee_tumble import AstrobeeTumbleEnv
-from fkn_bench.harness.recording import record
-from fkn_bench.recordings import RecordingError, load_episodes
+from fkn_bench.envs.replay import load_episodes
+from fkn_bench.exporters.recording import record
+from fkn_bench.recordings import RecordingError
 
 ENV_ID = "AstrobeeReplay-v0"
 STEPS = 120

@@ -11,12 +11,12 @@ import pytest
 from mcap.reader import make_reader
 from mcap.writer import CompressionType
 
+from fkn_bench.envs.replay import read_recording
 from fkn_bench.recordings import (
     McapRecording,
     RecordingError,
     RecordingRepairWarning,
     TopicNotFoundError,
-    read_recording,
     record_episode,
 )
 

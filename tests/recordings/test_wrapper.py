@@ -9,7 +9,8 @@ import pytest
 
 import fkn_bench  # noqa: F401  (registers the environments)
 from fkn_bench.estimators import make_estimator
-from fkn_bench.recordings import McapRecording, RecordMcap, read_metadata, read_recording
+from fkn_bench.envs.replay import read_recording
+from fkn_bench.recordings import McapRecording, RecordMcap, read_metadata
 
 STEPS = 60
 

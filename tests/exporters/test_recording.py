@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fkn_bench.harness.recording import record
+from fkn_bench.exporters.recording import record
 from fkn_bench.recordings import read_metadata
 
 

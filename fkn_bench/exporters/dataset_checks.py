@@ -1,4 +1,4 @@
-"""What an fkn-bench dataset (:mod:`fkn_bench.harness.datasets`) must be before it is scored: its
+"""What an fkn-bench dataset (:mod:`fkn_bench.exporters.datasets`) must be before it is scored: its
 id, its checksums, its metadata and its episodes. Every problem is a one-line
 :class:`DatasetError` naming the dataset and what is wrong.
 

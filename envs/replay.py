@@ -1,4 +1,6 @@
-"""Turn a recording into fkn-bench :class:`~fkn_bench.envs.Episodes` (one episode).
+"""Turn a recording (its topics read by :mod:`fkn_bench.recordings`, the file format) into
+fkn-bench :class:`~fkn_bench.envs.Episodes` (one episode), on the scenario's time grid and with its
+measurement model; ``AstrobeeReplay-v0`` (:mod:`fkn_bench.envs.astrobee_replay`) replays one.
 
 :func:`read_recording` reads the truth (and optionally a measurement topic) once and returns a
 :class:`RecordedTrajectory`; its :meth:`~RecordedTrajectory.episodes` builds the ``Episodes`` for
@@ -62,9 +64,9 @@ from typing import Any
 import numpy as np
 
 from fkn_bench.envs.episodes import Episodes
-from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
 from fkn_bench.envs.measurements import MeasurementGenerator
 from fkn_bench.geometry import quaternion as quat
+from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
 from fkn_bench.recordings.plausibility import QUATERNION_TOLERANCE, first_implausible
 from fkn_bench.recordings.reader import (
     McapRecording,

@@ -23,7 +23,7 @@ losslessly (HDF5), so that :class:`DatasetSource` gives back bit for bit the epi
 as on the scenario.
 
 Writing (:func:`write_dataset`). The id must be Minari's ``name-vN`` or ``namespace/name-vN``
-(:func:`~fkn_bench.harness.dataset_checks.check_dataset_id`): anything else, ``..`` and absolute
+(:func:`~fkn_bench.exporters.dataset_checks.check_dataset_id`): anything else, ``..`` and absolute
 paths included, is refused before a directory is made. An existing dataset of that id is replaced
 only with ``force``. The datasets directory is locked for the whole command
 (:func:`fkn_bench.io.directory_lock`): a second ``fkn-bench dataset`` into it meanwhile is
@@ -38,7 +38,7 @@ h5py writes (h5py then crashes its process) ends in one :class:`~fkn_bench.io.Wr
 (a :class:`~fkn_bench.io.DiskFullError` naming the free space when the disk is full), not a crash.
 
 Reading (:func:`read_dataset`, :class:`DatasetSource`). Before an episode is scored, the dataset's
-checksums, metadata and episodes are checked (:mod:`fkn_bench.harness.dataset_checks`: damaged
+checksums, metadata and episodes are checked (:mod:`fkn_bench.exporters.dataset_checks`: damaged
 files, edited metadata and implausible truths are one-line :class:`DatasetError` s naming the
 dataset, and for a truth the episode, seed and step); a dataset written before checksums were
 recorded is read with a :class:`DatasetWarning`.
@@ -65,7 +65,7 @@ from typing import Any
 import numpy as np
 
 from fkn_bench.envs import Episodes, generate_episodes
-from fkn_bench.harness.dataset_checks import (
+from fkn_bench.exporters.dataset_checks import (
     DatasetError,
     DatasetWarning,
     check_dataset_id,
@@ -450,14 +450,14 @@ def _read(path: str) -> StoredDataset:
 
 def read_dataset(path: str | Path) -> StoredDataset:
     """The dataset at ``path`` (its directory, or that directory's ``data/``), checked
-    (:mod:`fkn_bench.harness.dataset_checks`: :class:`DatasetError` naming the path and the
+    (:mod:`fkn_bench.exporters.dataset_checks`: :class:`DatasetError` naming the path and the
     problem; :class:`DatasetWarning` for a dataset without checksums), cached per process."""
     return _read(str(path))
 
 
 def _digest(files: Sequence[Path]) -> str:
     """SHA-256 (16 hex digits) over the files' SHA-256 digests (each cached by path, time and
-    size, :func:`~fkn_bench.harness.dataset_checks.file_sha256`: the files of a 100 MB dataset
+    size, :func:`~fkn_bench.exporters.dataset_checks.file_sha256`: the files of a 100 MB dataset
     are not hashed again for every cell of a grid)."""
     digest = hashlib.sha256()
     for file in files:

@@ -12,14 +12,9 @@ import pytest
 
 from fkn_bench.envs import generate_episodes
 from fkn_bench.estimators import make_estimator
+from fkn_bench.envs.replay import finite_difference_twist, load_episodes, read_recording
 from fkn_bench.geometry import quaternion as quat
-from fkn_bench.recordings import (
-    RecordingError,
-    TopicNotFoundError,
-    load_episodes,
-    read_recording,
-)
-from fkn_bench.recordings.replay import finite_difference_twist
+from fkn_bench.recordings import RecordingError, TopicNotFoundError
 from fkn_bench.types import STATE_GROUPS
 
 

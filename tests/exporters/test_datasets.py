@@ -12,7 +12,7 @@ import pytest
 
 import fkn_bench  # noqa: F401  (registers the environment)
 from fkn_bench.envs import generate_episodes
-from fkn_bench.harness import DatasetError, DatasetSource, read_dataset, write_dataset
+from fkn_bench.exporters import DatasetError, DatasetSource, read_dataset, write_dataset
 from fkn_bench.scenarios import get_scenario
 
 SHORT = get_scenario("ds1-flips", n_steps=300)  # sign flips and dropout: NaN poses stored and read back
@@ -114,7 +114,7 @@ def test_checksums_are_recorded_and_checked_before_the_file_is_read(written: Pat
 
 
 def test_a_dataset_without_checksums_is_read_with_a_warning(written: Path, tmp_path: Path) -> None:
-    from fkn_bench.harness.datasets import DatasetWarning
+    from fkn_bench.exporters.datasets import DatasetWarning
 
     old = _copy(written, tmp_path)
     _edit_metadata(old, lambda m: {**m, "fkn_bench": {k: v for k, v in m["fkn_bench"].items() if k != "sha256"}})
@@ -135,7 +135,7 @@ def test_implausible_truths_are_named_errors(written: Path, tmp_path: Path, caps
     import h5py
 
     from fkn_bench.cli import main
-    from fkn_bench.harness.dataset_checks import record_checksums
+    from fkn_bench.exporters.dataset_checks import record_checksums
 
     bad = _copy(written, tmp_path)
     with h5py.File(bad / "data" / "main_data.hdf5", "r+") as fh:
@@ -171,7 +171,7 @@ def test_tampered_metadata_are_named_errors(written: Path, tmp_path: Path, chang
 def test_episodes_of_the_wrong_shape_are_a_named_error(written: Path, tmp_path: Path) -> None:
     import h5py
 
-    from fkn_bench.harness.dataset_checks import record_checksums
+    from fkn_bench.exporters.dataset_checks import record_checksums
 
     bad = _copy(written, tmp_path)
     with h5py.File(bad / "data" / "main_data.hdf5", "r+") as fh:
@@ -198,7 +198,7 @@ def test_dataset_ids_are_checked_before_anything_is_made(tmp_path: Path, dataset
 def test_the_ids_accepted_are_minaris() -> None:
     from minari.dataset.minari_dataset import parse_dataset_id
 
-    from fkn_bench.harness.dataset_checks import check_dataset_id
+    from fkn_bench.exporters.dataset_checks import check_dataset_id
 
     for dataset_id in ("data-v0", "fkn-bench/ds1-full-v0", "ab/cd/my_data-v12"):
         assert check_dataset_id(dataset_id) == dataset_id
@@ -230,7 +230,7 @@ def test_a_killed_write_leaves_nothing_trusted_and_the_rerun_gives_the_same_data
     """Issue 34, finding 6: a ``dataset`` killed at any point leaves no dataset that ``run
     --dataset`` accepts (with ``--force``: the old one, or none) and its scratch is removed by the
     next write, which gives byte for byte the dataset of an uninterrupted write."""
-    from fkn_bench.harness import dataset_checks, datasets
+    from fkn_bench.exporters import dataset_checks, datasets
     from tests.conftest import SimulatedKill
 
     root = tmp_path / "datasets"
@@ -285,7 +285,7 @@ def test_a_crash_while_writing_is_one_error_and_leaves_nothing(written: Path, tm
     import shutil
     import signal
 
-    from fkn_bench.harness import datasets
+    from fkn_bench.exporters import datasets
     from fkn_bench.io import DiskFullError, WriteError
 
     root = tmp_path / "datasets"
