@@ -46,7 +46,7 @@ import numpy as np
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
-from fkn_bench.filters.base import FilterState, KalmanFilter, count_rejections, gate_threshold
+from fkn_bench.filters.base import FilterState, KalmanFilter, accept, count_rejections, gate_threshold
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.pose_twist import PoseTwistModel
@@ -410,13 +410,9 @@ class AdaptiveKalmanFilter:
         x_rows, P_rows = x[rows], P[rows]
         nu = self.model.align(z[rows], x_rows) - self.model.measure(x_rows)
         R = self.rule.measurement_noise({key: value[rows] for key, value in noise.items()})
-        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        with np.errstate(over="ignore", invalid="ignore"):
             S = projected_covariance(self.model, P_rows) + R  # H P- H^T + R: the gain's S, without the update
-            try:
-                nis = (nu * np.linalg.solve(S, nu[..., None])[..., 0]).sum(-1)
-            except np.linalg.LinAlgError:  # a singular S somewhere: row by row
-                nis = np.array([_row_nis(n, s) for n, s in zip(nu, S)])
-        passed = nis <= self._gate_threshold  # (NaN fails)
+        passed = accept(nu, S, self._gate_threshold)
         if passed.all():
             return update_rows
         kept = update_rows.copy()
@@ -497,14 +493,6 @@ class AdaptiveKalmanFilter:
         buffers = (means, covariances, innovations, innovation_covs, prior_means, updated, initialised,
                    r_diag, q_diag)
         return AdaptiveResult(*(None if a is None else np.swapaxes(a, 0, 1) for a in buffers), final=state)
-
-
-def _row_nis(nu: ArrayF, S: ArrayF) -> float:
-    """One row's NIS, or inf where ``S`` is singular."""
-    try:
-        return float(nu @ np.linalg.solve(S, nu))
-    except np.linalg.LinAlgError:
-        return math.inf
 
 
 def _finite_update(result: KalmanUpdate, noise: Noise) -> ArrayB:

@@ -47,7 +47,7 @@ from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.noise import NoiseLayout, NoiseParameters
 from fkn_bench.linalg import namespace, symmetrize
 
-__all__ = ["KalmanFilter", "FilterResult", "FilterState", "check_dt", "gate_threshold", "GATE_REINITIALISE_AFTER",
+__all__ = ["KalmanFilter", "FilterResult", "FilterState", "accept", "check_dt", "gate_threshold", "GATE_REINITIALISE_AFTER",
            "count_rejections"]
 
 
@@ -131,6 +131,25 @@ def gate_threshold(level: float | None, dof: int) -> tuple[float | None, float]:
     from scipy.stats import chi2
 
     return value, float(chi2.ppf(value, dof))
+
+
+def accept(innovation: Any, innovation_covariance: Any, threshold: float) -> Any:
+    """The chi-square gate, the one ``accept`` rule of every gated filter: ``(B,)`` True where the
+    normalised innovation squared ``nu^T S^-1 nu`` of ``innovation (B, m)`` and
+    ``innovation_covariance (B, m, m)`` is at most ``threshold`` (numpy or torch, not
+    differentiated). A non-finite NIS or a singular ``S`` fails; ``threshold = inf`` accepts
+    every row without solving."""
+    xp = namespace(innovation)
+    if threshold == math.inf:
+        if xp is torch:
+            return torch.ones(innovation.shape[:-1], dtype=torch.bool, device=innovation.device)
+        return np.ones(innovation.shape[:-1], dtype=bool)
+    try:
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            nis = (innovation * xp.linalg.solve(innovation_covariance, innovation[..., None])[..., 0]).sum(-1)
+    except (np.linalg.LinAlgError, RuntimeError):  # a singular S somewhere: row by row
+        return xp.stack([accept(nu[None], S[None], threshold)[0] for nu, S in zip(innovation, innovation_covariance)])
+    return nis <= threshold  # (NaN fails)
 
 
 def check_dt(dt: Any) -> float:
@@ -276,15 +295,8 @@ class KalmanFilter(ABC):
         self.gate, self._gate_threshold = gate_threshold(level, self.innovation_dim)
 
     def gate_accepts(self, innovation: Tensor, innovation_covariance: Tensor) -> Tensor:
-        """``(B,)`` True where the update passes the gate (everywhere without one; numpy or
-        torch, not differentiated; a non-finite NIS fails)."""
-        xp = namespace(innovation)
-        if self.gate is None:
-            if xp is torch:
-                return torch.ones(innovation.shape[:-1], dtype=torch.bool, device=innovation.device)
-            return xp.ones(innovation.shape[:-1], dtype=bool)
-        solved = xp.linalg.solve(innovation_covariance, innovation[..., None])[..., 0]
-        return (innovation * solved).sum(-1) <= self._gate_threshold
+        """``(B,)`` True where the update passes the gate (:func:`accept`; everywhere without one)."""
+        return accept(innovation, innovation_covariance, self._gate_threshold)
 
     @property
     def covariance_dim(self) -> int:
