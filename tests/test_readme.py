@@ -77,6 +77,27 @@ def test_add_your_estimator_example_registers_a_conforming_estimator(monkeypatch
     check_input_rules(estimator)
 
 
+def test_add_your_process_model_example_registers_a_model_the_filters_run(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The code block of "Add your process model" runs as shown: a Kalman estimator on the model it
+    registers decays the velocity as the block says."""
+    import numpy as np
+
+    from fkn_bench.estimators import KalmanEstimator
+    from fkn_bench.models import registry
+
+    text = README.read_text()
+    section = text[text.index("### Add your process model"):]
+    code = re.search(r"```python\n(.*?)```", section, flags=re.S)
+    assert code is not None, "no python block in README's 'Add your process model'"
+    registry.model_names()
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    exec(compile(code.group(1), "README.md", "exec"), {})
+    model = KalmanEstimator(model="damped-velocity").filter.model
+    x = model.prior_state(1, np.float64)
+    x[:, 10:13] = 1.0
+    np.testing.assert_allclose(model.predict(x, 2.0)[0, 10:13], np.exp(-0.1))
+
+
 def test_readme_settings_of_the_quick_runs_are_the_codes() -> None:
     """The figures README quotes about the quick runs come from the code (issue 20, item 3):
     `reproduce --quick` (a 2x32 network, 3 epochs, 5 seeds) and the quick sweep space's fixed
