@@ -13,6 +13,12 @@ Register your own estimator in one of two ways:
       [project.entry-points."fkn_bench.estimators"]
       my-filter = "my_package.estimators:make_my_filter"
 
+  or whose object is a module (no ``:name``) that registers its estimators with
+  :func:`register_estimator` when imported (with descriptions and ``trainable=``). The built-in
+  estimators are such entry points of fkn-bench itself (``pyproject.toml``); they load first, in
+  the order of their entry-point names, then the other packages' entry points. A plugin that fails
+  to load is left out with a warning; a plugin factory under a registered name is skipped.
+
 A factory is called as ``factory(scenario=scenario, **options)`` where ``scenario`` is the
 :class:`~fkn_bench.scenarios.Scenario` being evaluated (estimators that do not need it ignore
 it) and returns an :class:`~fkn_bench.estimators.base.Estimator`. An estimator that can be
@@ -28,8 +34,8 @@ module the file names, and its configuration values are checked against the clas
 
 from __future__ import annotations
 
-import importlib
 import importlib.metadata
+import re
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -55,11 +61,10 @@ __all__ = [
 
 ENTRY_POINT_GROUP = "fkn_bench.estimators"
 
-EstimatorFactory = Callable[..., Estimator]
+_DISTRIBUTION = "fkn-bench"
+"""The distribution whose entry points in :data:`ENTRY_POINT_GROUP` are the built-in estimators."""
 
-# modules whose import registers the built-in estimators (imported lazily: they pull in torch)
-_BUILTIN_MODULES: tuple[str, ...] = ("fkn_bench.estimators.builtin", "fkn_bench.flexkalmannet.registration", "fkn_bench.baselines.registration",
-                                      "fkn_bench.kalmannet.registration", "fkn_bench.estimators.gated")
+EstimatorFactory = Callable[..., Estimator]
 
 
 class UnknownEstimatorError(KeyError):
@@ -109,22 +114,44 @@ def register_estimator(
     return spec
 
 
+def _is_builtin(entry_point: importlib.metadata.EntryPoint) -> bool:
+    """Whether ``entry_point`` is one of fkn-bench's own (a built-in estimator module)."""
+    dist = getattr(entry_point, "dist", None)
+    return dist is not None and re.sub(r"[-_.]+", "-", dist.name).lower() == _DISTRIBUTION
+
+
+def _entry_points() -> list[importlib.metadata.EntryPoint]:
+    """The entry points of :data:`ENTRY_POINT_GROUP`: fkn-bench's own by name, then the others as
+    installed. Raises RuntimeError when fkn-bench's own are missing (its metadata is not
+    installed)."""
+    found = list(importlib.metadata.entry_points(group=ENTRY_POINT_GROUP))
+    builtin = sorted((e for e in found if _is_builtin(e)), key=lambda e: e.name)
+    if not builtin:
+        raise RuntimeError(
+            f"fkn-bench's built-in estimators are entry points '{ENTRY_POINT_GROUP}' of the installed package, and "
+            "none is installed: install fkn-bench (pip install -e . in a checkout) and run it from that environment")
+    return builtin + [e for e in found if not _is_builtin(e)]
+
+
 def _ensure_loaded() -> None:
     global _LOADED
     if _LOADED:
         return
+    entry_points = _entry_points()
     _LOADED = True
-    for module in _BUILTIN_MODULES:
-        importlib.import_module(module)
-    for entry_point in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
-        if entry_point.name in _REGISTRY:
+    for entry_point in entry_points:
+        registers = entry_point.attr is None  # a module whose import registers its estimators
+        if not registers and entry_point.name in _REGISTRY:
             continue
         try:
             factory = entry_point.load()
-        except Exception as exc:  # a broken plugin must not break the built-ins
+        except Exception as exc:  # a broken plugin must not break the built-ins (a broken built-in is an error)
+            if _is_builtin(entry_point):
+                raise
             warnings.warn(f"could not load estimator entry point {entry_point.name!r}: {exc}", stacklevel=2)
             continue
-        register_estimator(entry_point.name, factory, description=f"plugin {entry_point.value}")
+        if not registers:
+            register_estimator(entry_point.name, factory, description=f"plugin {entry_point.value}")
 
 
 def estimator_specs() -> list[EstimatorSpec]:

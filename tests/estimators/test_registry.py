@@ -129,10 +129,11 @@ def _fake_plugin(monkeypatch: pytest.MonkeyPatch, entries: list[importlib.metada
     module.make_constant = lambda scenario=None, **options: Constant(scenario=scenario, level=7.0)  # type: ignore[attr-defined]
     monkeypatch.setitem(sys.modules, "fake_fkn_plugin", module)
     groups: list[str] = []
+    installed = importlib.metadata.entry_points  # fkn-bench's own: the built-ins
 
     def entry_points(*, group: str) -> list[importlib.metadata.EntryPoint]:
         groups.append(group)
-        return [e for e in entries if e.group == group]
+        return [*installed(group=group), *[e for e in entries if e.group == group]]
 
     monkeypatch.setattr(importlib.metadata, "entry_points", entry_points)
     monkeypatch.setattr(registry, "_LOADED", False)
@@ -171,6 +172,24 @@ def test_a_broken_entry_point_warns_and_the_rest_loads(monkeypatch: pytest.Monke
         names = estimator_names()
     assert any("could not load estimator entry point 'broken'" in str(w.message) for w in caught)
     assert "broken" not in names and "plugin-constant" in names and names[:4] == BUILTIN
+
+
+def test_the_built_ins_are_the_packages_own_entry_points(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The built-in estimators are found through the entry-point group, like a plugin's: a module
+    per entry whose import registers them, fkn-bench's own loaded first and in name order (the
+    ``-gated`` variants wrap the others); without fkn-bench's metadata installed none is found."""
+    own = [e for e in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP) if registry._is_builtin(e)]
+    assert [e.value for e in sorted(own, key=lambda e: e.name)] == [
+        "fkn_bench.estimators.builtin", "fkn_bench.flexkalmannet.registration", "fkn_bench.baselines.registration",
+        "fkn_bench.kalmannet.registration", "fkn_bench.estimators.gated"]
+    assert all(e.attr is None for e in own)  # modules, each registering several estimators
+    plugin = importlib.metadata.EntryPoint("plugin-constant", "fake_fkn_plugin:make_constant", ENTRY_POINT_GROUP)
+    monkeypatch.setattr(registry, "_LOADED", False)
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda *, group: [plugin])  # no fkn-bench metadata
+    with pytest.raises(RuntimeError, match="built-in estimators are entry points 'fkn_bench.estimators' of the "
+                                           r"installed package, and none is installed: install fkn-bench \(pip install -e \."):
+        estimator_names()
+    assert registry._LOADED is False  # the next call looks again
 
 
 def test_an_estimator_file_is_data_naming_only_known_classes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
