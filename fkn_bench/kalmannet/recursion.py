@@ -41,6 +41,7 @@ over any state of named tuples) is :class:`ManifoldRecursion`, which Recursive K
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any, NamedTuple, TypeVar
 
@@ -48,6 +49,7 @@ import torch
 from torch import Tensor
 
 from fkn_bench.filters.base import check_dt
+from fkn_bench.filters.recursion import Carry, Proposal, scan, tree_map
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.kalmannet.manifolds import Manifold, manifold_for
 from fkn_bench.kalmannet.network import GainNetwork, Hidden, normalize_features
@@ -94,22 +96,38 @@ class KalmanNetRun(NamedTuple):
     final: KalmanNetState
 
 
-def _tree_map(fn: Callable[..., Tensor], *states: Any) -> Any:
-    """``fn`` applied to the tensors of states of one structure (named tuples of tensors and of
-    named tuples of tensors), the structure kept."""
-    first = states[0]
-    if isinstance(first, tuple):
-        return type(first)(*(_tree_map(fn, *parts) for parts in zip(*states)))
-    return fn(*states)
-
-
-def _select(rows: Tensor, a: StateT, b: StateT) -> StateT:
-    """``a`` in the batch rows where ``rows (B,)`` is True, ``b`` elsewhere (any state structure)."""
-    return _tree_map(lambda u, v: torch.where(rows.reshape((-1,) + (1,) * (u.dim() - 1)), u, v), a, b)
-
-
 def _detached(state: StateT) -> StateT:
-    return _tree_map(lambda t: t.detach(), state)
+    return tree_map(lambda t: t.detach(), state)
+
+
+class _Recorder:
+    """A :class:`ManifoldRecursion`'s step functions for :func:`~fkn_bench.filters.recursion.scan`
+    (no gate; the network's update is the posterior), keeping ``record(state)`` of every step."""
+
+    nis_threshold = math.inf
+
+    def __init__(self, recursion: ManifoldRecursion, record: Callable[[Any], tuple[Tensor, ...]]) -> None:
+        self.recursion, self.record_state = recursion, record
+        self.records: list[tuple[Tensor, ...]] = []
+        self.updated: list[Tensor] = []
+        self.initialised: list[Tensor] = []
+
+    def predict(self, state: Any, t: int, dt: float) -> Any:
+        return self.recursion.predict(state, dt)
+
+    def initial(self, state: Any, z: Tensor, t: int) -> Any:
+        return self.recursion.initial(state, z)
+
+    def propose(self, state: Any, z: Tensor, rows: Tensor, t: int) -> Proposal:
+        return Proposal(self.recursion.update(state, z))
+
+    def commit(self, state: Any, z: Tensor, rows: Tensor, proposal: Proposal, t: int) -> tuple[Any, Tensor]:
+        return proposal.state, rows
+
+    def record(self, t: int, prior: Any, state: Any, innovation: Any, used: Tensor, initialised: Tensor) -> None:
+        self.records.append(self.record_state(state))
+        self.updated.append(used)
+        self.initialised.append(initialised)
 
 
 class ManifoldRecursion(SequenceModel):
@@ -161,7 +179,8 @@ class ManifoldRecursion(SequenceModel):
     ) -> tuple[tuple[Tensor, ...], Tensor, Tensor, Any]:
         """Filter a batch: ``measurements (B, T, m)`` (entries outside ``mask`` are ignored and
         may be NaN), ``mask (B, T)`` -> ``(records, updated (B, T), initialised (B, T), final
-        state)``, ``records`` the tensors ``record(state)`` of every step stacked on axis 1.
+        state)``, ``records`` the tensors ``record(state)`` of every step stacked on axis 1. The
+        rules are the project's one recursion (:func:`fkn_bench.filters.recursion.scan`; no gate).
         float64 unless the measurements are of another floating dtype."""
         if measurements.dim() != 3 or measurements.shape[-1] != self.manifold.measurement_dim:
             raise ValueError(f"measurements must have shape (B, T, {self.manifold.measurement_dim}) (got {tuple(measurements.shape)})")
@@ -172,30 +191,14 @@ class ManifoldRecursion(SequenceModel):
             raise ValueError(f"measurements hold no sequences or no time steps (shape {tuple(measurements.shape)})")
         dt = check_dt(dt)
         z_all, usable = self.model.sanitize(measurements, mask.bool())
-        has_any = usable.any(1)
-        first = torch.where(has_any, usable.to(torch.int8).argmax(1), torch.full_like(has_any, -1, dtype=torch.long))
-        starts = first[:, None] == torch.arange(steps, device=first.device)[None, :]  # (B, T) the initialisation step
-        updates = usable & ~starts
-        start_any, update_any, update_all = starts.any(0).tolist(), updates.any(0).tolist(), updates.all(0).tolist()
         truncate = self.detach_every if torch.is_grad_enabled() else None
+        begin = None if truncate is None else (lambda state, t: _detached(state) if t > 0 and t % truncate == 0 else state)
         state = self.prior(batch, measurements.dtype, measurements.device)
-        initialised = torch.zeros(batch, dtype=torch.bool, device=measurements.device)
-        records, initialised_steps = [], []
-        for t in range(steps):
-            if truncate is not None and t > 0 and t % truncate == 0:
-                state = _detached(state)
-            if t > 0:
-                state = self.predict(state, dt)
-            if start_any[t]:
-                state = _select(starts[:, t], self.initial(state, z_all[:, t]), state)
-                initialised = initialised | starts[:, t]
-            if update_any[t]:
-                posterior = self.update(state, z_all[:, t])
-                state = posterior if update_all[t] else _select(updates[:, t], posterior, state)
-            records.append(record(state))
-            initialised_steps.append(initialised)
-        stacked = tuple(torch.stack(parts, 1) for parts in zip(*records))
-        return stacked, updates, torch.stack(initialised_steps, 1), state
+        recorder = _Recorder(self, record)
+        final = scan(recorder, Carry(state, torch.zeros(batch, dtype=torch.bool, device=measurements.device)), z_all, usable,
+                     dt, begin=begin)
+        stacked = tuple(torch.stack(parts, 1) for parts in zip(*recorder.records))
+        return stacked, torch.stack(recorder.updated, 1), torch.stack(recorder.initialised, 1), final.state
 
     def run_means(self, measurements: Tensor, mask: Tensor, *, dt: float) -> Tensor:
         return self.recurse(measurements, mask, dt=dt, record=lambda s: (s.mean,))[0][0]
