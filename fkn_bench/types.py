@@ -14,18 +14,34 @@ Conventions used everywhere in the project (convert only at the edges):
   ``q_true = exp(dtheta / 2) (x) q_est``.
 * Arrays are batch first: ``(B, T, 13)`` for state sequences, ``(B, T, 7)`` for measurements and
   ``(B, T)`` for validity masks.
+
+Shapes in signatures are written in jaxtyping's notation, without the package or its run-time
+checks (``fkn_bench/DESIGN.md``, "Performance notes"): ``Float[ArrayF, "B T 13"]`` is
+``typing.Annotated[ArrayF, "B T 13"]``, a float64 numpy array of shape ``(B, T, 13)``;
+``Float[Tensor, "B T 7"]`` a torch tensor; ``Bool[ArrayB, "B T"]`` a mask. Axis names: ``B``
+sequences (batch), ``T`` time steps, ``N`` rows of a flattened batch, ``n`` any state-like size,
+``...`` any leading axes; a number is a fixed size. Nothing checks them at run time (type checkers
+read ``Float[X, ...]`` as ``X``).
 """
 
 from __future__ import annotations
 
-from typing import TypeAlias
+from typing import TYPE_CHECKING, Any, TypeAlias, Union
+from typing import Annotated as Bool  # Bool[ArrayB, "B T"]: a boolean array with those axes
+from typing import Annotated as Float  # Float[ArrayF, "B T 13"]: a float array with those axes
 
 import numpy as np
 import numpy.typing as npt
 
+if TYPE_CHECKING:
+    from torch import Tensor
+
 __all__ = [
     "ArrayF",
     "ArrayB",
+    "Array",
+    "Float",
+    "Bool",
     "STATE_DIM",
     "MEASUREMENT_DIM",
     "ERROR_DIM",
@@ -45,6 +61,8 @@ ArrayF: TypeAlias = npt.NDArray[np.float64]
 """A float64 numpy array (shapes are given in each docstring)."""
 ArrayB: TypeAlias = npt.NDArray[np.bool_]
 """A boolean numpy array."""
+Array: TypeAlias = Union[npt.NDArray[Any], "Tensor"]
+"""A numpy array or a torch tensor: code written once for both (:func:`fkn_bench.linalg.namespace`)."""
 
 STATE_DIM = 13
 MEASUREMENT_DIM = 7
