@@ -173,7 +173,7 @@ def rate_offsets(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
     a burst of ``kick_length`` steps starts at step ``k`` where the ``kick`` stream's uniform
     draw is below ``kick_rate``; during a burst ``d`` takes the step ``kick_sigma n_k`` (``n_k``
     from the ``kick_noise`` stream) and it decays by ``exp(-dt / kick_decay)`` at every step."""
-    from scipy.signal import lfilter  # (here: scipy.signal takes 0.7 s to import)
+    from scipy.signal import lfilter  # here, not at module level: a slow import (DESIGN.md, "Performance notes")
 
     sc, steps = scenario, scenario.n_steps
     out = np.zeros((len(seeds), steps, 3))
@@ -193,8 +193,10 @@ def rate_offsets(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
 
 
 GENERATION_BYTES_PER_STEP = 400
-"""Memory that generating one step of one episode takes at its peak (truth, measurements and the
-generators' temporaries: 320-340 bytes measured with tracemalloc), for :func:`fkn_bench.limits.check_memory`."""
+"""Bytes that generating one step of one episode takes at its peak (truth ``(13,)``, measurement
+``(7,)`` and validity in float64, plus the generators' temporaries), for
+:func:`fkn_bench.limits.check_memory`; the measured peak: ``fkn_bench/DESIGN.md``, "Performance
+notes"."""
 
 
 class EpisodeStream:

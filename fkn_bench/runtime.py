@@ -1,11 +1,10 @@
 """Process-level settings for the torch parts: thread count, default dtype handling, and the
 device batched work runs on (:func:`resolve_device`: ``--device``).
 
-On small machines the filter's many small operations run fastest on one thread, and with two
-threads and a busy second core a step can run ten times slower (measured here:
-20 x 1600 EKF steps took 8 s with two threads beside another process, 0.5 s with one). The
-estimators therefore run the filter core under :func:`torch_threads` with ``FILTER_THREADS``
-threads; set the environment variable ``FKN_BENCH_THREADS`` to change it.
+The filter core is many small matrix operations (13 x 13 per sequence and step), which a second
+intra-op thread does not speed up and a busy second core slows down (``fkn_bench/DESIGN.md``,
+"Performance notes"). The estimators therefore run it under :func:`torch_threads` with
+``FILTER_THREADS`` threads (default 1); the environment variable ``FKN_BENCH_THREADS`` changes it.
 """
 
 from __future__ import annotations

@@ -3,8 +3,7 @@
 Defaults follow the paper's Table I (input 7, output 20, hidden 512, 7 layers, LeakyReLU, Adam,
 ReduceLROnPlateau, MSE loss, loss cut 100, 100 epochs, early stopping after 20, seed 0, no
 dropout or weight decay) except where measured otherwise; every deviation is listed in
-:data:`DEVIATIONS` with the measurement behind it (README and the closing notes of the project
-record the commands).
+:data:`DEVIATIONS` with the measurement behind it.
 """
 
 from __future__ import annotations
@@ -73,9 +72,10 @@ DEVIATIONS: dict[str, str] = {
     ),
     "scheduler": "ReduceLROnPlateau with factor 0.5 and patience 8 (the paper does not give them).",
 }
-"""Defaults that differ from the paper's table, and why (the measurements behind each; the
-commands are in the project's notes: ``fkn-bench train`` with ``--set`` overrides, evaluated with
-``fkn-bench run --estimator flexkalmannet --estimator-option parameters=...``)."""
+"""Defaults that differ from the paper's table, and why (the measurements behind each: train with
+``fkn-bench train --estimator flexkalmannet --scenario ds1 --set KEY=VALUE --out DIR``, score
+with ``fkn-bench run --estimator flexkalmannet --estimator-option parameters=DIR/parameters.json
+--scenario ds1 --seeds 20``)."""
 
 
 _MODEL_FIELDS = ("learn", "positivity", "hidden", "layers", "activation", "dropout", "network_dtype", "output_scale",

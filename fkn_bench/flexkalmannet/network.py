@@ -183,9 +183,9 @@ class FlexKalmanNet(NoiseModel):
         """Per-step parameters ``(B, T, size)``: the mean over the last ``history`` valid
         measurements up to each step (the deployed parameters before the first one).
 
-        The network runs on the valid measurements only (one in ten on ds1): the other steps'
-        outputs carry zero weight, and evaluating them made a time-varying epoch ~40x a
-        constant one. ``screen`` (deployment): ``outputs (N, size) -> (N,)`` True where a
+        The network runs on the ``N`` valid measurements of ``mask`` only (one step in ten on
+        ds1): the other steps' outputs carry zero weight in the window mean, so evaluating them
+        would take ``B T / N`` times the network passes for the same result. ``screen`` (deployment): ``outputs (N, size) -> (N,)`` True where a
         measurement's output may count; the others are left out as if missing."""
         valid = self._outputs(measurements[mask])  # (N, size), row-major order of the mask
         if screen is not None:
@@ -214,8 +214,8 @@ class FlexKalmanNet(NoiseModel):
         """The mean output over the reference measurements. Outside autograd it is cached until a
         weight, buffer or the train/eval mode changes (tensor version counters: an optimiser step
         or ``load_state_dict`` bumps them): an epoch asks for it three times (validation, the
-        history's standard deviations, the checkpoint), and each is a network pass over 2048
-        measurements, about 10% of a ds1 training epoch."""
+        history's standard deviations, the checkpoint), and each is a network pass over the
+        ``(R, 7)`` reference measurements."""
         if torch.is_grad_enabled():
             return self._outputs(self.reference).mean(0)
         key = (self.training, *((t.data_ptr(), t._version) for t in (*self.parameters(), *self.buffers())))

@@ -257,8 +257,10 @@ DS1_NOISE_STEP = _DS1.replace(
     model_family="ds1-noise-step",
     tags=(),
 )
-"""Issue 21's scenario where noise adaptation should pay: its own model family, so that the
-learned and tuned estimators run there with parameters trained on its training split."""
+"""ds1 with non-stationary noise (five times the measurement noise in the middle third of each
+split) and bursts of unmodelled torque: the scenario where estimating the noise while filtering
+should pay. Its own model family, so that the learned and tuned
+estimators run there with parameters trained on its training split."""
 register_scenario(DS1_NOISE_STEP)
 
 _PRIOR = dict(

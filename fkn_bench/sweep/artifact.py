@@ -1,5 +1,5 @@
 """A sweep's best options as the committed settings of a non-trainable estimator
-(``fkn-bench sweep --write-artifact``): the adaptive baselines' tuned settings (issue 21).
+(``fkn-bench sweep --write-artifact``): the adaptive baselines' tuned settings.
 
 A sweep of ``<name>-default`` (the method with its paper's settings, which the trials' options
 override) installs the tuned settings of ``<name>``; a sweep of any other non-trainable estimator

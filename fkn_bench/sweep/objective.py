@@ -20,7 +20,7 @@ initial noise scales): a trial builds it with the trial's options and runs it ov
 validation data, with the same loss cut, as FlexKalmanNet's training validates on (the val split
 of the scenario's data set, :func:`fkn_bench.training.data.training_data` with FlexKalmanNet's
 default data protocol), and its value is that validation 13-state RMSE: the same objective and,
-with the same trial counts, the same tuning budget as the learned filters (issue 21).
+with the same trial counts, the same tuning budget as the learned filters.
 """
 
 from __future__ import annotations

@@ -111,7 +111,7 @@ class SweepSampler(optuna.samplers.BaseSampler):
     A trial's *draw index* is its number less the interrupted trials before it (their retries take
     their place). ``random`` (one ``RandomSampler(seed + worker)`` per worker, optuna's own) replays
     the draws of the worker's earlier trials before drawing, so its sequence continues across
-    invocations (a second invocation no longer repeats the first one's points); ``tpe`` seeds a
+    invocations (a second invocation does not repeat the first one's points); ``tpe`` seeds a
     fresh ``TPESampler`` with ``(seed, draw index)`` for every trial; ``grid`` (optuna's
     ``GridSampler``, the same seed in every worker) assigns grid point ``draw index`` while any is
     left. Every trial records its worker and :func:`sweep_owner` (``owner``)."""

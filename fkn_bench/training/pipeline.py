@@ -88,12 +88,11 @@ class Trainable:
 
 CHECKPOINT_INTERVAL_S = 10.0
 """Seconds of training between checkpoints (after the first epoch, which is always saved, and
-besides the one at the end): an interrupted run loses at most this much. A FlexKalmanNet
-checkpoint is about 26 MB (network, best weights, Adam moments), written and fsynced: saving it
-after every 0.7 s epoch cost about a tenth of a ds1 training run. Since the checkpoint also holds
-the weights (and Adam's state) before the epoch's last step, so that a resumed run can undo that
-step as the uninterrupted one would, it is 32 MB with the default one step per epoch (measured:
-``fit("flexkalmannet", "ds1", {"epochs": 1, "episodes": 1})``), up to about 45 MB with several."""
+besides the one at the end): an interrupted run loses at most this much. A checkpoint holds the
+network, the best weights, the optimiser's state and the weights (and optimiser state) before the
+epoch's last step, so that a resumed run can undo that step as the uninterrupted one would; it is
+written and fsynced, so writing one per epoch would cost a noticeable share of a run whose epochs
+last about a second (sizes and costs: ``fkn_bench/DESIGN.md``, "Performance notes")."""
 
 
 def trainable(estimator: str) -> Trainable:

@@ -293,9 +293,10 @@ exception it raises (e.g. ``optuna.TrialPruned``) ends the training and propagat
 
 
 TRAINING_BYTES_PER_STEP = 16000
-"""Memory one step of one training window takes in a forward and backward pass (the autograd
-graph of the filter's recursion: 8.2 kB measured as peak RSS growth for the EKF on 64 x 512
-steps; twice that for the heavier variants and models), for :func:`fkn_bench.limits.check_memory`."""
+"""Bytes that one step of one training window takes in a forward and backward pass (the autograd
+graph of the filter's recursion), for :func:`fkn_bench.limits.check_memory`: a training run of
+``W`` windows of ``T`` steps needs about ``W T`` times this (the measured figures per variant:
+``fkn_bench/DESIGN.md``, "Performance notes")."""
 
 
 class Trainer:
