@@ -27,7 +27,9 @@ committed, is skipped for that scenario, as ``fkn-bench run --all`` skips it), e
 fails for it with the command that adds them (:data:`ADD_COMMAND`). Pass ``exclude`` to leave an
 estimator out on purpose. Committed cells whose estimator configuration (fingerprint) or scenario
 configuration changed are reported as stale, and committed cells of estimators that are no longer
-registered as orphaned; both fail too.
+registered as orphaned; both fail too. Only the gated pairs' cells are read in full (rows and
+checksums); of the others, the JSON records (their estimator and scenario). The regeneration of the
+leaderboards (``fkn-bench leaderboard``) reads and checks every cell.
 """
 
 from __future__ import annotations
@@ -258,6 +260,38 @@ def _committed_rows(records: Iterable[Any], seeds: Mapping[tuple[str, str], tupl
     return deterministic_rows(pd.concat(frames, ignore_index=True))
 
 
+def _committed_cells(results_dir: str | Path, gated: set[tuple[str, str]]) -> tuple[Any, list[str]]:
+    """``(results, labels)``: the committed cells of the ``gated`` ``(estimator label, scenario)``
+    pairs as :class:`~fkn_bench.harness.Results` (read and checksummed as
+    :meth:`~fkn_bench.harness.ResultStore.load` reads them), and the estimator labels of every
+    committed cell, from the cells' JSON records alone: the rows of the pairs not gated (most of
+    the store) are not parsed. Raises :class:`~fkn_bench.harness.StoreError` as ``load`` does for
+    a missing or empty directory, and for a cell record that cannot be read."""
+    from fkn_bench.harness import ResultStore, Results, StoreError
+    from fkn_bench.harness.grid import estimator_label
+    from fkn_bench.io import read_json
+
+    class _Gated(ResultStore):
+        def cell_files(self) -> list[Path]:
+            return files
+
+    store = ResultStore(results_dir)
+    everything = store.cell_files()
+    if not everything:
+        store.load()  # raises the store's error (no such directory, no cells)
+    labels: dict[Path, tuple[str, str]] = {}
+    for path in everything:
+        try:
+            document = read_json(path)
+            labels[path] = (estimator_label(document["estimator"], document["key"].get("estimator_options") or ()),
+                            document["scenario"])
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise StoreError(f"{path} is not a readable fkn-bench cell file: {exc}") from None
+    files = [path for path in everything if labels[path] in gated]
+    results = _Gated(results_dir).load() if files else Results([])
+    return results, sorted({label for label, _ in labels.values()})
+
+
 def _compare(committed: pd.DataFrame, now: pd.DataFrame, tolerances: Sequence[tuple[str, Tolerance]]) -> tuple[list[Difference], int]:
     keys = ["estimator", "scenario", "seed", "group", "metric"]
     merged = committed[keys + ["value"]].merge(now[keys + ["value"]], on=keys, how="outer",
@@ -309,7 +343,7 @@ def run_accuracy_gate(
         tolerances: ``(group/metric pattern, Tolerance)``, first match wins.
     """
     from fkn_bench.estimators import estimator_names
-    from fkn_bench.harness import MetricSettings, ResultStore, SimulatedSource, run_grid
+    from fkn_bench.harness import MetricSettings, SimulatedSource, run_grid
     from fkn_bench.harness.estimators import resolve_estimator
     from fkn_bench.harness.grid import CellSpec
     from fkn_bench.scenarios import get_scenario, scenario_names
@@ -317,23 +351,25 @@ def run_accuracy_gate(
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1 (got {seeds})")
     exclude = dict(exclude or {})
-    committed = ResultStore(results_dir).load()
     registered = estimator_names()
     names = [n for n in (estimators if estimators is not None else registered) if n not in exclude]
     scenario_list = list(scenarios) if scenarios is not None else list(scenario_names())
+    scenarios_of = {name: set(only) for name, only in (scenarios_of or {}).items()}
+    gated = {(name, scenario) for scenario in scenario_list for name in names
+             if name not in scenarios_of or scenario in scenarios_of[name]}
+    committed, committed_labels = _committed_cells(results_dir, gated)
     report = AccuracyReport(results_dir=str(results_dir), seeds=seeds, excluded=exclude)
 
     def problem(name: str, scenario: str, kind: str, detail: str) -> None:
         report.problems.append(PairProblem(name, scenario, kind, detail))
 
     if estimators is None:
-        for name in sorted(set(committed.estimators()) - set(registered) - set(exclude)):
+        for name in sorted(set(committed_labels) - set(registered) - set(exclude)):
             problem(name, "*", "orphaned", f"committed cells but no such estimator is registered: remove "
                     f"{results_dir}/cells/{name} and rebuild the leaderboards (fkn-bench leaderboard)")
 
     cells: list[CellSpec] = []
     wanted: dict[tuple[str, str], tuple[int, ...]] = {}
-    scenarios_of = {name: set(only) for name, only in (scenarios_of or {}).items()}
     for scenario_name in scenario_list:
         scenario = get_scenario(scenario_name)
         for name in names:
