@@ -19,7 +19,7 @@ from fkn_bench.geometry import quaternion as quat
 from fkn_bench.inputs import check_seed, describe
 from fkn_bench.limits import check_memory
 from fkn_bench.scenarios import SPLITS, Scenario, get_scenario
-from fkn_bench.types import ArrayB, ArrayF
+from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
 __all__ = ["Episodes", "EpisodeStream", "generate_episodes", "initial_rates", "initial_states", "rate_offsets",
            "true_inertia"]
@@ -44,10 +44,10 @@ class Episodes:
     scenario: Scenario
     seeds: tuple[int, ...]
     start: int
-    times: ArrayF
-    truth: ArrayF
-    measurements: ArrayF
-    valid: ArrayB
+    times: Float[ArrayF, "T"]
+    truth: Float[ArrayF, "B T 13"]
+    measurements: Float[ArrayF, "B T 7"]
+    valid: Bool[ArrayB, "B T"]
 
     @property
     def batch_size(self) -> int:
@@ -112,7 +112,8 @@ def _split_bounds(scenario: Scenario, name: str) -> tuple[int, int]:
     return scenario.split_bounds()[name]
 
 
-def initial_states(scenario: Scenario, seeds: Sequence[int]) -> tuple[ArrayF, ArrayF, ArrayF]:
+def initial_states(scenario: Scenario, seeds: Sequence[int]
+                   ) -> tuple[Float[ArrayF, "B 4"], Float[ArrayF, "B 3"], Float[ArrayF, "B 3"]]:
     """Initial attitude ``(B, 4)``, position ``(B, 3)`` and velocity ``(B, 3)`` per seed."""
     attitudes, positions = [], []
     for seed in seeds:
@@ -128,7 +129,7 @@ def initial_states(scenario: Scenario, seeds: Sequence[int]) -> tuple[ArrayF, Ar
     return np.array(attitudes).reshape(-1, 4), np.array(positions).reshape(-1, 3), velocity.reshape(-1, 3)
 
 
-def initial_rates(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
+def initial_rates(scenario: Scenario, seeds: Sequence[int]) -> Float[ArrayF, "B 3"]:
     """Each seed's initial angular rate ``(B, 3)``, rad/s, in the scenario's ``omega0_frame``:
     ``omega0`` for every seed, or, with a rate prior (:class:`~fkn_bench.scenarios.Scenario`,
     "Prior"), ``m u`` with the axis ``u`` (uniform on the sphere: a normalised standard normal
@@ -157,7 +158,7 @@ def initial_rates(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
     return out
 
 
-def true_inertia(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
+def true_inertia(scenario: Scenario, seeds: Sequence[int]) -> Float[ArrayF, "B 3"]:
     """The true principal moments ``(B, 3)`` (kg m^2) of each seed's body: the scenario's
     ``inertia`` scaled per axis by ``1 + u``, ``u ~ U(-inertia_error, inertia_error)``."""
     nominal = np.array(scenario.inertia)
@@ -167,7 +168,7 @@ def true_inertia(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
     return np.array([nominal * (1.0 + stream(seed, "inertia").uniform(-error, error, 3)) for seed in seeds])
 
 
-def rate_offsets(scenario: Scenario, seeds: Sequence[int]) -> ArrayF:
+def rate_offsets(scenario: Scenario, seeds: Sequence[int]) -> Float[ArrayF, "B N 3"]:
     """The world-frame rate offsets ``d (B, N, 3)`` (rad/s) of the unmodelled torque bursts of
     each seed's whole episode (``N = n_steps``; zero without bursts; see :class:`Scenario`):
     a burst of ``kick_length`` steps starts at step ``k`` where the ``kick`` stream's uniform

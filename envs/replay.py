@@ -77,7 +77,7 @@ from fkn_bench.recordings.reader import (
     POSE_TYPES,
 )
 from fkn_bench.scenarios import ConfigError, Scenario, get_scenario
-from fkn_bench.types import ArrayB, ArrayF
+from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
 __all__ = [
     "ASTROBEE_TRUTH_PATTERN", "ReplayReport", "RecordedTrajectory", "read_recording",
@@ -153,10 +153,10 @@ class RecordedTrajectory:
     """
 
     scenario: Scenario
-    times: ArrayF
-    truth: ArrayF
-    measurements: ArrayF | None
-    valid: ArrayB | None
+    times: Float[ArrayF, "T"]
+    truth: Float[ArrayF, "T 13"]
+    measurements: Float[ArrayF, "T 7"] | None
+    valid: Bool[ArrayB, "T"] | None
     start_stamp_ns: int
     report: ReplayReport
 
@@ -204,7 +204,7 @@ def _locate(stamps: np.ndarray, grid: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return exact, lo, hi, frac
 
 
-def resample_truth(stamps_ns: np.ndarray, poses: ArrayF, grid_ns: np.ndarray) -> tuple[ArrayF, int]:
+def resample_truth(stamps_ns: np.ndarray, poses: Float[ArrayF, "M 7"], grid_ns: np.ndarray) -> tuple[Float[ArrayF, "N 7"], int]:
     """Poses ``(N, 7)`` at ``grid_ns``: samples where the stamps match exactly, slerp / linear
     interpolation between neighbours elsewhere (clamped at the ends).
 
@@ -230,7 +230,7 @@ def _resample_linear(stamps_ns: np.ndarray, values: ArrayF, grid_ns: np.ndarray)
     return out
 
 
-def finite_difference_twist(stamps_ns: np.ndarray, poses: ArrayF) -> ArrayF:
+def finite_difference_twist(stamps_ns: np.ndarray, poses: Float[ArrayF, "N 7"]) -> Float[ArrayF, "N 6"]:
     """World-frame twists ``(N, 6)`` = ``[w(3), v(3)]`` of poses ``(N, 7)`` by central differences
     (one-sided at the ends); ``w`` from ``log(q_{i+1} (x) q_{i-1}^-1) / (t_{i+1} - t_{i-1})``."""
     n = len(stamps_ns)

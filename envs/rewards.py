@@ -25,7 +25,7 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from fkn_bench.types import ArrayF
+from fkn_bench.types import ArrayF, Float
 
 __all__ = ["DEFAULT_WEIGHTS", "WEIGHT_LIMIT", "estimate_cost", "estimate_cost_components", "estimate_cost_scalar", "attitude_error_angle", "unit_quaternions", "cost_and_quaternion_norm"]
 
@@ -50,7 +50,7 @@ def _chords(e: Sequence, t: Sequence, sqrt: Callable) -> tuple:
     return sqrt(m0 * m0 + m1 * m1 + m2 * m2 + m3 * m3), sqrt(p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
 
 
-def attitude_error_angle(q_true: ArrayF, q_est: ArrayF) -> ArrayF:
+def attitude_error_angle(q_true: Float[ArrayF, "N 4"], q_est: Float[ArrayF, "N 4"]) -> Float[ArrayF, "N"]:
     """Rotation angle (rad) between attitudes ``(N, 4)``; neither need be exactly unit."""
     minus, plus = _chords(q_est.T, q_true.T, np.sqrt)
     return 4.0 * np.arctan2(np.minimum(minus, plus), np.maximum(minus, plus))
@@ -62,14 +62,16 @@ def _norm3(d: ArrayF, start: int) -> ArrayF:
     return np.sqrt(a * a + b * b + c * c)
 
 
-def estimate_cost(truth: ArrayF, estimate: ArrayF, weights: Mapping[str, float] = DEFAULT_WEIGHTS) -> ArrayF:
+def estimate_cost(truth: Float[ArrayF, "N 13"], estimate: Float[ArrayF, "N 13"],
+                  weights: Mapping[str, float] = DEFAULT_WEIGHTS) -> Float[ArrayF, "N"]:
     """Weighted error (>= 0) of estimates ``(N, 13)`` against the truth ``(N, 13)``: ``(N,)``."""
     return estimate_cost_components(truth.T, estimate.T, weights)
 
 
 def estimate_cost_components(
-    truth: ArrayF, estimate: ArrayF, weights: Mapping[str, float] = DEFAULT_WEIGHTS, *, unit_truth: ArrayF | None = None
-) -> ArrayF:
+    truth: Float[ArrayF, "13 N"], estimate: Float[ArrayF, "13 N"], weights: Mapping[str, float] = DEFAULT_WEIGHTS, *,
+    unit_truth: Float[ArrayF, "4 N"] | None = None,
+) -> Float[ArrayF, "N"]:
     """:func:`estimate_cost` of component-major ``(13, N)`` truth and estimates, computed
     block-wise (a dozen numpy calls on ``(4, N)`` and ``(9, N)`` blocks; a sum over the component
     axis adds the rows in order, as the scalar form does). ``unit_truth (4, N)``: the normalised
@@ -78,8 +80,9 @@ def estimate_cost_components(
 
 
 def cost_and_quaternion_norm(
-    truth: ArrayF, estimate: ArrayF, weights: Mapping[str, float] = DEFAULT_WEIGHTS, *, unit_truth: ArrayF | None = None
-) -> tuple[ArrayF, ArrayF]:
+    truth: Float[ArrayF, "13 N"], estimate: Float[ArrayF, "13 N"], weights: Mapping[str, float] = DEFAULT_WEIGHTS, *,
+    unit_truth: Float[ArrayF, "4 N"] | None = None,
+) -> tuple[Float[ArrayF, "N"], Float[ArrayF, "N"]]:
     """:func:`estimate_cost_components` and the squared norms ``(N,)`` of the estimates'
     quaternions (which the vector environment checks against zero)."""
     q = estimate[:4]

@@ -36,6 +36,7 @@ from torch import Tensor, nn
 from fkn_bench.filters import ParameterSet
 from fkn_bench.training.data import Sequences
 from fkn_bench.training.trainer import NoiseModel
+from fkn_bench.types import Bool, Float
 
 __all__ = ["ACTIVATIONS", "FlexKalmanNetwork", "FlexKalmanNet", "Mode", "Screen"]
 
@@ -179,7 +180,8 @@ class FlexKalmanNet(NoiseModel):
             raise ValueError("a training window has no valid measurement")
         return (outputs * weights[..., None]).sum(1) / count
 
-    def time_varying_raw(self, measurements: Tensor, mask: Tensor, *, screen: Screen | None = None) -> Tensor:
+    def time_varying_raw(self, measurements: Float[Tensor, "B T 7"], mask: Bool[Tensor, "B T"], *,
+                         screen: Screen | None = None) -> Float[Tensor, "B T size"]:
         """Per-step parameters ``(B, T, size)``: the mean over the last ``history`` valid
         measurements up to each step (the deployed parameters before the first one).
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fkn_bench.types import ArrayF
+from fkn_bench.types import ArrayF, Float
 
 __all__ = ["component_rmse", "state_rmse", "magnitude_statistics", "MAGNITUDE_STATISTICS"]
 
@@ -25,7 +25,7 @@ def _errors(errors: ArrayF) -> ArrayF:
     return errors
 
 
-def component_rmse(errors: ArrayF) -> ArrayF:
+def component_rmse(errors: Float[ArrayF, "B T n"]) -> Float[ArrayF, "B n"]:
     """Root mean square over time of each component: ``(B, T, n) -> (B, n)``.
 
     With :func:`fkn_bench.metrics.errors.component_errors` this is the paper's per-variable RMSE
@@ -34,7 +34,7 @@ def component_rmse(errors: ArrayF) -> ArrayF:
     return np.sqrt(np.mean(np.square(_errors(errors)), axis=1))
 
 
-def state_rmse(errors: ArrayF) -> ArrayF:
+def state_rmse(errors: Float[ArrayF, "B T 13"]) -> Float[ArrayF, "B"]:
     """The 13-state RMSE per sequence, ``(B, T, 13) -> (B,)``: the root of the mean over time and
     over all components of the squared component errors (the paper's test loss, an MSE against
     all 13 true states; components keep their units, so position errors in m dominate).
@@ -44,7 +44,7 @@ def state_rmse(errors: ArrayF) -> ArrayF:
     return np.sqrt(np.mean(np.square(_errors(errors)), axis=(1, 2)))
 
 
-def magnitude_statistics(magnitudes: ArrayF) -> dict[str, ArrayF]:
+def magnitude_statistics(magnitudes: Float[ArrayF, "B T"]) -> dict[str, Float[ArrayF, "B"]]:
     """RMSE, median, 95th percentile (linear interpolation) and maximum over time of
     non-negative error magnitudes: ``(B, T) -> {name: (B,)}`` (names in
     :data:`MAGNITUDE_STATISTICS`). A NaN anywhere in a sequence makes all its values NaN."""

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import gammaincinv
 
-from fkn_bench.types import ArrayB, ArrayF
+from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
 __all__ = [
     "NEES_DOF",
@@ -60,11 +60,11 @@ class QuadraticForm:
         positive_definite: ``(B, T)`` True where the (finite) covariance has a Cholesky factor.
     """
 
-    values: ArrayF
-    positive_definite: ArrayB
+    values: Float[ArrayF, "B T"]
+    positive_definite: Bool[ArrayB, "B T"]
 
 
-def positive_definite(covariances: ArrayF) -> ArrayB:
+def positive_definite(covariances: Float[ArrayF, "... n n"]) -> Bool[ArrayB, "..."]:
     """``(..., n, n) -> (...)``: True where the matrix is finite and its Cholesky factorisation
     succeeds (LAPACK ``potrf`` through :func:`numpy.linalg.cholesky`)."""
     covariances = np.asarray(covariances, dtype=np.float64)
@@ -84,7 +84,8 @@ def positive_definite(covariances: ArrayF) -> ArrayB:
     return ok.reshape(shape)
 
 
-def normalized_squares(vectors: ArrayF, covariances: ArrayF, mask: ArrayB | None = None) -> QuadraticForm:
+def normalized_squares(vectors: Float[ArrayF, "B T n"], covariances: Float[ArrayF, "B T n n"],
+                       mask: Bool[ArrayB, "B T"] | None = None) -> QuadraticForm:
     """``x' C^-1 x`` for ``vectors (B, T, n)`` and ``covariances (B, T, n, n)`` where ``mask``
     ``(B, T)`` (default: everywhere). Use with the 12-dim error and error covariance for the NEES
     and with innovations and their covariances (``mask`` = update steps) for the NIS."""
@@ -145,8 +146,8 @@ class StatisticSums:
     """Per-time-step sums of a normalized statistic over runs, ``sum (T,)`` and ``count (T,)``
     (the number of runs with a value at that step). Sums of disjoint sets of runs add."""
 
-    sum: ArrayF
-    count: ArrayF
+    sum: Float[ArrayF, "T"]
+    count: Float[ArrayF, "T"]
 
     def __add__(self, other: StatisticSums) -> StatisticSums:
         if self.sum.shape != other.sum.shape:
@@ -154,7 +155,7 @@ class StatisticSums:
         return StatisticSums(self.sum + other.sum, self.count + other.count)
 
 
-def statistic_sums(values: ArrayF) -> StatisticSums:
+def statistic_sums(values: Float[ArrayF, "B T"]) -> StatisticSums:
     """Sum ``values (B, T)`` over runs per step, skipping NaN (not-a-value steps)."""
     values = np.asarray(values, dtype=np.float64)
     present = np.isfinite(values)
@@ -178,9 +179,9 @@ class AverageStatistic:
     """
 
     dof: int
-    per_step: ArrayF
-    lower: ArrayF
-    upper: ArrayF
+    per_step: Float[ArrayF, "T"]
+    lower: Float[ArrayF, "T"]
+    upper: Float[ArrayF, "T"]
     in_bounds_fraction: float
     average: float
     values: int

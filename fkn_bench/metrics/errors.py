@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from fkn_bench.geometry import quaternion as quat
-from fkn_bench.types import ATTITUDE, OMEGA, POSITION, STATE_DIM, VELOCITY, ArrayF
+from fkn_bench.types import ATTITUDE, OMEGA, POSITION, STATE_DIM, VELOCITY, ArrayF, Float
 
 __all__ = [
     "GROUPS",
@@ -46,7 +46,7 @@ def _check_pair(truth: ArrayF, means: ArrayF) -> tuple[ArrayF, ArrayF]:
     return truth, means
 
 
-def component_errors(truth: ArrayF, means: ArrayF) -> ArrayF:
+def component_errors(truth: Float[ArrayF, "... 13"], means: Float[ArrayF, "... 13"]) -> Float[ArrayF, "... 13"]:
     """Per-component errors ``estimate - truth``, ``(..., 13)``, with the estimated quaternion
     sign-aligned to the true one first (``q_est`` or ``-q_est``, whichever has a non-negative dot
     product with ``q_true``)."""
@@ -57,7 +57,7 @@ def component_errors(truth: ArrayF, means: ArrayF) -> ArrayF:
     return errors
 
 
-def error_state(truth: ArrayF, means: ArrayF) -> ArrayF:
+def error_state(truth: Float[ArrayF, "... 13"], means: Float[ArrayF, "... 13"]) -> Float[ArrayF, "... 12"]:
     """The 12-dim error ``[dtheta, dr, dw, dv]``, ``(..., 12)``: ``dtheta`` (rad) is the world-frame
     rotation vector with ``q_true = exp(dtheta / 2) (x) q_est``
     (:func:`fkn_bench.geometry.quaternion.error_rotation_vector`), the rest ``truth - estimate``.
@@ -67,13 +67,13 @@ def error_state(truth: ArrayF, means: ArrayF) -> ArrayF:
     return np.concatenate((dtheta, truth[..., 4:] - means[..., 4:]), axis=-1)
 
 
-def attitude_error_deg(q_true: ArrayF, q_est: ArrayF) -> ArrayF:
+def attitude_error_deg(q_true: Float[ArrayF, "... 4"], q_est: Float[ArrayF, "... 4"]) -> Float[ArrayF, "..."]:
     """Attitude error angle in degrees, ``(...,)``, in ``[0, 180]``; sign-safe
     (``2 atan2(|vec(q_e)|, |w(q_e)|)`` with ``q_e = q_true^-1 (x) q_est``)."""
     return np.degrees(quat.angle_between(np.asarray(q_true, dtype=float), np.asarray(q_est, dtype=float)))
 
 
-def group_errors(truth: ArrayF, means: ArrayF) -> dict[str, ArrayF]:
+def group_errors(truth: Float[ArrayF, "... 13"], means: Float[ArrayF, "... 13"]) -> dict[str, Float[ArrayF, "..."]]:
     """Error magnitudes per state group, each ``(...,)`` (the state axis removed):
 
     * ``attitude``: attitude error angle, deg (:func:`attitude_error_deg`);

@@ -30,7 +30,7 @@ from fkn_bench.metrics.consistency import StatisticSums, normalized_squares, sta
 from fkn_bench.metrics.errors import GROUPS, component_errors, error_state, group_errors
 from fkn_bench.metrics.settling import DEFAULT_PEAK_FRACTION, DEFAULT_TOLERANCES, SettlingResult, settling_time
 from fkn_bench.metrics.stability import DEFAULT_GROWTH_FLOORS, DivergenceFlags, error_growth, nees_high
-from fkn_bench.types import ERROR_DIM, POSE_ERROR_DIM, STATE_DIM, ArrayB, ArrayF
+from fkn_bench.types import ERROR_DIM, POSE_ERROR_DIM, STATE_DIM, ArrayB, ArrayF, Bool, Float
 
 __all__ = ["MetricSettings", "RunScores", "score_run"]
 
@@ -109,15 +109,15 @@ class RunScores:
 
     n_steps: int
     scored_steps: int
-    component_rmse: ArrayF
-    state_rmse: ArrayF
-    group_statistics: dict[str, dict[str, ArrayF]]
+    component_rmse: Float[ArrayF, "B 13"]
+    state_rmse: Float[ArrayF, "B"]
+    group_statistics: dict[str, dict[str, Float[ArrayF, "B"]]]
     settling: dict[str, SettlingResult]
-    settling_time: ArrayF
-    settled: ArrayB
-    nees_mean: ArrayF
-    nis_mean: ArrayF
-    nis_count: ArrayF
+    settling_time: Float[ArrayF, "B"]
+    settled: Bool[ArrayB, "B"]
+    nees_mean: Float[ArrayF, "B"]
+    nis_mean: Float[ArrayF, "B"]
+    nis_count: Float[ArrayF, "B"]
     nees_sums: StatisticSums | None
     nis_sums: StatisticSums | None
     divergence: DivergenceFlags
@@ -135,14 +135,14 @@ def _row_mean(values: ArrayF) -> ArrayF:
 
 
 def score_run(
-    truth: ArrayF,
-    means: ArrayF,
+    truth: Float[ArrayF, "B T 13"],
+    means: Float[ArrayF, "B T 13"],
     dt: float,
     *,
-    error_covariances: ArrayF | None = None,
-    innovations: ArrayF | None = None,
-    innovation_covariances: ArrayF | None = None,
-    innovation_mask: ArrayB | None = None,
+    error_covariances: Float[ArrayF, "B T 12 12"] | None = None,
+    innovations: Float[ArrayF, "B T 6"] | None = None,
+    innovation_covariances: Float[ArrayF, "B T 6 6"] | None = None,
+    innovation_mask: Bool[ArrayB, "B T"] | None = None,
     settings: MetricSettings | None = None,
 ) -> RunScores:
     """Score estimates against the truth (see module docstring).

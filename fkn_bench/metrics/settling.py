@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fkn_bench.types import ArrayB, ArrayF
+from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
 __all__ = [
     "DEFAULT_TOLERANCES",
@@ -65,12 +65,12 @@ class SettlingResult:
         band: the band used per run, ``(B,)``, in the error's units.
     """
 
-    time: ArrayF
-    settled: ArrayB
-    band: ArrayF
+    time: Float[ArrayF, "B"]
+    settled: Bool[ArrayB, "B"]
+    band: Float[ArrayF, "B"]
 
 
-def moving_rms(errors: ArrayF, window: int) -> ArrayF:
+def moving_rms(errors: Float[ArrayF, "B T"], window: int) -> Float[ArrayF, "B T"]:
     """Centred moving root mean square over ``window`` steps along the last axis, ``(B, T)``;
     the window shrinks at both ends (it covers ``k - window // 2 .. k + window // 2``)."""
     errors = np.asarray(errors, dtype=np.float64)
@@ -90,7 +90,8 @@ def moving_rms(errors: ArrayF, window: int) -> ArrayF:
     return np.sqrt(np.maximum(mean_square, 0.0))
 
 
-def settling_band(smoothed: ArrayF, tolerance: float, peak_fraction: float = DEFAULT_PEAK_FRACTION) -> ArrayF:
+def settling_band(smoothed: Float[ArrayF, "B T"], tolerance: float,
+                  peak_fraction: float = DEFAULT_PEAK_FRACTION) -> Float[ArrayF, "B"]:
     """Band per run ``max(tolerance, peak_fraction * peak)``, ``(B, T) -> (B,)``; the peak
     ignores NaN (a run that is NaN throughout gets the tolerance)."""
     smoothed = np.asarray(smoothed, dtype=np.float64)
@@ -102,7 +103,7 @@ def settling_band(smoothed: ArrayF, tolerance: float, peak_fraction: float = DEF
 
 
 def settling_time(
-    errors: ArrayF,
+    errors: Float[ArrayF, "B T"],
     dt: float,
     *,
     tolerance: float,

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fkn_bench.metrics.consistency import NEES_DOF, chi2_upper
-from fkn_bench.types import ArrayB, ArrayF
+from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
 __all__ = ["DEFAULT_GROWTH_FLOORS", "DIVERGENCE_REASONS", "LOST_TRACK_REASONS", "DivergenceFlags", "error_growth", "nees_high", "window_rms"]
 
@@ -48,26 +48,26 @@ LOST_TRACK_REASONS: tuple[str, ...] = ("non_finite", "cholesky_failed", "error_g
 class DivergenceFlags:
     """Per-run divergence flags, each ``(B,)`` bool; ``diverged`` is their union."""
 
-    non_finite: ArrayB
-    cholesky_failed: ArrayB
-    error_growth: ArrayB
-    nees_high: ArrayB
+    non_finite: Bool[ArrayB, "B"]
+    cholesky_failed: Bool[ArrayB, "B"]
+    error_growth: Bool[ArrayB, "B"]
+    nees_high: Bool[ArrayB, "B"]
 
     @property
-    def lost_track(self) -> ArrayB:
+    def lost_track(self) -> Bool[ArrayB, "B"]:
         """The union of :data:`LOST_TRACK_REASONS` (``nees_high`` left out)."""
         return self.non_finite | self.cholesky_failed | self.error_growth
 
     @property
-    def diverged(self) -> ArrayB:
+    def diverged(self) -> Bool[ArrayB, "B"]:
         return self.non_finite | self.cholesky_failed | self.error_growth | self.nees_high
 
-    def as_dict(self) -> dict[str, ArrayB]:
+    def as_dict(self) -> dict[str, Bool[ArrayB, "B"]]:
         """The flags by name (:data:`DIVERGENCE_REASONS`) plus ``diverged``."""
         return {name: getattr(self, name) for name in DIVERGENCE_REASONS} | {"diverged": self.diverged}
 
 
-def window_rms(magnitudes: ArrayF, start: int, stop: int) -> ArrayF:
+def window_rms(magnitudes: Float[ArrayF, "B T"], start: int, stop: int) -> Float[ArrayF, "B"]:
     """RMS over steps ``[start, stop)`` of ``(B, T)`` magnitudes, ``(B,)`` (NaN propagates)."""
     magnitudes = np.asarray(magnitudes, dtype=np.float64)
     if not 0 <= start < stop <= magnitudes.shape[1]:
@@ -76,12 +76,12 @@ def window_rms(magnitudes: ArrayF, start: int, stop: int) -> ArrayF:
 
 
 def error_growth(
-    magnitudes: Mapping[str, ArrayF],
+    magnitudes: Mapping[str, Float[ArrayF, "B T"]],
     *,
     initial_steps: int,
     final_steps: int,
     floors: Mapping[str, float] = DEFAULT_GROWTH_FLOORS,
-) -> ArrayB:
+) -> Bool[ArrayB, "B"]:
     """``(B,)``: True where, for some group, the RMS over the last ``final_steps`` exceeds both the
     RMS over the first ``initial_steps`` and the group's floor. NaN errors count as growth."""
     grown: ArrayB | None = None
@@ -97,7 +97,7 @@ def error_growth(
     return grown
 
 
-def nees_high(nees: ArrayF, *, final_steps: int, quantile: float = 0.999, dof: int = NEES_DOF) -> ArrayB:
+def nees_high(nees: Float[ArrayF, "B T"], *, final_steps: int, quantile: float = 0.999, dof: int = NEES_DOF) -> Bool[ArrayB, "B"]:
     """``(B,)``: True where the NEES ``(B, T)`` exceeds the chi2(``dof``) ``quantile`` at every step
     of the last ``final_steps`` (steps without a value, NaN, do not count as exceeding)."""
     nees = np.asarray(nees, dtype=np.float64)

@@ -35,6 +35,7 @@ import torch
 from torch import Tensor
 
 from fkn_bench.scenarios import PRIOR_EPISODES, Scenario, get_scenario
+from fkn_bench.types import Bool, Float
 
 __all__ = ["PRIOR_EPISODES", "Sequences", "TrainingData", "episodes_of", "training_data"]
 
@@ -49,9 +50,9 @@ class Sequences:
         truth: ``(B, T, 13)``.
     """
 
-    measurements: Tensor
-    mask: Tensor
-    truth: Tensor
+    measurements: Float[Tensor, "B T 7"]
+    mask: Bool[Tensor, "B T"]
+    truth: Float[Tensor, "B T 13"]
 
     @property
     def batch_size(self) -> int:

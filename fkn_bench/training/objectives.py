@@ -21,6 +21,7 @@ import torch
 from torch import Tensor
 
 from fkn_bench.filters.base import FilterResult
+from fkn_bench.types import Float
 
 __all__ = ["OBJECTIVES", "OBJECTIVE_LABELS", "aligned_state_error", "state_mse", "innovation_nll", "gaussian_nll"]
 
@@ -35,7 +36,7 @@ OBJECTIVE_LABELS: dict[str, str] = {
 """What the validation loss of each objective is (history, figures, artefacts)."""
 
 
-def aligned_state_error(means: Tensor, truth: Tensor) -> Tensor:
+def aligned_state_error(means: Float[Tensor, "... n"], truth: Float[Tensor, "... 13"]) -> Float[Tensor, "... 13"]:
     """``means - truth`` ``(..., 13)`` with the true quaternion's sign matched to the estimate
     (states augmented beyond the 13 of the truth, e.g. with inertia ratios, are compared on their
     first 13 components)."""
@@ -44,7 +45,7 @@ def aligned_state_error(means: Tensor, truth: Tensor) -> Tensor:
     return torch.cat((means[..., :4] - q_true, means[..., 4 : truth.shape[-1]] - truth[..., 4:]), dim=-1)
 
 
-def state_mse(means: Tensor, truth: Tensor, loss_cut: int) -> Tensor:
+def state_mse(means: Float[Tensor, "B T n"], truth: Float[Tensor, "B T 13"], loss_cut: int) -> Float[Tensor, ""]:
     """Mean squared 13-state error over steps ``loss_cut:`` of every sequence (a scalar)."""
     if loss_cut >= means.shape[1]:
         raise ValueError(f"loss_cut {loss_cut} leaves no steps of {means.shape[1]}")
@@ -67,7 +68,7 @@ def innovation_nll(result: FilterResult, loss_cut: int) -> Tensor:
     return 0.5 * (m * math.log(2.0 * math.pi) + log_det + whitened.square().sum(-1)).mean()
 
 
-def gaussian_nll(errors: Tensor, covariances: Tensor) -> Tensor:
+def gaussian_nll(errors: Float[Tensor, "... k"], covariances: Float[Tensor, "... k k"]) -> Float[Tensor, ""]:
     """Mean Gaussian negative log-likelihood ``1/2 [k log 2 pi + log det P + e^T P^-1 e]`` of
     errors ``(..., k)`` under covariances ``(..., k, k)`` (symmetric positive definite; a scalar)."""
     L = torch.linalg.cholesky(covariances)
