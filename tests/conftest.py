@@ -1,5 +1,7 @@
-"""Suite-wide fixtures: the scenario registry restored after each test and module, the GPU's
-filter path on the CPU, torch's ``meta`` default device, and simulated kills.
+"""Suite-wide fixtures: one torch thread, the scenario registry restored after each test and
+module, the GPU's filter path on the CPU, torch's ``meta`` default device, and simulated kills;
+and the order in which pytest-xdist hands out the test files (the files that hold a test marked
+``slow`` first).
 
 No test here times anything: the speed-ratio gate's timed checks run after the tests as
 ``fkn-bench bench gate --trips`` (README, "Benchmarks and CI gates"), where no second pytest
@@ -13,6 +15,33 @@ from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, contextmanager
 
 import pytest
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Under pytest-xdist, the test files that hold a test marked ``slow`` (a session- or
+    module-scoped fixture of 10 s and more, or tests of as much together) go first, in their
+    collection order, and the other files after them: ``--dist loadfile`` hands out whole files in
+    the order collected (``--no-loadscope-reorder`` in ``pyproject.toml``), so the long files
+    start while the short ones are left to even out the two workers' ends, instead of a long file
+    starting last on one worker while the other idles. Without xdist the order is left alone."""
+    if not hasattr(config, "workerinput"):  # not an xdist worker
+        return
+    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow_files)  # stable: the order within each group is kept
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _one_torch_thread() -> Iterator[None]:
+    """One intra-op torch thread in each test process (restored at the end): the test command runs
+    two pytest-xdist workers on two cores, and with two threads each, a torch operation waits for
+    a thread that the other worker's core holds (the filter runs at one thread everywhere:
+    :mod:`fkn_bench.runtime`). A test that needs another count sets it and restores it."""
+    import torch
+
+    previous = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(previous)
 
 
 def _restoring_the_scenario_registry() -> Iterator[None]:

@@ -21,6 +21,8 @@ from fkn_bench.estimators.conformance import (
 from fkn_bench.estimators.base import Estimator
 from fkn_bench.scenarios import Scenario, get_scenario
 
+pytestmark = pytest.mark.slow  # 1e5 fuzzed filter steps per registered estimator
+
 
 @pytest.fixture(scope="module")
 def hostile():  # noqa: ANN201

@@ -23,6 +23,8 @@ from fkn_bench.estimators.kalman import KalmanEstimator
 from fkn_bench.gates import accuracy
 from fkn_bench.gates.accuracy import ACCEPT_COMMAND, ADD_COMMAND, Tolerance, run_accuracy_gate, tolerance_for
 
+pytestmark = pytest.mark.slow  # the gate's first half, a session fixture of about 65 s (conftest.py)
+
 REPO = Path(__file__).resolve().parents[2]
 
 def test_committed_results_reproduce(constant_rate_report: accuracy.AccuracyReport, gated_estimator: str,

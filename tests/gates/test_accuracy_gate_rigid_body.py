@@ -5,7 +5,11 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import pytest
+
 from fkn_bench.gates import accuracy
+
+pytestmark = pytest.mark.slow  # the gate's second half, a session fixture of about 30 s (conftest.py)
 
 
 def test_committed_results_reproduce(rigid_body_report: accuracy.AccuracyReport, gated_estimator: str,

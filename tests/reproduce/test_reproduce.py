@@ -15,6 +15,8 @@ from fkn_bench.reproduce.report import Bullets, FigureRef, Heading, Paragraph, T
 from fkn_bench.reproduce.tables import TIMING_COLUMNS
 from fkn_bench.types import STATE_NAMES
 
+pytestmark = pytest.mark.slow  # two quick reproductions (training, evaluation, figures)
+
 TABLES = ("hyperparameters", "training_results", "learned_std", "rmse_learned_vs_manual", "cross_dataset", "robustness")
 FIGURES = (
     "training_loss_ds2", "parameters_ds2", "training_loss_ds1", "parameters_ds1", "states_ds1", "omega_uncertainty_ds1",

@@ -23,6 +23,8 @@ from fkn_bench.scenarios import get_scenario
 from fkn_bench.sweep import SweepTask, make_objective, parse_space
 from fkn_bench.sweep.objective import CATCH
 
+pytestmark = pytest.mark.slow  # a sweep in two worker processes
+
 SCENARIO_FILE = """
 [scenario.sweep-tiny]
 base = "ds1"
