@@ -6,7 +6,8 @@ recursion over a whole batch of sequences. The same call runs, and trains, any v
 
     result = variant.run(noise, measurements, mask, dt=0.1)   # (B, T, 7), (B, T) -> (B, T, 13)
 
-Conventions of :meth:`KalmanFilter.run`:
+Conventions of :meth:`KalmanFilter.run` (the project's one recursion,
+:func:`fkn_bench.filters.recursion.scan`, on this filter's step functions):
 
 * Step ``t`` predicts from ``t - 1`` (not at ``t = 0``) and then updates with measurement ``t``
   when ``mask[:, t]`` is true; a step without a measurement is predict-only.
@@ -45,7 +46,7 @@ from torch import Tensor
 
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.noise import NoiseLayout, NoiseParameters
-from fkn_bench.filters.recursion import GATE_REINITIALISE_AFTER, accept, count_rejections, gate_threshold
+from fkn_bench.filters.recursion import GATE_REINITIALISE_AFTER, Carry, Proposal, accept, count_rejections, gate_threshold, scan
 from fkn_bench.linalg import namespace, symmetrize
 
 __all__ = ["KalmanFilter", "FilterResult", "FilterState", "accept", "check_dt", "gate_threshold", "GATE_REINITIALISE_AFTER",
@@ -88,11 +89,6 @@ class FilterResult:
     updated: Tensor
     initialised: Tensor
     final: FilterState
-
-
-def _select(condition: Tensor, a: Tensor, b: Tensor) -> Tensor:
-    """``where(condition, a, b)`` with ``condition (B,)`` broadcast over trailing axes."""
-    return torch.where(condition.view(-1, *([1] * (a.dim() - 1))), a, b)
 
 
 def check_dt(dt: Any) -> float:
@@ -209,6 +205,76 @@ class _StepOutputs:
         time_major = [0, *(1 + axis for axis in order)]
         joined = torch.cat([block.permute(time_major) for _, block in self._blocks])
         return joined.permute(self._restore(order))
+
+
+class _KalmanSteps:
+    """A :class:`KalmanFilter`'s step functions for :func:`~fkn_bench.filters.recursion.scan`,
+    with its noise (constant or per step) and the per-step output series it stores."""
+
+    def __init__(self, filt: KalmanFilter, noise: NoiseParameters, shape: tuple[int, int], dtype: torch.dtype,
+                 device: torch.device, tracked: bool, store_covariances: bool, store_innovations: bool) -> None:
+        (batch, steps), m, k, n = shape, filt.innovation_dim, filt.covariance_dim, filt.model.state_dim
+        self.filter, self.noise = filt, noise
+        self.per_step = noise.steps() if noise.time_varying else None
+        self.nis_threshold = filt._gate_threshold if filt.gate is not None else math.inf
+        self.means = _StepOutputs(steps, (batch, n), dtype, tracked)
+        self.covariances = _StepOutputs(steps, (batch, k, k), dtype, tracked) if store_covariances else None
+        self.innovations = _StepOutputs(steps, (batch, m), dtype, tracked) if store_innovations else None
+        self.innovation_covs = _StepOutputs(steps, (batch, m, m), dtype, tracked) if store_innovations else None
+        self.prior_means = _StepOutputs(steps, (batch, n), dtype, tracked) if store_innovations else None
+        self.updated_steps = torch.zeros(steps, batch, dtype=torch.bool, device=device)
+        self.initialised_steps = torch.zeros(steps, batch, dtype=torch.bool, device=device)
+        self.no_innovation = torch.zeros(batch, m, dtype=dtype, device=device)
+        self.unit_covariance = torch.eye(m, dtype=dtype, device=device).expand(batch, m, m)
+
+    def _noise(self, t: int) -> NoiseParameters:
+        return self.per_step[t] if self.per_step is not None else self.noise
+
+    def predict(self, state: FilterState, t: int, dt: float) -> FilterState:
+        return self.filter.predict(state, self._noise(t).process, dt)
+
+    def initial(self, state: FilterState, z: Tensor, t: int) -> FilterState:
+        return self.filter.initial_state(z, self._noise(t).initial)
+
+    def propose(self, state: FilterState, z: Tensor, rows: Tensor, t: int) -> Proposal:
+        return Proposal(*self.filter.update(state, z, self._noise(t).measurement))
+
+    def commit(self, state: FilterState, z: Tensor, rows: Tensor, proposal: Proposal, t: int) -> tuple[FilterState, Tensor]:
+        return proposal.state, rows
+
+    def record(self, t: int, prior: FilterState, state: FilterState, innovation: tuple[Tensor, Tensor] | None,
+               used: Tensor, initialised: Tensor) -> None:
+        if self.prior_means is not None:
+            self.prior_means.put(t, prior.mean)
+        self.means.put(t, state.mean)
+        if self.covariances is not None:
+            self.covariances.put(t, state.covariance)
+        if self.innovations is not None and self.innovation_covs is not None:
+            nu, S = innovation if innovation is not None else (self.no_innovation, self.unit_covariance)
+            self.innovations.put(t, nu)
+            self.innovation_covs.put(t, S)
+        self.updated_steps[t] = used
+        self.initialised_steps[t] = initialised
+
+    def predict_steps(self, state: FilterState, t: int, count: int, dt: float) -> tuple[tuple[Tensor, Tensor | None], FilterState]:
+        process_noise, per_step_noise = self.filter._stretch_noise(self.noise, self.per_step, t, count)
+        means, covariances, state = self.filter.predict_steps(
+            state, process_noise, dt, count, per_step=per_step_noise, store_covariances=self.covariances is not None)
+        return (means, covariances), state
+
+    def record_stretch(self, t: int, stop: int, block: tuple[Tensor, Tensor | None], state: FilterState, predicted: bool,
+                       initialised: Tensor) -> None:
+        block_means, block_covariances = block
+        for series, values in ((self.means, block_means), (self.covariances, block_covariances), (self.prior_means, block_means)):
+            if series is not None and values is not None:
+                series.put_steps(t, values)
+                if not predicted:  # the stretch ends the sequence: its last step is the final state
+                    series.put(stop - 1, state.covariance if series is self.covariances else state.mean)
+        if self.innovations is not None and self.innovation_covs is not None:
+            batch, m = self.no_innovation.shape
+            self.innovations.put_steps(t, self.no_innovation.expand(stop - t, batch, m))
+            self.innovation_covs.put_steps(t, self.unit_covariance.expand(stop - t, batch, m, m))
+        self.initialised_steps[t:stop] = initialised
 
 
 class KalmanFilter(ABC):
@@ -350,118 +416,26 @@ class KalmanFilter(ABC):
         time_varying = noise.time_varying
         z_all, usable = self.model.sanitize(measurements, mask.bool())
 
-        any_usable = usable.any(0).tolist()
-        all_usable = usable.all(0).tolist()
         if initial is None:
-            has_any = usable.any(1)
-            first = torch.where(has_any, usable.to(torch.int8).argmax(1), torch.full_like(has_any, -1, dtype=torch.long))
-            init_steps = set(first[has_any].tolist())
-            noise0 = noise.at_step(0) if time_varying else noise
-            state = self.prior(batch, noise0.initial, dtype)
+            starts = None  # (each row's first usable measurement)
+            state = self.prior(batch, (noise.at_step(0) if time_varying else noise).initial, dtype)
             initialised = torch.zeros(batch, dtype=torch.bool, device=device)
         else:
-            first = torch.full((batch,), -1, dtype=torch.long, device=device)
-            init_steps = set()
+            starts = torch.zeros_like(usable)
             # symmetrised once: the structured EKF predict keeps a symmetric P symmetric, and makes
             # no symmetrising pass of its own (a symmetric P is returned unchanged, to the bit)
             state = FilterState(initial.mean.to(device, dtype), symmetrize(initial.covariance.to(device, dtype)))
             initialised = torch.ones(batch, dtype=torch.bool, device=device)
-
-        m, k, n = self.innovation_dim, self.covariance_dim, self.model.state_dim
         tracked = torch.is_grad_enabled() and any(
             t.requires_grad for t in (noise.process, noise.measurement, noise.initial, measurements)
         ) or (initial is not None and (initial.mean.requires_grad or initial.covariance.requires_grad))
-        means = _StepOutputs(steps, (batch, n), dtype, tracked)
-        covariances = _StepOutputs(steps, (batch, k, k), dtype, tracked) if store_covariances else None
-        innovations = _StepOutputs(steps, (batch, m), dtype, tracked) if store_innovations else None
-        innovation_covs = _StepOutputs(steps, (batch, m, m), dtype, tracked) if store_innovations else None
-        prior_means = _StepOutputs(steps, (batch, n), dtype, tracked) if store_innovations else None
-        updated_steps = torch.zeros(steps, batch, dtype=torch.bool, device=device)
-        initialised_steps = torch.zeros(steps, batch, dtype=torch.bool, device=device)
-        no_innovation = torch.zeros(batch, m, dtype=dtype, device=device)
-        unit_covariance = torch.eye(m, dtype=dtype, device=device).expand(batch, m, m)
-        rejections = torch.zeros(batch, dtype=torch.long, device=device)  # consecutive gated-out measurements per row
-        per_step = noise.steps() if time_varying else None
-        # stretch[t]: steps from t on (t >= 1) where no row has a measurement. They are predicted
-        # in one predict_steps call (nine steps in ten on ds1), together with the prediction of
-        # the step after them (whose update then starts from it)
-        stretch = [0] * (steps + 1)
-        for t in range(steps - 1, 0, -1):
-            stretch[t] = 0 if any_usable[t] else stretch[t + 1] + 1
-        resume, predicted = 0, False
-        for t in range(steps):
-            if t < resume:  # predicted in the stretch before
-                continue
-            count = stretch[t] + (t + stretch[t] < steps)  # the stretch's predictions, and the next step's
-            if stretch[t] and count > 1:
-                resume = t + stretch[t]
-                process_noise, per_step_noise = self._stretch_noise(noise, per_step, t, count)
-                block_means, block_covariances, state = self.predict_steps(
-                    state, process_noise, dt, count, per_step=per_step_noise, store_covariances=covariances is not None
-                )
-                predicted = resume < steps  # state: the next step's prediction; else the stretch's last
-                for series, values in ((means, block_means), (covariances, block_covariances), (prior_means, block_means)):
-                    if series is not None and values is not None:
-                        series.put_steps(t, values)
-                        if not predicted:  # the stretch ends the sequence: its last step is the final state
-                            series.put(resume - 1, state.covariance if series is covariances else state.mean)
-                if innovations is not None and innovation_covs is not None:
-                    innovations.put_steps(t, no_innovation.expand(resume - t, batch, m))
-                    innovation_covs.put_steps(t, unit_covariance.expand(resume - t, batch, m, m))
-                initialised_steps[t:resume] = initialised
-                continue
-            step_noise = per_step[t] if per_step is not None else noise
-            if t > 0 and not predicted:
-                state = self.predict(state, step_noise.process, dt)
-            predicted = False
-            if prior_means is not None:
-                prior_means.put(t, state.mean)
-            update_rows = usable[:, t]
-            if t in init_steps:
-                now = first == t
-                fresh = self.initial_state(z_all[:, t], step_noise.initial)
-                state = FilterState(_select(now, fresh.mean, state.mean), _select(now, fresh.covariance, state.covariance))
-                initialised = initialised | now
-                update_rows = update_rows & ~now
-                do_update = bool(update_rows.any())
-                every_row = False
-            else:
-                do_update = any_usable[t]
-                every_row = all_usable[t]
-            nu, S = no_innovation, unit_covariance
-            lost = None
-            if do_update:
-                posterior, nu_t, S_t = self.update(state, z_all[:, t], step_noise.measurement)
-                if self.gate is not None:  # rows whose innovation fails the gate keep their prior
-                    with torch.no_grad():
-                        passed = self.gate_accepts(nu_t.detach(), S_t.detach())
-                    tried = update_rows
-                    if not bool(passed[update_rows].all()):
-                        update_rows, every_row = update_rows & passed, False
-                    rejections, lost = count_rejections(rejections, tried, update_rows)
-                    lost = lost if bool(lost.any()) else None
-                if every_row:
-                    state, nu, S = posterior, nu_t, S_t
-                else:
-                    state = FilterState(
-                        _select(update_rows, posterior.mean, state.mean),
-                        _select(update_rows, posterior.covariance, state.covariance),
-                    )
-                    nu, S = _select(update_rows, nu_t, nu), _select(update_rows, S_t, S)
-                # no symmetrisation here: predict and update return symmetrised covariances
-            else:
-                update_rows = torch.zeros_like(update_rows)
-            if lost is not None:  # a lost track: re-initialised from this measurement
-                fresh = self.initial_state(z_all[:, t], step_noise.initial)
-                state = FilterState(_select(lost, fresh.mean, state.mean), _select(lost, fresh.covariance, state.covariance))
-            means.put(t, state.mean)
-            if covariances is not None:
-                covariances.put(t, state.covariance)
-            if innovations is not None and innovation_covs is not None:
-                innovations.put(t, nu)
-                innovation_covs.put(t, S)
-            updated_steps[t] = update_rows
-            initialised_steps[t] = initialised
+        steps_ = _KalmanSteps(self, noise, (batch, steps), dtype, device, tracked, store_covariances, store_innovations)
+        rejections = torch.zeros(batch, dtype=torch.long, device=device) if self.gate is not None else None
+        final = scan(steps_, Carry(state, initialised, rejections), z_all, usable, dt, starts=starts)
+        state = final.state
+        means, covariances, innovations, innovation_covs, prior_means = (
+            steps_.means, steps_.covariances, steps_.innovations, steps_.innovation_covs, steps_.prior_means)
+        updated_steps, initialised_steps = steps_.updated_steps, steps_.initialised_steps
         batch_first = lambda outputs: None if outputs is None else outputs.result().transpose(0, 1)  # noqa: E731
         return FilterResult(
             means=batch_first(means),
