@@ -75,10 +75,16 @@ def test_gate_lists_checks_and_rejects_unknown_ones(capsys: pytest.CaptureFixtur
 
 
 def test_gate_measures_one_check(capsys: pytest.CaptureFixture) -> None:
-    assert main(["bench", "gate", "--check", "online-step:manual-ekf", "--json"]) == 0
+    """A real measurement, reported as JSON, its verdict that of its last attempt. Whether it
+    passes depends on the machine's load (the other test worker's too), so the verdict is the
+    test command's next step (``fkn-bench bench gate --trips``), not asserted here; the exit
+    status follows it."""
+    code = main(["bench", "gate", "--check", "online-step:manual-ekf", "--json"])
     (outcome,) = json.loads(capsys.readouterr().out)
-    assert outcome["check"] == "online-step:manual-ekf" and outcome["passed"]
-    assert outcome["attempts"][0]["ratio"] >= outcome["min_ratio"]
+    assert outcome["check"] == "online-step:manual-ekf" and 1 <= len(outcome["attempts"]) <= 3
+    ratios = [attempt["ratio"] for attempt in outcome["attempts"]]
+    assert all(ratio > 0 for ratio in ratios) and all(ratio < outcome["min_ratio"] for ratio in ratios[:-1])
+    assert outcome["passed"] == (ratios[-1] >= outcome["min_ratio"]) and code == (0 if outcome["passed"] else 1)
 
 
 def test_bench_compile_readies_every_kernel(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
