@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 from pathlib import Path
 
@@ -89,14 +91,12 @@ def test_default_estimator_is_flexkalmannet_when_available(capsys: pytest.Captur
 
 
 def test_unavailable_estimator(capsys: pytest.CaptureFixture, tiny: str) -> None:
+    """Named, an estimator that does not build exits 2 with the reason; under ``--all`` it is
+    skipped with a message (:func:`run_all`)."""
     estimator_registry.register_estimator("needs-training", _unavailable)
     base = ["run", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "1", "--no-progress"]
     assert main([*base, "--estimator", "needs-training"]) == 2
     assert "not available for scenario tiny: FileNotFoundError: no trained parameters" in capsys.readouterr().err
-    assert main([*base, "--all", "--json"]) == 0
-    captured = capsys.readouterr()
-    assert "skipping needs-training on tiny" in captured.err
-    assert "needs-training" not in [e["estimator"] for e in json.loads(captured.out)["results"]]
 
 
 def _only_for_tiny(scenario=None, **_):
@@ -105,13 +105,52 @@ def _only_for_tiny(scenario=None, **_):
     return make_estimator("manual-ekf")
 
 
-def test_all_skips_only_the_unavailable_pairs(capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
-    estimator_registry.register_estimator("partly-trained", _only_for_tiny)
-    two = tmp_path / "two.toml"  # tiny and another as short, for which partly-trained does not build
-    two.write_text("[scenario.tiny]\nbase = \"ds1\"\nn_steps = 400\n[scenario.other]\nbase = \"ds1\"\nn_steps = 400\n")
-    document = _run_json(capsys, "--all", "--scenario", "tiny", "--scenario", "other", "--scenario-file", str(two),
-                         "--seeds", "1", "--no-progress", "--cut", "10")
-    pairs = [(e["estimator"], e["scenario"]) for e in document["results"]]
+@pytest.fixture(scope="module")
+def run_all(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """One ``run --all`` over two scenarios, shared by the tests of what ``--all`` runs and skips:
+    ``tiny`` (ds1, 2000 samples) and ``other`` (400), with three estimators registered on top of
+    the built-ins: ``needs-training`` builds for neither, ``partly-trained`` for ``tiny`` only,
+    ``late-arrival`` (registered after the built-ins were loaded) for both. Each cell's online
+    timing runs 5 ``step()`` calls once instead of 200 twice (the timing is not what these tests
+    check; ``test_json_document`` checks it). Returns the JSON document, stderr and the
+    estimators available for ``tiny``."""
+    from fkn_bench.harness import cell, resolve
+    from fkn_bench.scenarios import get_scenario
+
+    two = tmp_path_factory.mktemp("scenarios") / "two.toml"
+    two.write_text("[scenario.tiny]\nbase = \"ds1\"\nn_steps = 2000\n[scenario.other]\nbase = \"ds1\"\nn_steps = 400\n")
+    real_time_online = cell.time_online
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(scenario_registry, "_REGISTRY", dict(scenario_registry._REGISTRY))
+        estimator_names()
+        patch.setattr(estimator_registry, "_REGISTRY", dict(estimator_registry._REGISTRY))
+        patch.setattr(cell, "time_online", lambda estimator, measurements, dt: real_time_online(
+            estimator, measurements[:5], dt, passes=1))
+        estimator_registry.register_estimator("needs-training", _unavailable)
+        estimator_registry.register_estimator("partly-trained", _only_for_tiny)
+        estimator_registry.register_estimator("late-arrival", lambda scenario=None, **_: make_estimator("manual-mekf"),
+                                              overwrite=True)
+        with contextlib.redirect_stdout(io.StringIO()) as out, contextlib.redirect_stderr(io.StringIO()) as err:
+            code = main(["run", "--all", "--scenario", "tiny", "--scenario", "other", "--scenario-file", str(two),
+                         "--seeds", "1", "--no-progress", "--cut", "10", "--json"])
+        available = [r.name for r in resolve(None, [get_scenario("tiny")]) if r.available]
+    assert code == 0, err.getvalue()
+    return {"document": json.loads(out.getvalue()), "err": err.getvalue(), "available_on_tiny": available}
+
+
+def test_all_runs_every_available_estimator(run_all: dict) -> None:
+    available = run_all["available_on_tiny"]
+    assert [e["estimator"] for e in run_all["document"]["results"] if e["scenario"] == "tiny"] == available
+    assert "late-arrival" in available and {"manual-ekf", "oracle-ekf", "partly-trained"} <= set(available)
+
+
+def test_all_skips_an_unavailable_estimator_with_a_message(run_all: dict) -> None:
+    assert "skipping needs-training on tiny" in run_all["err"]
+    assert "needs-training" not in [e["estimator"] for e in run_all["document"]["results"]]
+
+
+def test_all_skips_only_the_unavailable_pairs(run_all: dict) -> None:
+    pairs = [(e["estimator"], e["scenario"]) for e in run_all["document"]["results"]]
     assert ("partly-trained", "tiny") in pairs and ("partly-trained", "other") not in pairs
     assert ("manual-ekf", "other") in pairs
 
@@ -120,20 +159,6 @@ def test_default_scenario_and_seeds() -> None:
     from fkn_bench.cli.run import DEFAULT_SCENARIO, DEFAULT_SEEDS
 
     assert DEFAULT_SCENARIO == "spin" and DEFAULT_SEEDS >= 20  # the headline: a prior family, not the paper's memorisable ds1
-
-
-def test_all_runs_every_available_estimator(capsys: pytest.CaptureFixture, tiny: str) -> None:
-    estimator_registry.register_estimator(
-        "late-arrival", lambda scenario=None, **_: make_estimator("manual-mekf"), overwrite=True
-    )
-    document = _run_json(capsys, "--all", "--scenario", "tiny", "--scenario-file", tiny, "--seeds", "1",
-                         "--no-progress")
-    from fkn_bench.harness import resolve
-    from fkn_bench.scenarios import get_scenario
-
-    available = [r.name for r in resolve(None, [get_scenario("tiny")]) if r.available]
-    assert [e["estimator"] for e in document["results"]] == available
-    assert "late-arrival" in available and {"manual-ekf", "oracle-ekf"} <= set(available)
 
 
 def test_unknown_estimator_exits_2_with_the_list(capsys: pytest.CaptureFixture) -> None:
