@@ -34,7 +34,7 @@ def _sequences(cv, batch: int, steps: int, seed: int) -> Sequences:  # noqa: ANN
 
 
 def test_nll_tuning_recovers_the_true_noise(balanced) -> None:
-    """20 000 samples (100 sequences of 200 steps, the first 10 steps of each cut) of a
+    """20 000 samples (200 sequences of 100 steps, the first 10 steps of each cut) of a
     constant-velocity model with known noise: minimising the innovation NLL of the EKF (the KF on
     a linear model) over the six log standard deviations, from unit starting values, recovers
     every standard deviation within 10%."""
@@ -42,7 +42,7 @@ def test_nll_tuning_recovers_the_true_noise(balanced) -> None:
     variant = ExtendedKalmanFilter(model=cv.torch_model())
     parameter_set = ParameterSet(variant.layout)
     model = DirectParameters(parameter_set)
-    data = SimpleNamespace(window=200, scenario=SimpleNamespace(dt=cv.dt), train=_sequences(cv, 100, 200, 0), val=_sequences(cv, 10, 200, 1))
+    data = SimpleNamespace(window=100, scenario=SimpleNamespace(dt=cv.dt), train=_sequences(cv, 200, 100, 0), val=_sequences(cv, 10, 100, 1))
     config = TrainConfig(objective="nll", optimizer="lbfgs", lbfgs_iterations=40, lr=1.0, epochs=3, patience=1, loss_cut=10)
     trainer = Trainer(model, variant, data, config)  # type: ignore[arg-type]
     trainer.fit(progress=False)
