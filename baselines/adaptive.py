@@ -35,7 +35,6 @@ two to 1e-12).
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
@@ -46,7 +45,8 @@ import numpy as np
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
-from fkn_bench.filters.base import FilterState, KalmanFilter, accept, count_rejections, gate_threshold
+from fkn_bench.filters.base import FilterState, KalmanFilter, gate_threshold
+from fkn_bench.filters.recursion import Carry, Proposal, scan
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.pose_twist import PoseTwistModel
@@ -223,38 +223,21 @@ def check_flag(name: str, value: bool) -> bool:
 
 # ---------------------------------------------------------------------------------------------
 # the recursion
-@dataclass(frozen=True, eq=False)
-class AdaptiveState:
-    """A batch of adaptive-filter states at one time (an immutable value).
+class AdaptiveState(NamedTuple):
+    """A batch of adaptive-filter states at one time (an immutable value; whether each row has
+    initialised and its gate rejections are the recursion's :class:`~fkn_bench.filters.recursion.Carry`).
 
     Attributes:
         x: ``(B, n)`` means.
         P: ``(B, n, n)`` covariances.
-        initialised: ``(B,)`` True once a sequence initialised from a measurement.
         since: ``(B,)`` predictions since the last update or initialisation.
         noise: the rule's adapted quantities (:data:`Noise`).
-        rejections: ``(B,)`` consecutive usable measurements not used (gated out or a failed
-            update) while a gate is set (None: none yet); see :meth:`AdaptiveKalmanFilter.set_gate`.
     """
 
     x: ArrayF
     P: ArrayF
-    initialised: ArrayB
     since: ArrayF
     noise: Mapping[str, ArrayF]
-    rejections: ArrayF | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class StepOutput:
-    """Per-step outputs of :meth:`AdaptiveKalmanFilter.step` (``B`` rows): the prior mean, the
-    innovation and its covariance (zero and identity in rows without an update; both None when
-    no row updated) and which rows updated."""
-
-    prior_mean: ArrayF
-    innovation: ArrayF | None
-    innovation_covariance: ArrayF | None
-    updated: ArrayB
 
 
 @dataclass(frozen=True, eq=False)
@@ -327,68 +310,10 @@ class AdaptiveKalmanFilter:
     covariance_dim = KalmanFilter.covariance_dim
     innovation_dim = KalmanFilter.innovation_dim
 
-    def initial_state(self, batch: int) -> AdaptiveState:
+    def prior(self, batch: int) -> AdaptiveState:
         """``batch`` sequences before their first measurement (the model's prior, ``P0``)."""
-        return AdaptiveState(
-            x=self.model.prior_state(batch, np.float64),
-            P=batched(self.P0, batch),
-            initialised=np.zeros(batch, dtype=bool),
-            since=np.zeros(batch),
-            noise=self.rule.initial(batch, self.Q0, self.R0),
-        )
-
-    def step(self, state: AdaptiveState, z: ArrayF, usable: ArrayB, dt: float, *, predict: bool = True) -> tuple[AdaptiveState, StepOutput]:
-        """One step of every row: predict over ``dt`` (unless ``predict`` is False, as at
-        ``t = 0``), then initialise or update the rows whose measurement ``z (B, m)`` is usable
-        (already sanitised by the model's ``sanitize``)."""
-        model, rule = self.model, self.rule
-        x, P, since, noise = state.x, state.P, state.since, state.noise
-        if predict:
-            predicted = ekf_predict(model, FilterState(x, P), rule.process_noise(noise), dt)
-            x, P = predicted.mean, predicted.covariance
-            since = since + 1.0
-        prior = x
-        if not usable.any():
-            return AdaptiveState(x, P, state.initialised, since, noise, state.rejections), StepOutput(prior, None, None, usable)
-        batch, m = x.shape[0], model.measurement_dim
-        nu = S = None
-        update_rows = usable & state.initialised
-        init_rows = usable & ~state.initialised
-        if self.gate is not None and update_rows.any():
-            update_rows = self._gated(update_rows, x, P, z, noise)
-        if update_rows.any():
-            every = bool(update_rows.all())
-            rows = slice(None) if every else np.flatnonzero(update_rows)
-            x_rows, P_rows = x[rows], P[rows]
-            z_rows = model.align(z[rows], x_rows)
-            nu_rows = z_rows - model.measure(x_rows)
-            ctx = UpdateContext(model, x_rows, P_rows, z_rows, nu_rows, np.maximum(since[rows], 1.0))
-            result, noise_rows, ok = self._guarded_update(ctx, {key: value if every else value[rows] for key, value in noise.items()})
-            if not ok.all():  # skipped rows: no innovation, and they count as not updated
-                nu_rows = np.where(ok[:, None], nu_rows, 0.0)
-                update_rows = update_rows.copy()
-                update_rows[np.flatnonzero(update_rows)[~ok]] = False
-            if every:
-                x, P, noise, nu, S = result.x, result.P, noise_rows, nu_rows, result.S
-                since = np.where(update_rows, 0.0, since)
-            else:
-                nu, S = np.zeros((batch, m)), batched(np.eye(m), batch)
-                x, P = x.copy(), P.copy()
-                x[rows], P[rows], nu[rows], S[rows] = result.x, result.P, nu_rows, result.S
-                noise = _put(noise, rows, noise_rows)
-                since = np.where(update_rows, 0.0, since)
-        rejections = state.rejections
-        if self.gate is not None:  # a lost track (set_gate) re-initialises like a first measurement
-            counts = np.zeros(batch, dtype=np.int64) if rejections is None else rejections
-            rejections, lost = count_rejections(counts, usable & state.initialised, update_rows)
-            init_rows = init_rows | lost
-        if init_rows.any():
-            x, P = x.copy(), P.copy()
-            x[init_rows] = model.initial_state(z[init_rows])
-            P[init_rows] = self.P0
-            since = np.where(init_rows, 0.0, since)
-        new = AdaptiveState(x, P, state.initialised | usable, since, noise, rejections)
-        return new, StepOutput(prior, nu, S, update_rows)
+        return AdaptiveState(self.model.prior_state(batch, np.float64), batched(self.P0, batch), np.zeros(batch),
+                             self.rule.initial(batch, self.Q0, self.R0))
 
     gate: float | None = None
     """Chi-square gate level (:meth:`set_gate`); None: no gate."""
@@ -403,21 +328,6 @@ class AdaptiveKalmanFilter:
         that is not used (gated out, or a failed update) re-initialises the row's state from it
         (mean from the measurement, ``P0``; the adapted noise is kept): a lost track."""
         self.gate, self._gate_threshold = gate_threshold(level, self.model.measurement_dim)
-
-    def _gated(self, update_rows: ArrayB, x: ArrayF, P: ArrayF, z: ArrayF, noise: Noise) -> ArrayB:
-        """``update_rows`` without the rows whose innovation fails the gate."""
-        rows = np.flatnonzero(update_rows)
-        x_rows, P_rows = x[rows], P[rows]
-        nu = self.model.align(z[rows], x_rows) - self.model.measure(x_rows)
-        R = self.rule.measurement_noise({key: value[rows] for key, value in noise.items()})
-        with np.errstate(over="ignore", invalid="ignore"):
-            S = projected_covariance(self.model, P_rows) + R  # H P- H^T + R: the gain's S, without the update
-        passed = accept(nu, S, self._gate_threshold)
-        if passed.all():
-            return update_rows
-        kept = update_rows.copy()
-        kept[rows[~passed]] = False
-        return kept
 
     def _guarded_update(self, ctx: UpdateContext, noise: Noise) -> tuple[KalmanUpdate, Noise, ArrayB]:
         """The rule's update of ``ctx``'s rows, and ``ok (b,)``: rows whose update failed (the
@@ -456,43 +366,111 @@ class AdaptiveKalmanFilter:
                     value[one] = new_row[key]
         return KalmanUpdate(x, P, S, K), out, ok
 
+    def steps(self) -> _AdaptiveSteps:
+        """The filter's step functions for the one recursion
+        (:func:`fkn_bench.filters.recursion.scan` and the online ``advance``)."""
+        return _AdaptiveSteps(self)
+
     def run(self, measurements: ArrayF, mask: ArrayB, *, dt: float) -> AdaptiveResult:
         """Filter a batch of sequences ``measurements (B, T, m)`` with validity ``mask (B, T)``."""
         measurements = np.asarray(measurements, dtype=float)
         mask = np.asarray(mask, dtype=bool)
-        m, n = self.model.measurement_dim, self.model.state_dim
+        m = self.model.measurement_dim
         if measurements.ndim != 3 or measurements.shape[-1] != m:
             raise ValueError(f"measurements must have shape (B, T, {m}) (got {measurements.shape})")
         if mask.shape != measurements.shape[:2]:
             raise ValueError(f"mask must have shape {measurements.shape[:2]} (got {mask.shape})")
         batch, steps, _ = measurements.shape
         z_all, usable = self.model.sanitize(measurements, mask)
-        # time-major buffers: one contiguous block per step
-        means = np.empty((steps, batch, n))
-        covariances = np.empty((steps, batch, n, n))
-        innovations = np.empty((steps, batch, m))
-        innovation_covs = np.empty((steps, batch, m, m))
-        prior_means = np.empty((steps, batch, n))
-        updated = np.empty((steps, batch), dtype=bool)
-        initialised = np.empty((steps, batch), dtype=bool)
-        r_diag = np.empty((steps, batch, m))
-        q_diag = np.empty((steps, batch, n)) if self.rule.adapts_q else None
-        state = self.initial_state(batch)
-        for t in range(steps):
-            state, out = self.step(state, z_all[:, t], usable[:, t], dt, predict=t > 0)
-            means[t], covariances[t] = state.x, state.P
-            prior_means[t] = out.prior_mean
-            if out.innovation is None or out.innovation_covariance is None:
-                innovations[t], innovation_covs[t] = 0.0, np.eye(m)
-            else:
-                innovations[t], innovation_covs[t] = out.innovation, out.innovation_covariance
-            updated[t], initialised[t] = out.updated, state.initialised
-            r_diag[t] = np.diagonal(self.rule.measurement_noise(state.noise), axis1=1, axis2=2)
-            if q_diag is not None:
-                q_diag[t] = np.diagonal(self.rule.process_noise(state.noise), axis1=1, axis2=2)
-        buffers = (means, covariances, innovations, innovation_covs, prior_means, updated, initialised,
-                   r_diag, q_diag)
-        return AdaptiveResult(*(None if a is None else np.swapaxes(a, 0, 1) for a in buffers), final=state)
+        recorder = _AdaptiveSteps(self, steps=steps, batch=batch)
+        rejections = np.zeros(batch, dtype=np.int64) if self.gate is not None else None
+        final = scan(recorder, Carry(self.prior(batch), np.zeros(batch, dtype=bool), rejections), z_all, usable, dt)
+        buffers = (recorder.means, recorder.covariances, recorder.innovations, recorder.innovation_covs,
+                   recorder.prior_means, recorder.updated, recorder.initialised, recorder.r_diag, recorder.q_diag)
+        return AdaptiveResult(*(None if a is None else np.swapaxes(a, 0, 1) for a in buffers), final=final.state)
+
+
+class _AdaptiveSteps:
+    """An :class:`AdaptiveKalmanFilter`'s step functions (module docstring of
+    :mod:`fkn_bench.filters.recursion`): the EKF prediction with the rule's ``Q``; the gate's
+    innovation with the rule's current ``R`` (``S = H P- H^T + R``, before the rule adapts it, so a
+    gross outlier neither moves the state nor feeds the noise estimates); the rule's guarded update
+    of the accepted rows; initialisation from the measurement with ``P0``, the adapted noise kept.
+    With ``steps``, it stores the per-step outputs of :meth:`AdaptiveKalmanFilter.run` (time-major)."""
+
+    def __init__(self, filt: AdaptiveKalmanFilter, *, steps: int = 0, batch: int = 0) -> None:
+        self.filter, self.model, self.rule = filt, filt.model, filt.rule
+        self.nis_threshold = filt._gate_threshold if filt.gate is not None else math.inf
+        if steps:
+            n, m = self.model.state_dim, self.model.measurement_dim
+            self.means, self.covariances = np.empty((steps, batch, n)), np.empty((steps, batch, n, n))
+            self.innovations, self.innovation_covs = np.zeros((steps, batch, m)), np.empty((steps, batch, m, m))
+            self.innovation_covs[:] = np.eye(m)
+            self.prior_means = np.empty((steps, batch, n))
+            self.updated, self.initialised = np.zeros((steps, batch), dtype=bool), np.empty((steps, batch), dtype=bool)
+            self.r_diag = np.empty((steps, batch, m))
+            self.q_diag = np.empty((steps, batch, n)) if self.rule.adapts_q else None
+        self._recording = bool(steps)
+
+    def predict(self, state: AdaptiveState, t: int, dt: float) -> AdaptiveState:
+        predicted = ekf_predict(self.model, FilterState(state.x, state.P), self.rule.process_noise(state.noise), dt)
+        return AdaptiveState(predicted.mean, predicted.covariance, state.since + 1.0, state.noise)
+
+    def initial(self, state: AdaptiveState, z: ArrayF, t: int) -> AdaptiveState:
+        batch = z.shape[0]
+        return AdaptiveState(self.model.initial_state(z), batched(self.filter.P0, batch), np.zeros(batch), state.noise)
+
+    def propose(self, state: AdaptiveState, z: ArrayF, rows: ArrayB, t: int) -> Proposal:
+        if self.nis_threshold == math.inf:
+            return Proposal(None)
+        index = np.flatnonzero(rows)
+        x_rows, P_rows = state.x[index], state.P[index]
+        R = self.rule.measurement_noise({key: value[index] for key, value in state.noise.items()})
+        batch, m = state.x.shape[0], self.model.measurement_dim
+        nu, S = np.zeros((batch, m)), batched(np.eye(m), batch)
+        nu[index] = self.model.align(z[index], x_rows) - self.model.measure(x_rows)
+        with np.errstate(over="ignore", invalid="ignore"):
+            S[index] = projected_covariance(self.model, P_rows) + R  # H P- H^T + R: the gain's S, without the update
+        return Proposal(None, nu, S)
+
+    def commit(self, state: AdaptiveState, z: ArrayF, rows: ArrayB, proposal: Proposal, t: int) -> tuple[Any, ...]:
+        """The rule's update of ``rows`` (a failed row keeps its prediction and its noise estimates,
+        zero innovation, identity innovation covariance, and counts as not updated)."""
+        model = self.model
+        x, P, since, noise = state
+        batch, m = x.shape[0], model.measurement_dim
+        every = bool(rows.all())
+        index = slice(None) if every else np.flatnonzero(rows)
+        x_rows, P_rows = x[index], P[index]
+        z_rows = model.align(z[index], x_rows)
+        nu_rows = z_rows - model.measure(x_rows)
+        ctx = UpdateContext(model, x_rows, P_rows, z_rows, nu_rows, np.maximum(since[index], 1.0))
+        result, noise_rows, ok = self.filter._guarded_update(ctx, {key: value if every else value[index] for key, value in noise.items()})
+        used = rows
+        if not ok.all():  # skipped rows: no innovation, and they count as not updated
+            nu_rows = np.where(ok[:, None], nu_rows, 0.0)
+            used = rows.copy()
+            used[np.flatnonzero(rows)[~ok]] = False
+        if every:
+            return AdaptiveState(result.x, result.P, np.where(used, 0.0, since), noise_rows), used, (nu_rows, result.S)
+        nu, S = np.zeros((batch, m)), batched(np.eye(m), batch)
+        x, P = x.copy(), P.copy()
+        x[index], P[index], nu[index], S[index] = result.x, result.P, nu_rows, result.S
+        return AdaptiveState(x, P, np.where(used, 0.0, since), _put(noise, index, noise_rows)), used, (nu, S)
+
+    def record(self, t: int, prior: AdaptiveState, state: AdaptiveState, innovation: tuple[ArrayF, ArrayF] | None,
+               used: ArrayB | None, initialised: ArrayB) -> None:
+        if not self._recording:
+            return
+        self.means[t], self.covariances[t], self.prior_means[t] = state.x, state.P, prior.x
+        if innovation is not None:
+            self.innovations[t], self.innovation_covs[t] = innovation
+        if used is not None:
+            self.updated[t] = used
+        self.initialised[t] = initialised
+        self.r_diag[t] = np.diagonal(self.rule.measurement_noise(state.noise), axis1=1, axis2=2)
+        if self.q_diag is not None:
+            self.q_diag[t] = np.diagonal(self.rule.process_noise(state.noise), axis1=1, axis2=2)
 
 
 def _finite_update(result: KalmanUpdate, noise: Noise) -> ArrayB:
@@ -505,7 +483,6 @@ def _finite_update(result: KalmanUpdate, noise: Noise) -> ArrayB:
 
 # ---------------------------------------------------------------------------------------------
 # the estimator
-_NO_MEASUREMENT, _NOT_USABLE, _USABLE = np.zeros((1, 7)), np.zeros(1, dtype=bool), np.ones(1, dtype=bool)
 
 
 class AdaptiveEKFEstimator(RecursiveEstimator):
@@ -589,22 +566,10 @@ class AdaptiveEKFEstimator(RecursiveEstimator):
         return restart_diverged(estimates, lambda zs, ms: self.estimate(zs, ms, step), z, m)
 
     def _online_prior(self) -> AdaptiveState:
-        return self.filter.initial_state(1)
+        return self.filter.prior(1)
 
-    def _online_predict(self, state: AdaptiveState, dt: float) -> AdaptiveState:
-        return self.filter.step(state, _NO_MEASUREMENT, _NOT_USABLE, dt)[0]
-
-    def _online_update(self, state: AdaptiveState, z: ArrayF) -> AdaptiveState:
-        new, output = self.filter.step(state, z, _USABLE, 0.0, predict=False)
-        if not output.updated[0]:  # gated out (or a failed update, skipped): the state as it was
-            return state
-        return new
-
-    def _online_initial(self, state: AdaptiveState, z: ArrayF) -> AdaptiveState:
-        # AdaptiveKalmanFilter.step initialises a row that is not initialised, without an update
-        # (a lost track's re-initialisation too: the row marked uninitialised first)
-        fresh = dataclasses.replace(state, initialised=np.zeros(1, dtype=bool), rejections=None)
-        return self.filter.step(fresh, z, _USABLE, 0.0, predict=False)[0]
+    def _online_steps(self) -> _AdaptiveSteps:
+        return self.filter.steps()
 
     def _online_report(self, state: AdaptiveState) -> tuple[ArrayF, ArrayF]:
         return state.x[0], state.P[0]

@@ -42,7 +42,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from fkn_bench.filters.base import GATE_REINITIALISE_AFTER, check_dt
+from fkn_bench.filters.base import check_dt
+from fkn_bench.filters.recursion import Carry, Proposal, Steps, advance
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 from fkn_bench.inputs import real_array, real_number
 from fkn_bench.io import read_json, write_json_atomic
@@ -373,13 +374,37 @@ means anything, and one over ~1e308 s overflows."""
 
 
 class OnlineState(NamedTuple):
-    """An online estimator's state after a step (an immutable value): the time (s), the filter's
-    own state (e.g. a batch-1 :class:`~fkn_bench.filters.FilterState`) and whether the sequence
-    has initialised."""
+    """An online estimator's state after a step (an immutable value): the time (s) and the
+    recursion's carry (:class:`~fkn_bench.filters.recursion.Carry`: the filter's own batch-1
+    state, whether the sequence has initialised, its gate rejections)."""
 
     time: float
-    state: Any
-    initialised: bool
+    carry: Carry
+
+
+class _FilterSteps:
+    """The default online step functions: ``estimator.filter`` (a
+    :class:`~fkn_bench.filters.KalmanFilter`) on numpy batch-1 arrays, with the step's noise
+    ``estimator._online_noise = (Q, R, P0)`` read at every call (it may change per step)."""
+
+    def __init__(self, estimator: Any) -> None:
+        self.estimator, self.filter = estimator, estimator.filter
+        self.nis_threshold = self.filter._gate_threshold if self.filter.gate is not None else math.inf
+
+    def predict(self, state: Any, t: int, dt: float) -> Any:
+        return self.filter.predict(state, self.estimator._online_noise[0], dt)
+
+    def initial(self, state: Any, z: ArrayF, t: int) -> Any:
+        return self.filter.initial_state(z, self.estimator._online_noise[2])
+
+    def propose(self, state: Any, z: ArrayF, rows: ArrayB, t: int) -> Proposal:
+        return Proposal(*self.filter.update(state, z, self.estimator._online_noise[1]))
+
+    def commit(self, state: Any, z: ArrayF, rows: ArrayB, proposal: Proposal, t: int) -> tuple[Any, ArrayB]:
+        return proposal.state, rows
+
+    def record(self, *args: Any) -> None:
+        pass
 
 
 class RecursiveEstimator(Estimator):
@@ -392,13 +417,13 @@ class RecursiveEstimator(Estimator):
     from ``dt`` by more than :data:`TIME_TOLERANCE` is predicted over its actual length. A refused
     step (a bad ``time``, ``valid`` or ``pose``) leaves the estimator as it was, so the next
     valid step continues the sequence. The measurement is cleaned by :meth:`_online_sanitize`
-    (the model's rule; unusable measurements skip the update). The first step starts from
-    :meth:`_online_prior` without a prediction; later steps predict first. The sequence
-    initialises at its first usable measurement (:meth:`_online_initial`; that measurement is not
-    used again in an update); later usable measurements update.
-
-    The ``_online_*`` hooks step a filter variant on numpy arrays by default; subclasses with
-    another filter state override them. Measurements reach them sanitised, as ``(1, 7)`` arrays.
+    (the model's rule; unusable measurements skip the update). Each step is one iteration, at
+    batch 1, of the project's one recursion (:func:`fkn_bench.filters.recursion.advance`: the
+    first step starts from :meth:`_online_prior` without a prediction, later steps predict first;
+    the sequence initialises at its first usable measurement, later ones update, a chi-square gate
+    and the lost-track restart as in the batch run) on the step functions of
+    :meth:`_online_steps`: by default the filter variant's on numpy arrays; an estimator with
+    another state returns its own. Measurements reach them sanitised, as ``(1, 7)`` arrays.
     """
 
     _dt: float | None = None
@@ -416,7 +441,6 @@ class RecursiveEstimator(Estimator):
         self._dt = step
         self._online = None
         self.restarts = 0
-        self._gate_rejections = 0
 
     def step(self, observation: Any) -> Estimate:
         if self._dt is None:
@@ -424,6 +448,7 @@ class RecursiveEstimator(Estimator):
         pose, time = parse_observation(observation)
         z = None if pose is None else self._online_sanitize(pose[None])
         previous = self._online
+        interval = self._dt
         if previous is None:
             now = 0.0 if time is None else time
         else:
@@ -439,49 +464,40 @@ class RecursiveEstimator(Estimator):
             if abs(interval - self._dt) <= TIME_TOLERANCE:
                 interval = self._dt
         self._online_observe(z)  # after the checks: a refused step leaves the estimator as it was
-        if previous is None:
-            state, initialised = self._online_prior(), False
-        else:
-            state, initialised = self._online_predict(previous.state, interval), previous.initialised
-        updated = False
-        if z is not None:
-            if initialised:
-                updated_state = self._online_update(state, z)
-                updated = updated_state is not state  # (the same object: gated out, or a failed update)
-                state = self._online_gate_bookkeeping(state, z) if not updated else updated_state
-                if updated:
-                    self._gate_rejections = 0
-            else:
-                state, initialised = self._online_initial(state, z), True
-        mean, covariance = self._online_report(state)
+        steps = self._online_steps()
+        carry = self._online_start(steps) if previous is None else previous.carry
+        started = bool(carry.initialised[0])
+        usable = _NONE if z is None else _ONE
+        starts = usable if z is not None and not started else _NONE
+        carry, used = advance(steps, carry, _NO_POSE if z is None else z, usable, starts, 0, interval,
+                              predict=previous is not None, any_start=starts is _ONE,
+                              any_update=z is not None and started, all_update=z is not None and started)
+        updated = used is not None and bool(used[0])
+        mean, covariance = self._online_report(carry.state)
         if not _reportable(mean, covariance):
             # diverged (module docstring): restart from the prior, initialising from this
             # step's measurement when it is usable
-            state, initialised, updated = self._online_prior(), False, False
+            carry, updated = self._online_start(steps), False
             if z is not None:
-                state, initialised = self._online_initial(state, z), True
+                carry = carry._replace(state=steps.initial(carry.state, z, 0), initialised=_ONE)
             self.restarts += 1
-            self._gate_rejections = 0
-            mean, covariance = self._online_report(state)
-        self._online = OnlineState(now, state, initialised)
+            mean, covariance = self._online_report(carry.state)
+        self._online = OnlineState(now, carry)
         mean = mean.copy()
         w, x, y, z = mean[0:4].tolist()
         mean[0:4] /= math.sqrt(w * w + x * x + y * y + z * z)
-        return Estimate(time=now, mean=mean, native_covariance=covariance, initialised=initialised, updated=updated)
+        return Estimate(time=now, mean=mean, native_covariance=covariance, initialised=bool(carry.initialised[0]),
+                        updated=updated)
 
-    _gate_rejections: int = 0
+    def _online_start(self, steps: Steps) -> Carry:
+        """The carry of a new sequence: the prior, not initialised, no gate rejections."""
+        gated = steps.nis_threshold != math.inf
+        return Carry(self._online_prior(), _NONE, np.zeros(1, dtype=np.int64) if gated else None)
 
-    def _online_gate_bookkeeping(self, state: Any, z: ArrayF) -> Any:
-        """After a usable measurement that was not used: with a chi-square gate on the filter,
-        the :data:`~fkn_bench.filters.base.GATE_REINITIALISE_AFTER`-th in a row re-initialises
-        the state from it (a lost track, as the batch run does); else ``state`` as it is."""
-        if getattr(getattr(self, "filter", None), "gate", None) is None:
-            return state
-        self._gate_rejections += 1
-        if self._gate_rejections < GATE_REINITIALISE_AFTER:
-            return state
-        self._gate_rejections = 0
-        return self._online_initial(state, z)
+    def _online_steps(self) -> Steps:
+        """The step functions of the online recursion (batch 1); by default the filter's
+        (:class:`_FilterSteps`); estimators with another state return their own."""
+        return _FilterSteps(self)
 
     def _online_sanitize(self, z: ArrayF) -> ArrayF | None:
         """The measurement ``(1, 7)`` cleaned by the model's rule, or None when unusable."""
@@ -491,29 +507,14 @@ class RecursiveEstimator(Estimator):
     def _online_observe(self, z: ArrayF | None) -> None:
         """Called first in every step with the sanitised measurement (None when unusable)."""
 
-    # default hooks: a filter variant (``self.filter``, a :class:`~fkn_bench.filters.KalmanFilter`)
-    # stepped on numpy arrays with the step's noise ``self._online_noise = (Q, R, P0)``
+    # the default step functions: a filter variant (``self.filter``, a
+    # :class:`~fkn_bench.filters.KalmanFilter`) stepped on numpy arrays with the step's noise
+    # ``self._online_noise = (Q, R, P0)``
     _online_noise: tuple[ArrayF, ArrayF, ArrayF]
 
     def _online_prior(self) -> Any:
         """The filter state before the first step's measurement."""
         return self.filter.prior(1, self._online_noise[2], np.float64)  # type: ignore[attr-defined]
-
-    def _online_predict(self, state: Any, dt: float) -> Any:
-        """The state predicted over ``dt`` seconds."""
-        return self.filter.predict(state, self._online_noise[0], dt)  # type: ignore[attr-defined]
-
-    def _online_initial(self, state: Any, z: ArrayF) -> Any:
-        """The state initialised from the first usable measurement."""
-        return self.filter.initial_state(z, self._online_noise[2])  # type: ignore[attr-defined]
-
-    def _online_update(self, state: Any, z: ArrayF) -> Any:
-        """The state updated with a usable measurement; ``state`` itself (the same object) when
-        the filter's chi-square gate rejects the update (:meth:`KalmanFilter.set_gate`)."""
-        posterior, nu, S = self.filter.update(state, z, self._online_noise[1])  # type: ignore[attr-defined]
-        if self.filter.gate is not None and not bool(self.filter.gate_accepts(nu, S)[0]):  # type: ignore[attr-defined]
-            return state
-        return posterior
 
     def _online_report(self, state: Any) -> tuple[ArrayF, ArrayF]:
         """The mean ``(13,)`` and the native covariance (read-only: the steps are pure)."""
@@ -521,6 +522,10 @@ class RecursiveEstimator(Estimator):
 
 
 _ONE = np.ones(1, dtype=bool)
+_NONE = np.zeros(1, dtype=bool)
+_NO_POSE = np.zeros((1, 7))
+for _constant in (_ONE, _NONE, _NO_POSE):
+    _constant.flags.writeable = False
 
 
 def _reportable(mean: ArrayF, covariance: ArrayF | None) -> bool:

@@ -253,7 +253,8 @@ class _KalmanSteps:
             nu, S = innovation if innovation is not None else (self.no_innovation, self.unit_covariance)
             self.innovations.put(t, nu)
             self.innovation_covs.put(t, S)
-        self.updated_steps[t] = used
+        if used is not None:
+            self.updated_steps[t] = used
         self.initialised_steps[t] = initialised
 
     def predict_steps(self, state: FilterState, t: int, count: int, dt: float) -> tuple[tuple[Tensor, Tensor | None], FilterState]:

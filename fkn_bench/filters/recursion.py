@@ -8,9 +8,12 @@ tuples of arrays, batch first; numpy or torch), collected in a :class:`Steps` ob
 * ``propose(state, z, rows, t)``: the update of the ``rows`` with a usable measurement, as a
   :class:`Proposal` (the posterior, or None when :meth:`Steps.commit` computes it, and the
   innovation ``nu (B, m)`` with its covariance ``S (B, m, m)``, or None);
-* ``commit(state, z, rows, proposal, t)``: the posterior of the accepted ``rows`` and the rows
-  actually updated (a filter may refuse a row whose update failed);
-* ``record(t, prior, state, innovation, used, initialised)``: stores what the filter reports.
+* ``commit(state, z, rows, proposal, t)``: ``(posterior, used)`` or ``(posterior, used,
+  (nu, S))``: the posterior of the accepted ``rows``, the rows actually updated (a filter may
+  refuse a row whose update failed) and, optionally, the innovation to report (default: the
+  proposal's);
+* ``record(t, prior, state, innovation, used, initialised)``: stores what the filter reports
+  (``innovation`` None where no row updated, ``used`` None where none did).
 
 :func:`advance` applies the rules to one step of a batch, :func:`scan` to a whole sequence:
 
@@ -132,7 +135,7 @@ class Steps(Protocol):
 
     def propose(self, state: Any, z: Any, rows: Any, t: int) -> Proposal: ...
 
-    def commit(self, state: Any, z: Any, rows: Any, proposal: Proposal, t: int) -> tuple[Any, Any]: ...
+    def commit(self, state: Any, z: Any, rows: Any, proposal: Proposal, t: int) -> tuple[Any, ...]: ...
 
     def record(self, t: int, prior: Any, state: Any, innovation: tuple[Any, Any] | None, used: Any, initialised: Any) -> None: ...
 
@@ -175,9 +178,10 @@ def advance(steps: Steps, carry: Carry, z: Any, usable: Any, starts: Any, t: int
             any_start: bool | None = None, any_update: bool | None = None, all_update: bool | None = None) -> tuple[Carry, Any]:
     """One step of the recursion (module docstring) for a batch: ``z (B, m)`` sanitised
     measurements, ``usable (B,)`` which are usable, ``starts (B,)`` the rows initialising now
-    (their first usable measurement). Returns the new carry and the rows updated. The optional
-    booleans are ``starts.any()``, ``(usable & ~starts).any()`` and ``.all()`` when the caller
-    knows them (a scan computes them for all steps at once)."""
+    (their first usable measurement; usable too). Returns the new carry and the rows updated
+    (None: none). The optional booleans are ``starts.any()``, ``(usable & ~starts).any()`` and
+    ``.all()`` when the caller knows them (a scan computes them for all steps at once; the online
+    step of one sequence knows them without looking at arrays)."""
     state, initialised, rejections = carry
     if predict:
         state = steps.predict(state, t, dt)
@@ -186,9 +190,11 @@ def advance(steps: Steps, carry: Carry, z: Any, usable: Any, starts: Any, t: int
         any_start = bool(starts.any())
     rows = usable & ~starts if any_start else usable
     if any_start:
-        state = select(starts, steps.initial(state, z, t), state)
+        fresh = steps.initial(state, z, t)
+        every_start = bool(starts.all())
+        state = fresh if every_start else select(starts, fresh, state)
         initialised = initialised | starts
-        any_update, all_update = bool(rows.any()), False
+        any_update, all_update = (False, False) if every_start else (bool(rows.any()), False)
     elif any_update is None:
         any_update, all_update = bool(rows.any()), bool(rows.all())
     used, innovation, lost = None, None, None
@@ -199,20 +205,25 @@ def advance(steps: Steps, carry: Carry, z: Any, usable: Any, starts: Any, t: int
             passed = accept(_detached(proposal.innovation), _detached(proposal.innovation_covariance), steps.nis_threshold)
             if not bool(passed[rows].all()):
                 rows, every = rows & passed, False
-        posterior, used = steps.commit(state, z, rows, proposal, t)
+        committed = steps.commit(state, z, rows, proposal, t) if bool(rows.any()) else (state, rows, None)
+        posterior, used = committed[0], committed[1]
         if used is not rows:
             every = every and bool(used.all())
         if steps.nis_threshold != math.inf:
             rejections, lost = count_rejections(rejections, tried, used)
             lost = lost if bool(lost.any()) else None
-        state = posterior if every else select(used, posterior, state)
-        if proposal.innovation is not None:
-            nu, S = proposal.innovation, proposal.innovation_covariance
+        if every:
+            state = posterior
+        elif bool(used.any()):
+            state = select(used, posterior, state)
+        reported = committed[2] if len(committed) > 2 and committed[2] is not None else (
+            (proposal.innovation, proposal.innovation_covariance) if proposal.innovation is not None else None)
+        if reported is not None:
+            nu, S = reported
             innovation = (nu, S) if every else (select(used, nu, _zeros_like(nu)), select(used, S, _eye_like(S)))
     if lost is not None:  # a lost track: re-initialised from this measurement
-        state = select(lost, steps.initial(state, z, t), state)
-    if used is None:
-        used = _zeros_like(usable)
+        fresh = steps.initial(state, z, t)
+        state = fresh if bool(lost.all()) else select(lost, fresh, state)
     steps.record(t, prior, state, innovation, used, initialised)
     return Carry(state, initialised, rejections), used
 

@@ -24,6 +24,7 @@ learns no measurement noise), so no NIS (NaN).
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
@@ -31,6 +32,7 @@ import numpy as np
 import torch
 
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
+from fkn_bench.filters.recursion import Proposal
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error, with_unit_quaternion
 from fkn_bench.kalmannet.checkpoint import model_from_checkpoint, recursive_model_from_checkpoint
 from fkn_bench.kalmannet.recursion import KalmanNet, KalmanNetState
@@ -44,6 +46,34 @@ from fkn_bench.types import ArrayB, ArrayF
 __all__ = ["KalmanNetEstimator", "kalmannet_factory", "RecursiveKalmanNetEstimator", "recursive_kalmannet_factory"]
 
 _ONE = np.ones(1, dtype=bool)
+
+
+class _OnlineSteps:
+    """A KalmanNet-family network's step functions for the online recursion (batch 1): numpy
+    measurements in, torch states, no gradients (no gate: the learned gain is the update)."""
+
+    nis_threshold = math.inf
+
+    def __init__(self, net: Any) -> None:
+        self.net = net
+
+    def predict(self, state: Any, t: int, dt: float) -> Any:
+        with torch.no_grad():
+            return self.net.predict(state, dt)
+
+    def initial(self, state: Any, z: ArrayF, t: int) -> Any:
+        with torch.no_grad():
+            return self.net.initial(state, torch.from_numpy(z))
+
+    def propose(self, state: Any, z: ArrayF, rows: ArrayB, t: int) -> Proposal:
+        with torch.no_grad(), torch_threads():
+            return Proposal(self.net.update(state, torch.from_numpy(z)))
+
+    def commit(self, state: Any, z: ArrayF, rows: ArrayB, proposal: Proposal, t: int) -> tuple[Any, ArrayB]:
+        return proposal.state, rows
+
+    def record(self, *args: Any) -> None:
+        pass
 
 
 class KalmanNetEstimator(RecursiveEstimator):
@@ -112,17 +142,8 @@ class KalmanNetEstimator(RecursiveEstimator):
     def _online_prior(self) -> KalmanNetState:
         return self.net.prior(1, torch.float64)
 
-    def _online_predict(self, state: KalmanNetState, dt: float) -> KalmanNetState:
-        with torch.no_grad():
-            return self.net.predict(state, dt)
-
-    def _online_initial(self, state: KalmanNetState, z: ArrayF) -> KalmanNetState:
-        with torch.no_grad():
-            return self.net.initial(state, torch.from_numpy(z))
-
-    def _online_update(self, state: KalmanNetState, z: ArrayF) -> KalmanNetState:
-        with torch.no_grad(), torch_threads():
-            return self.net.update(state, torch.from_numpy(z))
+    def _online_steps(self) -> _OnlineSteps:
+        return _OnlineSteps(self.net)
 
     def _online_report(self, state: KalmanNetState) -> tuple[ArrayF, None]:
         return state.mean[0].numpy(), None

@@ -124,9 +124,9 @@ class _Recorder:
     def commit(self, state: Any, z: Tensor, rows: Tensor, proposal: Proposal, t: int) -> tuple[Any, Tensor]:
         return proposal.state, rows
 
-    def record(self, t: int, prior: Any, state: Any, innovation: Any, used: Tensor, initialised: Tensor) -> None:
+    def record(self, t: int, prior: Any, state: Any, innovation: Any, used: Tensor | None, initialised: Tensor) -> None:
         self.records.append(self.record_state(state))
-        self.updated.append(used)
+        self.updated.append(torch.zeros_like(initialised) if used is None else used)
         self.initialised.append(initialised)
 
 

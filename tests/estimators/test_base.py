@@ -469,15 +469,17 @@ def test_online_step_restarts_a_state_that_stopped_being_finite(monkeypatch: pyt
     estimator.reset(dt=0.1)
     pose = np.array([1.0, 0.0, 0.0, 0.0, 1.0, 2.0, 3.0])
     estimator.step(pose)
-    real_predict = type(estimator)._online_predict
-    monkeypatch.setattr(type(estimator), "_online_predict", lambda self, state, dt: type(state)(np.full_like(state.mean, np.nan), state.covariance))
+    from fkn_bench.estimators.base import _FilterSteps
+
+    real_predict = _FilterSteps.predict
+    monkeypatch.setattr(_FilterSteps, "predict", lambda self, state, t, dt: type(state)(np.full_like(state.mean, np.nan), state.covariance))
     restarted = estimator.step(pose)
     assert estimator.restarts == 1 and restarted.initialised and not restarted.updated
     np.testing.assert_array_equal(restarted.mean[:7], pose)
     assert np.isfinite(restarted.covariance).all()
     missing = estimator.step(np.full(7, np.nan))  # no usable measurement: back to the prior
     assert estimator.restarts == 2 and not missing.initialised
-    monkeypatch.setattr(type(estimator), "_online_predict", real_predict)
+    monkeypatch.setattr(_FilterSteps, "predict", real_predict)
     assert estimator.step(pose).initialised and estimator.restarts == 2
     estimator.reset(dt=0.1)
     assert estimator.restarts == 0
