@@ -128,10 +128,8 @@ def _check_noise_shapes(noise: NoiseParameters, batch: int, steps: int, k: int, 
 def _empty(shape: tuple[int, ...], dtype: torch.dtype, device: torch.device) -> Tensor:
     """``torch.empty``, but on the CPU in memory numpy allocates: numpy advises the kernel to back
     allocations of 4 MB and more with transparent huge pages (``madvise``, Linux), so filling a
-    fresh series faults once per 2 MB page rather than once per 4 kB page: a B = 1024, 200-step
-    EKF run on ds1 storing every covariance (277 MB) took 290-300 ms with torch's allocator and
-    170-190 ms with numpy's, in one process on the 2-core AMD machine (the speed suite's
-    ``test_ekf_forward_batch_1024[means+covariances]`` times this run)."""
+    fresh series faults once per 2 MB page rather than once per 4 kB page (``fkn_bench/DESIGN.md``,
+    "Performance notes")."""
     if device.type != "cpu":
         return torch.empty(shape, dtype=dtype, device=device)
     try:

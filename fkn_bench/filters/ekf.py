@@ -32,10 +32,10 @@ from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.pose_twist import PoseTwistModel
 from fkn_bench.filters.structured import pose_predict, pose_predict_steps, pose_update
 from fkn_bench.linalg import add_matmul, broadcast, constant, divide_spd, eye, namespace, solve_spd, symmetrize, zeros
+from fkn_bench.types import Array
 
 __all__ = ["ExtendedKalmanFilter", "joseph_update", "linear_measurement_update", "STRUCTURED_MIN_BATCH"]
 
-Array = Any
 
 
 def joseph_update(
@@ -187,13 +187,8 @@ STRUCTURED_MIN_BATCH = 128
 (:mod:`fkn_bench.filters.structured`) as torch operations, where its compiled kernels do not run
 (not CPU float64: :func:`fkn_bench.filters.kernels.supports`; where they run, the structured
 step runs at every batch size): it costs about twice as many (smaller) torch operations as the
-generic step, so below about 100 rows the generic step's fewer calls win. Measured with the
-dense step forced, one process, alternating, 100 steps of ds1, ratio dense/structured time
-(forward; forward+backward): B = 16: 0.55; 0.63, B = 64: 0.83; 0.85, B = 96: 1.01; 1.03,
-B = 128: 0.99; 1.19, B = 256: 1.51; 1.48; again after the structured step lost its overheads
-(``run()`` timed with ``STRUCTURED_MIN_BATCH`` set to 1 and to a huge
-value, alternating): B = 32: 0.70; 0.72, B = 64: 0.86; 0.77, B = 96: 0.92; 0.94, B = 128: 1.14;
-1.05."""
+generic step, so below about 100 rows the generic step's fewer calls win (the crossing is
+measured in ``fkn_bench/DESIGN.md``, "Performance notes")."""
 
 
 class ExtendedKalmanFilter(KalmanFilter):

@@ -12,17 +12,14 @@ overhead per step. They run on CPU float64 tensors (the filters' default; any
 strides: inputs that are not C-contiguous are copied); anything else (a GPU, float32) takes the
 torch operations, which stay the reference implementation.
 
-Measured with ``fkn-bench bench run -k step_paths`` (the EKF's ``run()`` on ds1, 200 steps, with
-the kernels and with the torch operations, one thread) on the 2-core AMD EPYC CI machine, one
-run: at B = 64 the forward pass 9.0x faster with the kernels and forward + backward 5.3x; at
-B = 1024 1.55x and 1.40x (the torch operations predict step by step).
+``fkn-bench bench run -k step_paths`` times the EKF's ``run()`` with and without them
+(``fkn_bench/DESIGN.md``, "Performance notes").
 
 Compilation (``numba.njit``, ``cache=True``) happens on first use, a few seconds per kernel, and
 is cached on disk beside this file (or in numba's user cache directory where that is
 read-only). :data:`ENABLED` switches the kernels off (the torch operations then run everywhere),
 which is how the tests compare the two. :func:`warm_up` (``fkn-bench bench compile``) compiles
-every kernel at once: 45 s on the 2-core AMD EPYC in a fresh environment (17.5 s of it the
-two forward kernels), under a second once cached. The test command runs it before pytest, so that
+every kernel at once (tens of seconds in a fresh environment, under a second once cached). The test command runs it before pytest, so that
 the two test workers do not both compile the kernels inside whichever tests first reach them.
 """
 
@@ -376,12 +373,10 @@ def _update_backward_kernel(x, P, nu, R, Si, K, N, TKq, Y, M, norm, g_mean, g_P,
         for c in range(13):
             for b in range(B):
                 G[a, c, b] = (g_P[a, c, b] + g_P[c, a, b]) * 0.5
-    # (A sum over a small axis inside the batch loop reads one batch-long row per term, each 8 kB
-    # apart at B = 1024: here up to 40 rows at once, which map to the same L1 cache sets. The
-    # heavy products below accumulate term by term into one row instead, in the same order, so
-    # the results are the same to the bit: 5.1 ms -> 2.7 ms per call at B = 1024 (shared R, one
-    # process). The other kernels' sums read at most 22 rows; rewritten the same way they were
-    # no faster, and are left as they are.)
+    # (The heavy products below accumulate term by term into one batch-long row, in the order
+    # of the sums they replace, so the results are the same to the bit: a sum over a small axis
+    # inside the batch loop would read up to 40 rows 8 kB apart at B = 1024, which share L1
+    # cache sets.)
     for a in range(13):  # dM = G TK, dTK = G M (P+ = M TK^T + Y T^T, G symmetric)
         for j in range(7):
             for b in range(B):

@@ -28,7 +28,6 @@ and covariance, and the reset ``q <- exp(dtheta / 2) (x) q`` maps the covariance
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import numpy as np
 
@@ -39,11 +38,10 @@ from fkn_bench.models.noise import NoiseLayout
 from fkn_bench.models.pose_twist import PoseTwistModel
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import add_matmul, broadcast, constant, dot, eye, namespace, symmetrize, zeros
-from fkn_bench.types import ERROR_NAMES
+from fkn_bench.types import Array, ERROR_NAMES
 
 __all__ = ["MultiplicativeEKF", "MEKF_MANUAL_LAYOUT", "left_jacobian"]
 
-Array = Any
 
 _ERROR_UNITS = ("rad",) * 3 + ("m",) * 3 + ("rad/s",) * 3 + ("m/s",) * 3
 

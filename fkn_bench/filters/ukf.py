@@ -22,7 +22,6 @@ that remains (it should not) falls back to ``P + sqrt(eps) mean(diag(P)) I`` for
 
 from __future__ import annotations
 
-from typing import Any
 
 import numpy as np
 
@@ -31,10 +30,10 @@ from fkn_bench.filters.ekf import linear_measurement_update
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.pose_twist import PoseTwistModel
 from fkn_bench.linalg import cholesky, constant, eye, namespace, symmetrize
+from fkn_bench.types import Array
 
 __all__ = ["UnscentedKalmanFilter", "sigma_point_weights"]
 
-Array = Any
 
 
 def _diagonal(P: Array) -> Array:

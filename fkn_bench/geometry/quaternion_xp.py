@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 
 from fkn_bench.linalg import constant, dot, namespace
+from fkn_bench.types import Array
 
 __all__ = [
     "multiply",
@@ -31,7 +32,6 @@ __all__ = [
     "align_sign",
 ]
 
-Array = Any
 
 
 def _linear(make: Any, inputs: int) -> np.ndarray:

@@ -25,17 +25,16 @@ a ``where``).
 
 from __future__ import annotations
 
-from typing import Any
 
 import numpy as np
 
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import namespace
+from fkn_bench.types import Array
 
 __all__ = ["Manifold", "Euclidean", "PoseTangent", "manifold_for"]
 
-Array = Any
 
 
 class Manifold:

@@ -25,11 +25,10 @@ import numpy as np
 
 from fkn_bench.linalg import constant, namespace
 from fkn_bench.models.noise import NoiseLayout
+from fkn_bench.types import Array
 
-__all__ = ["StateSpaceModel", "prior_array", "Array"]
+__all__ = ["StateSpaceModel", "prior_array"]
 
-Array = Any
-"""A numpy array or a torch tensor."""
 
 
 class StateSpaceModel:

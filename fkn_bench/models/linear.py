@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from fkn_bench.linalg import constant, namespace
-from fkn_bench.models.base import Array, StateSpaceModel
+from fkn_bench.models.base import StateSpaceModel
+from fkn_bench.types import Array
 from fkn_bench.models.noise import NoiseLayout
 
 __all__ = ["LinearGaussianModel"]

@@ -16,9 +16,9 @@ import numpy as np
 
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, dot, eye, namespace, sum_last, zeros
-from fkn_bench.models.base import Array, StateSpaceModel, prior_array
+from fkn_bench.models.base import StateSpaceModel, prior_array
 from fkn_bench.models.noise import NoiseLayout
-from fkn_bench.types import MEASUREMENT_NAMES, STATE_NAMES, STATE_UNITS
+from fkn_bench.types import Array, MEASUREMENT_NAMES, STATE_NAMES, STATE_UNITS
 
 __all__ = ["PoseTwistModel", "PAPER_MANUAL_LAYOUT"]
 

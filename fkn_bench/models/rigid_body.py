@@ -43,7 +43,8 @@ import numpy as np
 
 from fkn_bench.geometry import quaternion_xp as qx
 from fkn_bench.linalg import constant, eye, namespace, zeros
-from fkn_bench.models.base import Array, prior_array
+from fkn_bench.models.base import prior_array
+from fkn_bench.types import Array
 from fkn_bench.models.noise import NoiseLayout
 from fkn_bench.models.pose_twist import PAPER_MANUAL_LAYOUT, PoseTwistModel
 
