@@ -18,16 +18,20 @@ import pytest
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Under pytest-xdist, the test files that hold a test marked ``slow`` (a session- or
-    module-scoped fixture of 10 s and more, or tests of as much together) go first, in their
-    collection order, and the other files after them: ``--dist loadfile`` hands out whole files in
-    the order collected (``--no-loadscope-reorder`` in ``pyproject.toml``), so the long files
-    start while the short ones are left to even out the two workers' ends, instead of a long file
-    starting last on one worker while the other idles. Without xdist the order is left alone."""
+    """Under pytest-xdist, the test files that hold a test marked ``slow`` go first, the longest
+    first (by the largest ``seconds`` their ``slow`` markers give; 10 where none is given), and
+    the other files after them in their collection order. ``--dist loadfile`` hands out whole files
+    in the order collected (``--no-loadscope-reorder`` in ``pyproject.toml``), the first two to
+    the two workers: the long files start at once on both workers, and the short ones even out
+    the two workers' ends (a long file handed out last keeps one worker busy while the other
+    idles). Without xdist the order is left alone."""
     if not hasattr(config, "workerinput"):  # not an xdist worker
         return
-    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
-    items.sort(key=lambda item: item.path not in slow_files)  # stable: the order within each group is kept
+    seconds: dict[object, float] = {}
+    for item in items:
+        marks = [mark.kwargs.get("seconds", 10.0) for mark in item.iter_markers("slow")]
+        seconds[item.path] = max([seconds.get(item.path, 0.0), *marks])
+    items.sort(key=lambda item: -seconds[item.path])  # stable: each file's tests keep their order
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -20,7 +20,7 @@ from fkn_bench.baselines.sage_husa import SageHusaRule
 from fkn_bench.baselines.vbakf import VBAKFRule
 from fkn_bench.filters.linear import linear_kalman_filter
 
-pytestmark = pytest.mark.slow  # runs of 3000 and 5000 steps, 45 s together
+pytestmark = pytest.mark.slow(seconds=40)  # runs of 3000 and 5000 steps
 
 P0_STD = np.ones(4)
 

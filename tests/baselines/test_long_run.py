@@ -32,7 +32,7 @@ def long_flips():  # noqa: ANN201
     return scenario, generate_episodes(scenario, [7])
 
 
-@pytest.mark.slow
+@pytest.mark.slow(seconds=12)  # the file: four runs of 3e4 steps
 @pytest.mark.parametrize("name", BASELINES)
 def test_no_nan_and_positive_definite_covariances_over_3e4_steps(name: str, long_flips) -> None:
     scenario, episodes = long_flips

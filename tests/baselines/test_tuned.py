@@ -21,7 +21,7 @@ from fkn_bench.scenarios import get_scenario
 from fkn_bench.training import DirectParameters, Sequences, TrainConfig, Trainer, fit
 from fkn_bench.training.artifacts import artifact_path, read_artifact
 
-pytestmark = pytest.mark.slow  # trainings of the tuned EKFs
+pytestmark = pytest.mark.slow(seconds=12)  # trainings of the tuned EKFs
 
 SHORT = get_scenario("ds1", n_steps=2000)
 TINY = {"epochs": 2, "window": 200, "loss_cut": 50, "lbfgs_iterations": 3}

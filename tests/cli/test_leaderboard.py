@@ -23,7 +23,7 @@ def _files(root: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in root.iterdir() if p.is_file() and not p.name.startswith(".")}
 
 
-@pytest.mark.slow  # every committed cell read, every leaderboard and figure redrawn
+@pytest.mark.slow(seconds=20)  # every committed cell read, every leaderboard and figure redrawn
 def test_committed_leaderboards_regenerate_identically(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert (LEADERBOARDS / "results" / "cells").is_dir(), "committed results are missing"
     assert main(["leaderboard", "--results", str(LEADERBOARDS / "results"), "--out", str(tmp_path)]) == 0

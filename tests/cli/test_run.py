@@ -14,7 +14,7 @@ from fkn_bench.estimators import estimator_names, make_estimator, registry as es
 from fkn_bench.scenarios import registry as scenario_registry
 from fkn_bench.types import STATE_NAMES
 
-pytestmark = pytest.mark.slow  # fkn-bench run over every registered estimator
+pytestmark = pytest.mark.slow(seconds=8)  # fkn-bench run over every registered estimator
 
 JSON_KEYS = (
     "estimator", "scenario", "seeds", "rmse", "attitude_rmse_deg", "position_rmse_m", "omega_rmse_rad_s",

@@ -21,7 +21,7 @@ from fkn_bench.estimators.conformance import (
 from fkn_bench.estimators.base import Estimator
 from fkn_bench.scenarios import Scenario, get_scenario
 
-pytestmark = pytest.mark.slow  # 1e5 fuzzed filter steps per registered estimator
+pytestmark = pytest.mark.slow(seconds=70)  # 1e5 fuzzed filter steps per registered estimator
 
 
 @pytest.fixture(scope="module")

@@ -23,7 +23,7 @@ from fkn_bench.estimators.kalman import KalmanEstimator
 from fkn_bench.gates import accuracy
 from fkn_bench.gates.accuracy import ACCEPT_COMMAND, ADD_COMMAND, Tolerance, run_accuracy_gate, tolerance_for
 
-pytestmark = pytest.mark.slow  # the gate's first half, a session fixture of about 65 s (conftest.py)
+pytestmark = pytest.mark.slow(seconds=65)  # the gate's first half: its session fixture (conftest.py)
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -9,7 +9,7 @@ import pytest
 
 from fkn_bench.gates import accuracy
 
-pytestmark = pytest.mark.slow  # the gate's second half, a session fixture of about 30 s (conftest.py)
+pytestmark = pytest.mark.slow(seconds=30)  # the gate's second half: its session fixture (conftest.py)
 
 
 def test_committed_results_reproduce(rigid_body_report: accuracy.AccuracyReport, gated_estimator: str,

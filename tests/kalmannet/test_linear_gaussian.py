@@ -13,7 +13,7 @@ import torch
 
 from fkn_bench.kalmannet.linear import Q_STD, R_STD, kalman_means, kalmannet_means, mse_db, simulate, train_kalmannet
 
-pytestmark = pytest.mark.slow  # one 15-epoch training, 10-20 s
+pytestmark = pytest.mark.slow(seconds=10)  # one 15-epoch training
 
 
 @pytest.fixture(scope="module")

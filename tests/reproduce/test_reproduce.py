@@ -15,7 +15,7 @@ from fkn_bench.reproduce.report import Bullets, FigureRef, Heading, Paragraph, T
 from fkn_bench.reproduce.tables import TIMING_COLUMNS
 from fkn_bench.types import STATE_NAMES
 
-pytestmark = pytest.mark.slow  # two quick reproductions (training, evaluation, figures)
+pytestmark = pytest.mark.slow(seconds=20)  # two quick reproductions (training, evaluation, figures)
 
 TABLES = ("hyperparameters", "training_results", "learned_std", "rmse_learned_vs_manual", "cross_dataset", "robustness")
 FIGURES = (

@@ -23,7 +23,7 @@ from fkn_bench.scenarios import get_scenario
 from fkn_bench.sweep import SweepTask, make_objective, parse_space
 from fkn_bench.sweep.objective import CATCH
 
-pytestmark = pytest.mark.slow  # a sweep in two worker processes
+pytestmark = pytest.mark.slow(seconds=15)  # a sweep in two worker processes
 
 SCENARIO_FILE = """
 [scenario.sweep-tiny]
