@@ -20,18 +20,18 @@ from fkn_bench.types import ArrayF
 __all__ = ["error_covariance_from_state", "state_covariance_from_error", "pose_innovation", "with_unit_quaternion"]
 
 
-def _state_to_error_map(q: ArrayF) -> ArrayF:
-    """``T (..., 12, 13) = blockdiag(2 Theta(q)^T, I9)``."""
-    T = np.zeros(q.shape[:-1] + (12, 13))
-    T[..., 0:3, 0:4] = 2.0 * np.swapaxes(theta_matrix(q), -1, -2)
-    T[..., 3:12, 4:13] = np.eye(9)
-    return T
-
-
 def error_covariance_from_state(q: ArrayF, covariance: ArrayF) -> ArrayF:
-    """12x12 error covariance ``T P T^T`` of a 13x13 state covariance at attitude ``q``."""
-    T = _state_to_error_map(q)
-    return symmetrize(T @ covariance @ np.swapaxes(T, -1, -2))
+    """12x12 error covariance ``T P T^T`` of a 13x13 state covariance ``P`` at attitude ``q``, with
+    ``T = blockdiag(A, I9)`` and ``A = 2 Theta(q)^T`` (3x4), computed by blocks:
+    ``[[A P_qq A^T, A P_qx], [P_xq A^T, P_xx]]`` (``x`` the nine components after ``q``)."""
+    A = 2.0 * np.swapaxes(theta_matrix(q), -1, -2)
+    At = np.swapaxes(A, -1, -2)
+    out = np.empty(covariance.shape[:-2] + (12, 12))
+    out[..., 0:3, 0:3] = A @ covariance[..., 0:4, 0:4] @ At
+    out[..., 0:3, 3:12] = A @ covariance[..., 0:4, 4:13]
+    out[..., 3:12, 0:3] = covariance[..., 4:13, 0:4] @ At
+    out[..., 3:12, 3:12] = covariance[..., 4:13, 4:13]
+    return symmetrize(out)
 
 
 def state_covariance_from_error(q: ArrayF, error_covariance: ArrayF) -> ArrayF:
