@@ -47,7 +47,7 @@ from fkn_bench.filters.recursion import Carry, Proposal, Steps, advance
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 from fkn_bench.inputs import real_array, real_number
 from fkn_bench.io import read_json, write_json_atomic
-from fkn_bench.types import ArrayB, ArrayF
+from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
 __all__ = [
     "Estimate",
@@ -135,13 +135,13 @@ class Estimates:
         extras: estimator-specific arrays (e.g. adapted noise), keyed by name.
     """
 
-    means: ArrayF
-    covariances: ArrayF | None = None
-    error_covariances: ArrayF | None = None
-    innovations: ArrayF | None = None
-    innovation_covariances: ArrayF | None = None
-    innovation_mask: ArrayB | None = None
-    initialised: ArrayB | None = None
+    means: Float[ArrayF, "B T 13"]
+    covariances: Float[ArrayF, "B T 13 13"] | None = None
+    error_covariances: Float[ArrayF, "B T 12 12"] | None = None
+    innovations: Float[ArrayF, "B T m"] | None = None
+    innovation_covariances: Float[ArrayF, "B T m m"] | None = None
+    innovation_mask: Bool[ArrayB, "B T"] | None = None
+    initialised: Bool[ArrayB, "B T"] | None = None
     extras: Mapping[str, ArrayF] = field(default_factory=dict)
 
     @property
@@ -307,7 +307,7 @@ class Estimator(ABC):
     description: str = ""
 
     @abstractmethod
-    def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
+    def estimate(self, measurements: Float[ArrayF, "B T 7"], mask: Bool[ArrayB, "B T"], dt: float) -> Estimates:
         """Filter whole sequences: ``measurements (B, T, 7)``, ``mask (B, T)`` -> :class:`Estimates`."""
 
     @abstractmethod

@@ -48,6 +48,7 @@ from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.noise import NoiseLayout, NoiseParameters
 from fkn_bench.filters.recursion import GATE_REINITIALISE_AFTER, Carry, Proposal, accept, count_rejections, gate_threshold, scan
 from fkn_bench.linalg import namespace, symmetrize
+from fkn_bench.types import Bool, Float
 
 __all__ = ["KalmanFilter", "FilterResult", "FilterState", "accept", "check_dt", "gate_threshold", "GATE_REINITIALISE_AFTER",
            "count_rejections"]
@@ -62,8 +63,8 @@ class FilterState(NamedTuple):
             dimension for the multiplicative EKF).
     """
 
-    mean: Tensor
-    covariance: Tensor
+    mean: Float[Tensor, "B n"]
+    covariance: Float[Tensor, "B k k"]
 
 
 @dataclass(frozen=True)
@@ -81,13 +82,13 @@ class FilterResult:
         final: the state after the last step (to continue filtering).
     """
 
-    means: Tensor
-    covariances: Tensor | None
-    innovations: Tensor | None
-    innovation_covariances: Tensor | None
-    prior_means: Tensor | None
-    updated: Tensor
-    initialised: Tensor
+    means: Float[Tensor, "B T n"]
+    covariances: Float[Tensor, "B T k k"] | None
+    innovations: Float[Tensor, "B T m"] | None
+    innovation_covariances: Float[Tensor, "B T m m"] | None
+    prior_means: Float[Tensor, "B T n"] | None
+    updated: Bool[Tensor, "B T"]
+    initialised: Bool[Tensor, "B T"]
     final: FilterState
 
 
@@ -378,8 +379,8 @@ class KalmanFilter(ABC):
     def run(
         self,
         noise: NoiseParameters,
-        measurements: Tensor,
-        mask: Tensor,
+        measurements: Float[Tensor, "B T m"],
+        mask: Bool[Tensor, "B T"],
         *,
         dt: float,
         initial: FilterState | None = None,

@@ -25,7 +25,7 @@ import numpy as np
 
 from fkn_bench.linalg import constant, namespace
 from fkn_bench.models.noise import NoiseLayout
-from fkn_bench.types import Array
+from fkn_bench.types import Array, Bool, Float
 
 __all__ = ["StateSpaceModel", "prior_array"]
 
@@ -47,15 +47,15 @@ class StateSpaceModel:
         """This model's cache of constant arrays (see :func:`fkn_bench.linalg.constant`)."""
         return self.__dict__.setdefault("_cache", {})
 
-    def predict(self, x: Array, dt: float) -> Array:
+    def predict(self, x: Float[Array, "B n"], dt: float) -> Float[Array, "B n"]:
         """Mean propagation ``f(x)`` of ``(B, n)`` states over ``dt`` seconds."""
         return self.transition(x, dt)[0]
 
-    def jacobian(self, x: Array, dt: float) -> Array:
+    def jacobian(self, x: Float[Array, "B n"], dt: float) -> Float[Array, "B n n"]:
         """``F = df/dx`` ``(B, n, n)`` at ``x``."""
         return self.transition(x, dt)[1]
 
-    def transition(self, x: Array, dt: float) -> tuple[Array, Array]:
+    def transition(self, x: Float[Array, "B n"], dt: float) -> tuple[Float[Array, "B n"], Float[Array, "B n n"]]:
         """``(f(x), F)`` together."""
         raise NotImplementedError
 
@@ -63,20 +63,20 @@ class StateSpaceModel:
         """``H (m, n)`` in the namespace and dtype of ``like``."""
         return constant(like, "H", lambda: self.H, self._constants())
 
-    def measure(self, x: Array) -> Array:
+    def measure(self, x: Float[Array, "B n"]) -> Float[Array, "B m"]:
         """``H x`` for states ``(B, n)``."""
         if self.observed is not None:
             return x[:, self.observed]
         return x @ self.measurement_matrix(x).swapaxes(0, 1)
 
-    def sanitize(self, measurements: Array, mask: Array) -> tuple[Array, Array]:
+    def sanitize(self, measurements: Float[Array, "... m"], mask: Bool[Array, "..."]) -> tuple[Float[Array, "... m"], Bool[Array, "..."]]:
         """Clean inputs once per sequence: drop non-finite measurements from the mask (zeros in
         their place)."""
         xp = namespace(measurements)
         mask = mask & xp.all(xp.isfinite(measurements), axis=-1)
         return xp.where(mask[..., None], measurements, 0.0), mask
 
-    def align(self, z: Array, x_pred: Array) -> Array:
+    def align(self, z: Float[Array, "B m"], x_pred: Float[Array, "B n"]) -> Float[Array, "B m"]:
         """Measurement made comparable with the prediction (identity by default)."""
         return z
 
@@ -93,7 +93,7 @@ class StateSpaceModel:
         covariance (``None``: none), so that square-root filters can regularise along it."""
         return None
 
-    def initial_state(self, z: Array) -> Array:
+    def initial_state(self, z: Float[Array, "B m"]) -> Float[Array, "B n"]:
         """State ``(B, n)`` initialised from measurements ``(B, m)``."""
         raise NotImplementedError
 
