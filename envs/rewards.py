@@ -56,12 +56,6 @@ def attitude_error_angle(q_true: Float[ArrayF, "N 4"], q_est: Float[ArrayF, "N 4
     return 4.0 * np.arctan2(np.minimum(minus, plus), np.maximum(minus, plus))
 
 
-def _norm3(d: ArrayF, start: int) -> ArrayF:
-    """Euclidean norms of components ``start .. start+2`` of component-major ``d (13, N)``."""
-    a, b, c = d[start], d[start + 1], d[start + 2]
-    return np.sqrt(a * a + b * b + c * c)
-
-
 def estimate_cost(truth: Float[ArrayF, "N 13"], estimate: Float[ArrayF, "N 13"],
                   weights: Mapping[str, float] = DEFAULT_WEIGHTS) -> Float[ArrayF, "N"]:
     """Weighted error (>= 0) of estimates ``(N, 13)`` against the truth ``(N, 13)``: ``(N,)``."""

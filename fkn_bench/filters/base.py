@@ -303,10 +303,6 @@ class KalmanFilter(ABC):
         the sequence from the last one (a lost track)."""
         self.gate, self._gate_threshold = gate_threshold(level, self.innovation_dim)
 
-    def gate_accepts(self, innovation: Tensor, innovation_covariance: Tensor) -> Tensor:
-        """``(B,)`` True where the update passes the gate (:func:`accept`; everywhere without one)."""
-        return accept(innovation, innovation_covariance, self._gate_threshold)
-
     @property
     def covariance_dim(self) -> int:
         """Dimension ``k`` of the covariance the filter carries."""
