@@ -54,9 +54,13 @@ def hostile_measurements(seeds: tuple[int, ...] = (0, 1, 2), steps: int = 300, l
     sequence 0 a NaN, an inf and a zero quaternion inside the mask (its 3rd, 5th and 7th
     measurements) and a quaternion scaled by 3 (9th); in sequence 1 every quaternion scaled by
     0.25 and the value 7.0 everywhere outside the mask; and, with ``late_start``, sequence 2
-    masked until that step (it initialises late). Needs at least three seeds with ``late_start``."""
+    masked until that step (it initialises late). Needs at least two seeds, three with
+    ``late_start`` (ValueError otherwise)."""
     from fkn_bench.envs import generate_episodes
 
+    if len(seeds) < 2:
+        raise ValueError(f"hostile_measurements needs at least two seeds (got {len(seeds)}): sequence 1 carries "
+                         f"the rescaled quaternions")
     if late_start is not None and len(seeds) < 3:
         raise ValueError(f"late_start needs at least three seeds (got {len(seeds)})")
     episodes = generate_episodes("ds1-flips", list(seeds), split="test").window(0, steps)

@@ -95,3 +95,10 @@ def test_registered_estimator_survives_30_percent_garbage(name: str, garbage) ->
             assert np.isfinite(estimate.mean).all(), t
             if estimate.native_covariance is not None:
                 assert np.isfinite(estimate.native_covariance).all(), t
+
+
+def test_too_few_seeds_for_the_hostile_batch_are_named() -> None:
+    with pytest.raises(ValueError, match="at least two seeds"):
+        hostile_measurements(seeds=(0,), late_start=None)
+    with pytest.raises(ValueError, match="late_start needs at least three seeds"):
+        hostile_measurements(seeds=(0, 1))
