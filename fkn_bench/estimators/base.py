@@ -42,8 +42,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from fkn_bench.filters.base import check_dt
-from fkn_bench.filters.recursion import Carry, Proposal, Steps, advance
+from fkn_bench.filters.base import FilterSteps, check_dt
+from fkn_bench.filters.recursion import Carry, Steps, advance
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 from fkn_bench.inputs import real_array, real_number
 from fkn_bench.io import read_json, write_json_atomic
@@ -382,29 +382,17 @@ class OnlineState(NamedTuple):
     carry: Carry
 
 
-class _FilterSteps:
-    """The default online step functions: ``estimator.filter`` (a
+class _FilterSteps(FilterSteps):
+    """The default online step functions: ``estimator.filter``'s (a
     :class:`~fkn_bench.filters.KalmanFilter`) on numpy batch-1 arrays, with the step's noise
     ``estimator._online_noise = (Q, R, P0)`` read at every call (it may change per step)."""
 
     def __init__(self, estimator: Any) -> None:
-        self.estimator, self.filter = estimator, estimator.filter
-        self.nis_threshold = self.filter._gate_threshold if self.filter.gate is not None else math.inf
+        super().__init__(estimator.filter)
+        self.estimator = estimator
 
-    def predict(self, state: Any, t: int, dt: float) -> Any:
-        return self.filter.predict(state, self.estimator._online_noise[0], dt)
-
-    def initial(self, state: Any, z: ArrayF, t: int) -> Any:
-        return self.filter.initial_state(z, self.estimator._online_noise[2])
-
-    def propose(self, state: Any, z: ArrayF, rows: ArrayB, t: int) -> Proposal:
-        return Proposal(*self.filter.update(state, z, self.estimator._online_noise[1]))
-
-    def commit(self, state: Any, z: ArrayF, rows: ArrayB, proposal: Proposal, t: int) -> tuple[Any, ArrayB]:
-        return proposal.state, rows
-
-    def record(self, *args: Any) -> None:
-        pass
+    def noise(self, t: int) -> tuple[ArrayF, ArrayF, ArrayF]:
+        return self.estimator._online_noise
 
 
 class RecursiveEstimator(Estimator):
@@ -428,6 +416,7 @@ class RecursiveEstimator(Estimator):
 
     _dt: float | None = None
     _online: OnlineState | None = None
+    _steps: Steps | None = None
     restarts: int = 0
     """Online restarts since :meth:`reset` (module docstring: a state that stopped being finite)."""
 
@@ -464,7 +453,9 @@ class RecursiveEstimator(Estimator):
             if abs(interval - self._dt) <= TIME_TOLERANCE:
                 interval = self._dt
         self._online_observe(z)  # after the checks: a refused step leaves the estimator as it was
-        steps = self._online_steps()
+        if previous is None or self._steps is None:
+            self._steps = self._online_steps()  # (once per sequence: the online step is a hot path)
+        steps = self._steps
         carry = self._online_start(steps) if previous is None else previous.carry
         started = bool(carry.initialised[0])
         usable = _NONE if z is None else _ONE

@@ -50,7 +50,7 @@ from fkn_bench.filters.recursion import GATE_REINITIALISE_AFTER, Carry, Proposal
 from fkn_bench.linalg import namespace, symmetrize
 from fkn_bench.types import Bool, Float
 
-__all__ = ["KalmanFilter", "FilterResult", "FilterState", "accept", "check_dt", "gate_threshold", "GATE_REINITIALISE_AFTER",
+__all__ = ["KalmanFilter", "FilterResult", "FilterState", "FilterSteps", "accept", "check_dt", "gate_threshold", "GATE_REINITIALISE_AFTER",
            "count_rejections"]
 
 
@@ -206,16 +206,47 @@ class _StepOutputs:
         return joined.permute(self._restore(order))
 
 
-class _KalmanSteps:
-    """A :class:`KalmanFilter`'s step functions for :func:`~fkn_bench.filters.recursion.scan`,
-    with its noise (constant or per step) and the per-step output series it stores."""
+class FilterSteps:
+    """A :class:`KalmanFilter`'s step functions for the one recursion
+    (:mod:`fkn_bench.filters.recursion`), written once for the batch run and the online step:
+    the filter's ``predict``, ``initial_state`` and ``update`` with the step's ``Q``, ``P0`` and
+    ``R`` (:meth:`noise`, which a subclass gives); its chi-square gate; records nothing."""
+
+    def __init__(self, filt: KalmanFilter) -> None:
+        self.filter = filt
+        self.nis_threshold = filt._gate_threshold if filt.gate is not None else math.inf
+
+    def noise(self, t: int) -> tuple[Any, Any, Any]:
+        """``(Q, R, P0)`` of step ``t``."""
+        raise NotImplementedError
+
+    def predict(self, state: FilterState, t: int, dt: float) -> FilterState:
+        return self.filter.predict(state, self.noise(t)[0], dt)
+
+    def initial(self, state: FilterState, z: Tensor, t: int) -> FilterState:
+        return self.filter.initial_state(z, self.noise(t)[2])
+
+    def propose(self, state: FilterState, z: Tensor, rows: Tensor, t: int) -> Proposal:
+        return Proposal(*self.filter.update(state, z, self.noise(t)[1]))
+
+    def commit(self, state: FilterState, z: Tensor, rows: Tensor, proposal: Proposal, t: int) -> tuple[FilterState, Tensor]:
+        return proposal.state, rows
+
+    def record(self, *args: Any) -> None:
+        pass
+
+
+class _KalmanSteps(FilterSteps):
+    """:class:`FilterSteps` of :meth:`KalmanFilter.run`: its noise (constant or per step), the
+    per-step output series it stores and the stretch prediction."""
 
     def __init__(self, filt: KalmanFilter, noise: NoiseParameters, shape: tuple[int, int], dtype: torch.dtype,
                  device: torch.device, tracked: bool, store_covariances: bool, store_innovations: bool) -> None:
+        super().__init__(filt)
         (batch, steps), m, k, n = shape, filt.innovation_dim, filt.covariance_dim, filt.model.state_dim
-        self.filter, self.noise = filt, noise
-        self.per_step = noise.steps() if noise.time_varying else None
-        self.nis_threshold = filt._gate_threshold if filt.gate is not None else math.inf
+        self.constant_noise = (noise.process, noise.measurement, noise.initial)
+        self.per_step = [(p.process, p.measurement, p.initial) for p in noise.steps()] if noise.time_varying else None
+        self.noise_parameters = noise
         self.means = _StepOutputs(steps, (batch, n), dtype, tracked)
         self.covariances = _StepOutputs(steps, (batch, k, k), dtype, tracked) if store_covariances else None
         self.innovations = _StepOutputs(steps, (batch, m), dtype, tracked) if store_innovations else None
@@ -226,20 +257,8 @@ class _KalmanSteps:
         self.no_innovation = torch.zeros(batch, m, dtype=dtype, device=device)
         self.unit_covariance = torch.eye(m, dtype=dtype, device=device).expand(batch, m, m)
 
-    def _noise(self, t: int) -> NoiseParameters:
-        return self.per_step[t] if self.per_step is not None else self.noise
-
-    def predict(self, state: FilterState, t: int, dt: float) -> FilterState:
-        return self.filter.predict(state, self._noise(t).process, dt)
-
-    def initial(self, state: FilterState, z: Tensor, t: int) -> FilterState:
-        return self.filter.initial_state(z, self._noise(t).initial)
-
-    def propose(self, state: FilterState, z: Tensor, rows: Tensor, t: int) -> Proposal:
-        return Proposal(*self.filter.update(state, z, self._noise(t).measurement))
-
-    def commit(self, state: FilterState, z: Tensor, rows: Tensor, proposal: Proposal, t: int) -> tuple[FilterState, Tensor]:
-        return proposal.state, rows
+    def noise(self, t: int) -> tuple[Tensor, Tensor, Tensor]:
+        return self.per_step[t] if self.per_step is not None else self.constant_noise
 
     def record(self, t: int, prior: FilterState, state: FilterState, innovation: tuple[Tensor, Tensor] | None,
                used: Tensor, initialised: Tensor) -> None:
@@ -257,7 +276,12 @@ class _KalmanSteps:
         self.initialised_steps[t] = initialised
 
     def predict_steps(self, state: FilterState, t: int, count: int, dt: float) -> tuple[tuple[Tensor, Tensor | None], FilterState]:
-        process_noise, per_step_noise = self.filter._stretch_noise(self.noise, self.per_step, t, count)
+        # the constant Q, or the steps' own stacked (B, count, k, k) (from the per-step unbind of
+        # NoiseParameters.steps, whose backward is one stack, not a slice's zero-filled gradient of
+        # the whole series)
+        per_step_noise = self.per_step is not None and self.noise_parameters.process.dim() == 4
+        process_noise = (torch.stack([self.per_step[j][0] for j in range(t, t + count)], dim=1) if per_step_noise
+                         else self.noise(t)[0])
         means, covariances, state = self.filter.predict_steps(
             state, process_noise, dt, count, per_step=per_step_noise, store_covariances=self.covariances is not None)
         return (means, covariances), state
@@ -361,16 +385,6 @@ class KalmanFilter(ABC):
             mean = mean.to(initial_covariance.device)
         k = initial_covariance.shape[-1]
         return FilterState(mean, namespace(mean).broadcast_to(initial_covariance, (batch, k, k)))
-
-    @staticmethod
-    def _stretch_noise(noise: NoiseParameters, per_step: list[NoiseParameters] | None, t: int, count: int) -> tuple[Tensor, bool]:
-        """``(Q, per_step)`` for :meth:`predict_steps` over steps ``t`` to ``t + count - 1``: the
-        constant ``Q``, or the steps' own stacked ``(B, count, k, k)`` (from the per-step
-        ``unbind`` of :meth:`NoiseParameters.steps`, whose backward is one stack, not a slice's
-        zero-filled gradient of the whole series)."""
-        if per_step is None or noise.process.dim() != 4:
-            return noise.process, False
-        return torch.stack([per_step[j].process for j in range(t, t + count)], dim=1), True
 
     def run(
         self,

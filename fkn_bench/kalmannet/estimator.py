@@ -24,7 +24,6 @@ learns no measurement noise), so no NIS (NaN).
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +34,7 @@ from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch
 from fkn_bench.filters.recursion import Proposal
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error, with_unit_quaternion
 from fkn_bench.kalmannet.checkpoint import model_from_checkpoint, recursive_model_from_checkpoint
-from fkn_bench.kalmannet.recursion import KalmanNet, KalmanNetState
+from fkn_bench.kalmannet.recursion import KalmanNet, KalmanNetState, NetworkSteps
 from fkn_bench.kalmannet.recursive import RecursiveKalmanNet, RecursiveKalmanNetState
 from fkn_bench.linalg import symmetrize
 from fkn_bench.runtime import torch_threads
@@ -48,32 +47,21 @@ __all__ = ["KalmanNetEstimator", "kalmannet_factory", "RecursiveKalmanNetEstimat
 _ONE = np.ones(1, dtype=bool)
 
 
-class _OnlineSteps:
-    """A KalmanNet-family network's step functions for the online recursion (batch 1): numpy
-    measurements in, torch states, no gradients (no gate: the learned gain is the update)."""
-
-    nis_threshold = math.inf
-
-    def __init__(self, net: Any) -> None:
-        self.net = net
+class _OnlineSteps(NetworkSteps):
+    """:class:`~fkn_bench.kalmannet.recursion.NetworkSteps` for the online step (batch 1):
+    numpy measurements in, torch states, no gradients."""
 
     def predict(self, state: Any, t: int, dt: float) -> Any:
         with torch.no_grad():
-            return self.net.predict(state, dt)
+            return super().predict(state, t, dt)
 
     def initial(self, state: Any, z: ArrayF, t: int) -> Any:
         with torch.no_grad():
-            return self.net.initial(state, torch.from_numpy(z))
+            return super().initial(state, torch.from_numpy(z), t)
 
     def propose(self, state: Any, z: ArrayF, rows: ArrayB, t: int) -> Proposal:
         with torch.no_grad(), torch_threads():
-            return Proposal(self.net.update(state, torch.from_numpy(z)))
-
-    def commit(self, state: Any, z: ArrayF, rows: ArrayB, proposal: Proposal, t: int) -> tuple[Any, ArrayB]:
-        return proposal.state, rows
-
-    def record(self, *args: Any) -> None:
-        pass
+            return super().propose(state, torch.from_numpy(z), rows, t)
 
 
 class KalmanNetEstimator(RecursiveEstimator):

@@ -56,7 +56,7 @@ from fkn_bench.kalmannet.network import GainNetwork, Hidden, normalize_features
 from fkn_bench.training.data import Sequences
 from fkn_bench.training.trainer import SequenceModel
 
-__all__ = ["KalmanNet", "KalmanNetState", "KalmanNetRun", "ManifoldRecursion"]
+__all__ = ["KalmanNet", "KalmanNetState", "KalmanNetRun", "ManifoldRecursion", "NetworkSteps"]
 
 StateT = TypeVar("StateT")
 
@@ -100,17 +100,15 @@ def _detached(state: StateT) -> StateT:
     return tree_map(lambda t: t.detach(), state)
 
 
-class _Recorder:
-    """A :class:`ManifoldRecursion`'s step functions for :func:`~fkn_bench.filters.recursion.scan`
-    (no gate; the network's update is the posterior), keeping ``record(state)`` of every step."""
+class NetworkSteps:
+    """A :class:`ManifoldRecursion`'s step functions for the one recursion
+    (:mod:`fkn_bench.filters.recursion`), for the batch run and the online step alike: no gate,
+    the network's update is the posterior; records nothing."""
 
     nis_threshold = math.inf
 
-    def __init__(self, recursion: ManifoldRecursion, record: Callable[[Any], tuple[Tensor, ...]]) -> None:
-        self.recursion, self.record_state = recursion, record
-        self.records: list[tuple[Tensor, ...]] = []
-        self.updated: list[Tensor] = []
-        self.initialised: list[Tensor] = []
+    def __init__(self, recursion: ManifoldRecursion) -> None:
+        self.recursion = recursion
 
     def predict(self, state: Any, t: int, dt: float) -> Any:
         return self.recursion.predict(state, dt)
@@ -123,6 +121,20 @@ class _Recorder:
 
     def commit(self, state: Any, z: Tensor, rows: Tensor, proposal: Proposal, t: int) -> tuple[Any, Tensor]:
         return proposal.state, rows
+
+    def record(self, *args: Any) -> None:
+        pass
+
+
+class _Recorder(NetworkSteps):
+    """:class:`NetworkSteps` of :meth:`ManifoldRecursion.recurse`, keeping ``record(state)`` of every step."""
+
+    def __init__(self, recursion: ManifoldRecursion, record: Callable[[Any], tuple[Tensor, ...]]) -> None:
+        super().__init__(recursion)
+        self.record_state = record
+        self.records: list[tuple[Tensor, ...]] = []
+        self.updated: list[Tensor] = []
+        self.initialised: list[Tensor] = []
 
     def record(self, t: int, prior: Any, state: Any, innovation: Any, used: Tensor | None, initialised: Tensor) -> None:
         self.records.append(self.record_state(state))
