@@ -187,8 +187,8 @@ STRUCTURED_MIN_BATCH = 128
 (:mod:`fkn_bench.filters.structured`) as torch operations, where its compiled kernels do not run
 (not CPU float64: :func:`fkn_bench.filters.kernels.supports`; where they run, the structured
 step runs at every batch size): it costs about twice as many (smaller) torch operations as the
-generic step, so below about 100 rows the generic step's fewer calls win (the crossing is
-measured in ``fkn_bench/DESIGN.md``, "Performance notes")."""
+generic step, so for small batches the generic step's fewer calls win; the two are within about
+15% of each other from 96 to 256 rows (``fkn_bench/DESIGN.md``, "Performance notes")."""
 
 
 class ExtendedKalmanFilter(KalmanFilter):
