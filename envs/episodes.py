@@ -168,29 +168,41 @@ def true_inertia(scenario: Scenario, seeds: Sequence[int]) -> Float[ArrayF, "B 3
     return np.array([nominal * (1.0 + stream(seed, "inertia").uniform(-error, error, 3)) for seed in seeds])
 
 
-def rate_offsets(scenario: Scenario, seeds: Sequence[int]) -> Float[ArrayF, "B N 3"]:
-    """The world-frame rate offsets ``d (B, N, 3)`` (rad/s) of the unmodelled torque bursts of
-    each seed's whole episode (``N = n_steps``; zero without bursts; see :class:`Scenario`):
-    a burst of ``kick_length`` steps starts at step ``k`` where the ``kick`` stream's uniform
-    draw is below ``kick_rate``; during a burst ``d`` takes the step ``kick_sigma n_k`` (``n_k``
-    from the ``kick_noise`` stream) and it decays by ``exp(-dt / kick_decay)`` at every step."""
-    from scipy.signal import lfilter  # here, not at module level: a slow import (DESIGN.md, "Performance notes")
-
+def kick_bursts(scenario: Scenario, seeds: Sequence[int]) -> tuple[Bool[ArrayB, "B N"], Float[ArrayF, "B N 3"]]:
+    """Where each seed's unmodelled torque bursts act, ``(B, N)`` (True at the steps of a burst;
+    ``N = n_steps``), and the standard-normal draws ``n_k (B, N, 3)`` of their rate steps (see
+    :func:`rate_offsets`): a burst of ``kick_length`` steps starts at step ``k`` where the
+    ``kick`` stream's uniform draw is below ``kick_rate``. All False (and zeros) without bursts."""
     sc, steps = scenario, scenario.n_steps
-    out = np.zeros((len(seeds), steps, 3))
+    inside, noise = np.zeros((len(seeds), steps), dtype=bool), np.zeros((len(seeds), steps, 3))
     if not sc.has_kicks:
-        return out
+        return inside, noise
     blocks = range(-(-steps // BLOCK))
-    decay = float(np.exp(-sc.dt / sc.kick_decay))
     for row, seed in enumerate(seeds):
         starts = np.concatenate([stream(seed, "kick", b).random(BLOCK) for b in blocks])[:steps] < sc.kick_rate
-        noise = np.concatenate([stream(seed, "kick_noise", b).standard_normal((BLOCK, 3)) for b in blocks])[:steps]
+        noise[row] = np.concatenate([stream(seed, "kick_noise", b).standard_normal((BLOCK, 3)) for b in blocks])[:steps]
         # in a burst: a start in the last kick_length steps (this one included)
         started = np.cumsum(starts)
         before = np.concatenate([np.zeros(sc.kick_length, dtype=started.dtype), started[:-sc.kick_length]])[:steps]
-        increments = np.where((started - before > 0)[:, None], sc.kick_sigma * noise, 0.0)
-        out[row] = lfilter([1.0], [1.0, -decay], increments, axis=0)  # d_k = a d_{k-1} + u_k
-    return out
+        inside[row] = started - before > 0
+    return inside, noise
+
+
+def rate_offsets(scenario: Scenario, seeds: Sequence[int]) -> Float[ArrayF, "B N 3"]:
+    """The world-frame rate offsets ``d (B, N, 3)`` (rad/s) of the unmodelled torque bursts of
+    each seed's whole episode (``N = n_steps``; zero without bursts; see :class:`Scenario`):
+    during a burst (:func:`kick_bursts`) ``d`` takes the step ``kick_sigma n_k`` (``n_k`` from
+    the ``kick_noise`` stream) and it decays by ``exp(-dt / kick_decay)`` at every step."""
+    from scipy.signal import lfilter  # here, not at module level: a slow import (DESIGN.md, "Performance notes")
+
+    sc = scenario
+    out = np.zeros((len(seeds), sc.n_steps, 3))
+    if not sc.has_kicks:
+        return out
+    inside, noise = kick_bursts(sc, seeds)
+    decay = float(np.exp(-sc.dt / sc.kick_decay))
+    increments = np.where(inside[..., None], sc.kick_sigma * noise, 0.0)
+    return lfilter([1.0], [1.0, -decay], increments, axis=1)  # d_k = a d_{k-1} + u_k
 
 
 GENERATION_BYTES_PER_STEP = 400
