@@ -98,6 +98,9 @@ class Results:
         self._by_pair: dict[tuple[str, str], list[CellRecord]] = {}  # (label, scenario) -> records, in order
         for record in self.records:
             self._by_pair.setdefault((record.label, record.scenario), []).append(record)
+        self.bounds: dict[str, dict[str, Any]] = {}
+        """``{scenario: bound}``: the stored posterior Cramér-Rao bounds that belong to these
+        records (:mod:`fkn_bench.harness.bounds`; :meth:`ResultStore.load` reads them)."""
 
     def __len__(self) -> int:
         return len(self.records)

@@ -59,6 +59,7 @@ import numpy as np
 import pandas as pd
 
 from fkn_bench.harness.grid import CellSpec, path_name, variant_id
+from fkn_bench.harness.bounds import read_bounds
 from fkn_bench.harness.records import CellRecord, Results
 from fkn_bench.io import (TEMPORARY_PATTERN, WriteError, directory_lock, read_json, remove_temporaries, to_jsonable,
                           write_bytes_atomic, write_json_atomic, write_text_atomic)
@@ -344,7 +345,9 @@ class ResultStore:
             place = self._paths(record)[2]
             if path == place or place not in records:
                 records[place] = record
-        return Results(records.values())
+        results = Results(records.values())
+        results.bounds = read_bounds(self.root, results)
+        return results
 
     def write_summary(self, results: Results, provenance: dict[str, Any], *, computed: int | None = None) -> None:
         """Write ``results.csv`` (all rows, exact floats) and ``results.json`` (provenance).
