@@ -94,12 +94,16 @@ def run_cell(spec: CellSpec) -> CellRecord:
         trained_on = (getattr(estimator, "metadata", None) or {}).get("scenario")
         if trained_on:  # a learned or tuned estimator: the training set its parameters come from
             notes["trained_on"] = trained_on.get("name") if isinstance(trained_on, dict) else str(trained_on)
-        try:
-            online_steps = min(spec.online_steps, episodes.n_steps)
-            us_online = time_online(estimator, episodes.measurements[0, :online_steps], dt)
-        except Exception as exc:  # noqa: BLE001 - timing only: keep the batch results
+        if getattr(estimator, "causal", True) is False:  # a smoother: it reads the whole episode, no online step
+            notes["non_causal"] = True
             us_online = float("nan")
-            notes["online_error"] = _message(exc)
+        else:
+            try:
+                online_steps = min(spec.online_steps, episodes.n_steps)
+                us_online = time_online(estimator, episodes.measurements[0, :online_steps], dt)
+            except Exception as exc:  # noqa: BLE001 - timing only: keep the batch results
+                us_online = float("nan")
+                notes["online_error"] = _message(exc)
     cost = {
         "us_per_step_batched": 1e6 * batched.seconds / (episodes.batch_size * episodes.n_steps),
         "us_per_step_online": us_online,

@@ -149,6 +149,7 @@ def summarize_pair(results: Results, estimator: str, scenario: str) -> dict[str,
         },
         "errors": sorted({c.error for c in cells if c.error}),
         "trained_on": next((c.notes["trained_on"] for c in cells if c.notes.get("trained_on")), None),
+        "non_causal": any(c.notes.get("non_causal") for c in cells),
     }
 
 

@@ -65,6 +65,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import quote
 
+import numpy as np
 import pandas as pd
 
 from fkn_bench.harness.grid import path_name
@@ -73,8 +74,9 @@ from fkn_bench.harness.rows import deterministic_rows
 from fkn_bench.harness.store import rows_to_csv
 from fkn_bench.harness.summary import GROUP_RMSE_KEYS, summarize_pair
 from fkn_bench.io import to_jsonable
-from fkn_bench.metrics import DIVERGENCE_REASONS, GROUPS
+from fkn_bench.metrics import DIVERGENCE_REASONS, GROUP_UNITS, GROUPS
 from fkn_bench.metrics.statistics import ALPHA, INTERVAL_METHOD, TEST_METHOD, PairedTest, paired_test
+from fkn_bench.reporting.bounds import BOUND_LABEL, BOUND_NOTE, EFFICIENCY_KEYS, bound_means, efficiencies
 from fkn_bench.reporting.figures import png_bytes
 from fkn_bench.reporting.manifest import check_files, write_files
 from fkn_bench.reporting.plots import comparison_chart, comparison_data
@@ -251,23 +253,39 @@ def _figure_link(scenario: str) -> str:
 
 
 # ---------------------------------------------------------------------------------------- tables
-def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow], tests: Sequence[PairedTest | None]) -> Table:
+def _label(summary: dict[str, Any]) -> str:
+    """The estimator's row label: its name, what it was trained on, and "non-causal" for a smoother."""
+    return (summary["estimator"] + (f" (trained on {summary['trained_on']})" if summary.get("trained_on") else "")
+            + (" (non-causal reference)" if summary.get("non_causal") else ""))
+
+
+def _bound_cell(bound: dict[str, Any], key: str, digits: int = 3) -> str:
+    summary = bound["summary"][key]
+    mean, se = summary["mean"], summary["standard_error"]
+    se = 0.0 if se is not None and abs(se) <= 1e-9 * abs(mean) else se  # one value for every episode, to rounding
+    return f"{_fmt(mean, digits)} ±{_fmt(se, 2)}"
+
+
+def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow], tests: Sequence[PairedTest | None],
+                   references: Sequence[dict[str, Any]] = (), bound: dict[str, Any] | None = None) -> Table:
     numbers = rank_numbers(ranked, tests)
     header = [
-        "rank", "estimator", "13-state RMSE [95% CI]", "vs. above", "median [IQR]", "attitude (deg)", "position (m)", "rate (rad/s)",
+        "rank", "estimator", "13-state RMSE [95% CI]", "vs. above", "median [IQR]", "efficiency", "attitude (deg)",
+        "position (m)", "rate (rad/s)",
         "velocity (m/s)", "settling (s)", "settled", "lost track", "NEES flag", "ANEES", "NEES in 95% bounds",
         "µs/step online",
         "µs/step batched",
     ]
     rows = []
-    for i, (s, test, number) in enumerate(zip(ranked, tests, numbers)):
+    for i, (s, test, number) in enumerate([*zip(ranked, tests, numbers), *((r, None, None) for r in references)]):
         st = s["statistics"]["state_rmse"]
         rows.append([
             _DASH if number is None else str(number),
-            s["estimator"] + (f" (trained on {s['trained_on']})" if s.get("trained_on") else ""),
+            _label(s),
             _with_interval(s),
             _versus_above(test, i == 0) if number is not None else _DASH,
             f"{_fmt(st['median'], 4)} [{_fmt(st['q25'], 3)}, {_fmt(st['q75'], 3)}]",
+            _fmt(efficiencies(s, bound)["state"], 2),
             *(_fmt(s[k]) for k in (*GROUP_RMSE_KEYS.values(), "settling_time_s")),
             _pct(s["settled_fraction"]),
             _pct(s.get("lost_track_fraction", s["diverged_fraction"])),
@@ -277,9 +295,12 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
             _fmt(s["us_per_step"]),
             _fmt(s["us_per_step_batched"]),
         ])
+    if bound is not None:
+        rows.append([_DASH, BOUND_LABEL, _bound_cell(bound, "state", 4), _DASH, _DASH, "1",
+                     *(_bound_cell(bound, g) for g in GROUPS)] + [_DASH] * (len(header) - 10))
     for q in quoted:
         rows.append([_DASH, q.label, f"{_fmt(q.state_rmse, 4)}*"] + [_DASH] * (len(header) - 3))
-    runs = sorted({s["runs"] for s in ranked})
+    runs = sorted({s["runs"] for s in [*ranked, *references]})
     episodes = f"{runs[0]}" if len(runs) == 1 else f"{runs[0]} to {runs[-1]}"
     notes = [
         "13-state RMSE: root of the mean, over the 13 state components [q, r, w, v] and the scored window, of "
@@ -299,8 +320,11 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
         "NEES of the 12-dim error over seeds and scored steps (12 for a consistent filter); NEES in 95% bounds: "
         "share of steps whose average over the seeds is inside the two-sided 95% chi-square interval. µs/step: "
         "wall time of one online step, and of one sequence step in the batched run (machine-dependent). "
-        "(trained on X): the data set a learned or tuned estimator's parameters were fitted to.",
+        "(trained on X): the data set a learned or tuned estimator's parameters were fitted to. (non-causal "
+        "reference): a smoother, which reads the whole episode before it estimates any step; shown, not ranked.",
     ]
+    if bound is not None:
+        notes.append(BOUND_NOTE)
     if quoted:
         notes.append(
             "Rows marked (quoted) are copied from the paper, not run here: " + quoted[0].citation + ". "
@@ -309,9 +333,11 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
     return Table("Ranking", header, rows, notes, align=["r", "l"] + ["r"] * (len(header) - 2))
 
 
-def _components_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]) -> Table:
+def _components_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow], bound: dict[str, Any] | None = None) -> Table:
     header = ["estimator", *STATE_NAMES]
     rows = [[s["estimator"], *(_fmt(s["rmse"][n]) for n in STATE_NAMES)] for s in ranked]
+    if bound is not None:
+        rows.append([BOUND_LABEL, *(_fmt(v) for v in np.mean(np.asarray(bound["component_rmse"]), axis=0))])
     rows += [[q.label, *(f"{q.rmse[n]:.3f}" for n in STATE_NAMES)] for q in quoted]
     notes = [
         "RMSE per state component over the scored window, mean over seeds (q: unit quaternion components, "
@@ -360,6 +386,22 @@ def _settling_table(ranked: Sequence[dict[str, Any]]) -> Table:
     return Table("Settling time", header, rows, notes)
 
 
+def _efficiency_table(summaries: Sequence[dict[str, Any]], bound: dict[str, Any]) -> Table:
+    header = ["estimator", "13-state", *(f"{g}" for g in GROUPS)]
+    rows = [[BOUND_LABEL, *(_bound_cell(bound, k, 4 if k == "state" else 3) for k in EFFICIENCY_KEYS)]]
+    for s in summaries:
+        values = efficiencies(s, bound)
+        rows.append([_label(s), *(_fmt(values[k], 2) for k in EFFICIENCY_KEYS)])
+    units = ", ".join(f"{g} {GROUP_UNITS[g]}" for g in GROUPS)
+    notes = [f"First row: the bound of the 13-state RMSE and of each group's RMSE ({units}), mean over the test "
+             "episodes ± Monte-Carlo standard error. Other rows: efficiency = bound / RMSE, the bound averaged over the "
+             "episodes the estimator was scored on; 1.0 is the best possible. " + BOUND_NOTE]
+    if bound.get("inertia") == "estimated":
+        notes.append("The bound of a free tumble with the inertia ratios unknown, their prior the scenario's "
+                     "(`fkn-bench bound --scenario NAME --inertia known` prints the bound with the inertia known).")
+    return Table("How far from the best possible", header, rows, notes)
+
+
 # ---------------------------------------------------------------------------------------- pages
 def _scenario_intro(results: Results, scenario: str, runs: int) -> list[str]:
     source = results.source(scenario)
@@ -375,32 +417,50 @@ def _scenario_intro(results: Results, scenario: str, runs: int) -> list[str]:
     ]
 
 
-def ranked_summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
-    """The summaries of every estimator stored for ``scenario``, ranked (:func:`rank`)."""
+def _summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
     estimators = sorted({r.label for r in results.records if r.scenario == scenario})
-    return rank([summarize_pair(results, e, scenario) for e in estimators])
+    return [summarize_pair(results, e, scenario) for e in estimators]
+
+
+def ranked_summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
+    """The summaries of every causal estimator stored for ``scenario``, ranked (:func:`rank`)."""
+    return rank([s for s in _summaries(results, scenario) if not s.get("non_causal")])
+
+
+def reference_summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
+    """The summaries of the non-causal estimators (smoothers) stored for ``scenario``, by score:
+    shown as references, not ranked (an estimator that reads the whole episode is no filter)."""
+    return rank([s for s in _summaries(results, scenario) if s.get("non_causal")])
 
 
 def _scenario_files(results: Results, scenario: str, ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest | None],
                     figure: bool = False) -> dict[str, str]:
     quoted = quoted_rows(scenario)
-    runs = max(s["runs"] for s in ranked)
+    references = reference_summaries(results, scenario)
+    bound = results.bounds.get(scenario)
+    shown = [*ranked, *references]
+    runs = max(s["runs"] for s in shown)
     intro = _scenario_intro(results, scenario, runs)
-    tables = [_ranking_table(ranked, quoted, tests), _components_table(ranked, quoted), _consistency_table(ranked),
-              _settling_table(ranked)]
+    tables = [_ranking_table(ranked, quoted, tests, references, bound), _components_table(shown, quoted, bound),
+              *([_efficiency_table(shown, bound)] if bound is not None else []), _consistency_table(shown),
+              _settling_table(shown)]
     title = f"fkn-bench leaderboard: {scenario}"
-    shown = [_figure_link(scenario)] if figure else []
-    markdown = f"# {title}\n\n" + "\n\n".join([*intro, *shown]) + "\n\n" + "\n".join(markdown_table(t) for t in tables)
+    link = [_figure_link(scenario)] if figure else []
+    markdown = f"# {title}\n\n" + "\n\n".join([*intro, *link]) + "\n\n" + "\n".join(markdown_table(t) for t in tables)
     page = html_page(title, [p.replace("`", "") for p in intro], tables)
     stem = path_name(scenario)
-    return {f"{stem}.md": markdown, f"{stem}.html": page, f"{stem}.csv": _scenario_csv(ranked, tests)}
+    return {f"{stem}.md": markdown, f"{stem}.html": page, f"{stem}.csv": _scenario_csv(ranked, tests, references, bound)}
 
 
-def _scenario_csv(ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest | None]) -> str:
-    """The ranking's deterministic columns; ``p_vs_above`` rounded to 3 significant digits (the
-    test's decision does not hinge on more, and the file stays the same across SciPy versions)."""
+def _scenario_csv(ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest | None],
+                  references: Sequence[dict[str, Any]] = (), bound: dict[str, Any] | None = None) -> str:
+    """The ranking's deterministic columns, then the non-causal references (no rank) and the bound
+    row (``estimator`` = :data:`BOUND_LABEL`: the bound in the RMSE columns, efficiency 1);
+    ``p_vs_above`` rounded to 3 significant digits (the test's decision does not hinge on more, and
+    the file stays the same across SciPy versions)."""
     records = []
-    for s, test, number in zip(ranked, tests, rank_numbers(ranked, tests)):
+    numbered = [*zip(ranked, tests, rank_numbers(ranked, tests)), *((r, None, None) for r in references)]
+    for s, test, number in numbered:
         st = s["statistics"]["state_rmse"]
         ci = s.get("state_rmse_ci") or (None, None)
         tested = test is not None and test.pvalue is not None
@@ -418,7 +478,16 @@ def _scenario_csv(ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest |
             "anees_lower": s["anees_bounds"][0],
             "anees_upper": s["anees_bounds"][1],
             **{k: s[k] for k in ("nees_in_bounds_fraction", "anis", "nis_in_bounds_fraction")},
+            "non_causal": bool(s.get("non_causal")),
+            **{f"efficiency_{k}": v for k, v in efficiencies(s, bound).items()},
         })
+    if bound is not None:
+        means = bound_means(bound)
+        components = np.mean(np.asarray(bound["component_rmse"]), axis=0)
+        records.append({"estimator": BOUND_LABEL, "scenario": bound["scenario"], "runs": len(bound["seeds"]),
+                        "state_rmse": means["state"], **{GROUP_RMSE_KEYS[g]: means[g] for g in GROUPS},
+                        **{f"rmse_{n}": float(v) for n, v in zip(STATE_NAMES, components)}, "non_causal": False,
+                        **{f"efficiency_{k}": 1.0 for k in EFFICIENCY_KEYS}})
     frame = pd.DataFrame(records)
     frame["rank"] = frame["rank"].astype("Int64")
     frame["tied_with_above"] = frame["tied_with_above"].astype("boolean")
@@ -475,8 +544,10 @@ def _section(results: Results, section: str, scenarios: Sequence[str], ranked: d
                   "95% confidence interval); each PNG's text chunks hold the numbers it plots and their SHA-256.", ""]
     lines += [
         f"- [{s}]({u}.md) ([HTML]({u}.html), [CSV]({u}.csv)): best {ranked[s][0]['estimator']} "
-        f"({_fmt(ranked[s][0]['state_rmse'], 4)})"
-        for s, u in ((s, quote(path_name(s))) for s in scenarios)
+        f"({_fmt(ranked[s][0]['state_rmse'], 4)}"
+        + (f"; {BOUND_LABEL} {_fmt(results.bounds[s]['summary']['state']['mean'], 4)}, efficiency "
+           f"{_fmt(efficiencies(ranked[s][0], results.bounds[s])['state'], 2)}" if s in results.bounds else "") + ")"
+        for s, u in ((s, quote(path_name(s))) for s in scenarios) if ranked[s]
     ]
     return lines + [""]
 
