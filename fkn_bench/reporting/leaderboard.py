@@ -88,6 +88,7 @@ from fkn_bench.types import STATE_NAMES
 __all__ = [
     "RESULTS_DIR",
     "REGENERATE_COMMAND",
+    "BOUND_COMMAND",
     "LEADERBOARD_COMMAND",
     "CSV_FLOAT_FORMAT",
     "FIGURES_DIR",
@@ -108,10 +109,13 @@ __all__ = [
 RESULTS_DIR = "leaderboards/results"
 """The committed per-cell results (``fkn-bench run --out``), relative to the repository root."""
 LEADERBOARD_COMMAND = "fkn-bench leaderboard"
-REGENERATE_COMMAND = f"fkn-bench run --all --out {RESULTS_DIR} --no-progress && {LEADERBOARD_COMMAND}"
+BOUND_COMMAND = f"fkn-bench bound --results {RESULTS_DIR} --quiet"
+"""Computes the posterior Cramér-Rao bound of every simulated scenario of the committed results
+that has none stored (or a stale one) and stores it beside the cells (:mod:`fkn_bench.harness.bounds`)."""
+REGENERATE_COMMAND = f"fkn-bench run --all --out {RESULTS_DIR} --no-progress && {BOUND_COMMAND} && {LEADERBOARD_COMMAND}"
 """Rebuilds the committed leaderboards: runs every available estimator on every named scenario
 (cells already in ``leaderboards/results`` with the same configuration are reused; add
-``--rerun`` to recompute them), then rebuilds the tables."""
+``--rerun`` to recompute them), stores the scenarios' bounds, then rebuilds the tables."""
 
 CSV_FLOAT_FORMAT = "%.10g"
 """Float format of the leaderboard CSVs (fixed, so regenerated files are byte-identical)."""
