@@ -305,6 +305,9 @@ class Estimator(ABC):
 
     name: str = "estimator"
     description: str = ""
+    causal: bool = True
+    """False for an estimator whose estimate at a step uses later measurements (a smoother): an
+    offline reference, not a filter; it has no online ``step`` and reports label it."""
 
     @abstractmethod
     def estimate(self, measurements: Float[ArrayF, "B T 7"], mask: Bool[ArrayB, "B T"], dt: float) -> Estimates:
