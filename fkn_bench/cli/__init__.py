@@ -20,8 +20,8 @@ from contextlib import contextmanager
 __all__ = ["main", "Interrupted", "UsageError", "usage_errors", "COMMANDS"]
 
 COMMANDS: tuple[str, ...] = (
-    "scenarios", "simulate", "run", "train", "bench", "leaderboard", "plot", "render", "record", "dataset", "reproduce",
-    "sweep",
+    "scenarios", "simulate", "run", "train", "bench", "leaderboard", "bound", "plot", "render", "record", "dataset",
+    "reproduce", "sweep",
 )
 """Subcommand modules, in the order ``--help`` lists them."""
 

@@ -81,7 +81,8 @@ def store_bounds(root: str | Path, results: Results, *, force: bool = False,
 
 def read_bounds(root: str | Path, results: Results) -> dict[str, dict[str, Any]]:
     """``{scenario: Bound.to_dict()}`` of the stored bounds whose key matches ``results``
-    (module docstring); a missing, unreadable or stale bound is left out."""
+    (module docstring); a missing, unreadable or stale bound is left out, and so is the bound of
+    a scenario whose records mix metric settings (:meth:`Results.settings` refuses them)."""
     out = {}
     for scenario in results.scenarios():
         path = bound_path(root, scenario)
@@ -91,6 +92,10 @@ def read_bounds(root: str | Path, results: Results) -> dict[str, dict[str, Any]]
             document = read_json(path)
         except (OSError, ValueError):
             continue
-        if isinstance(document, dict) and document.get("key") == bound_key(results, scenario):
+        try:
+            key = bound_key(results, scenario)
+        except ValueError:  # records that mix metric settings: no bound belongs to them
+            continue
+        if isinstance(document, dict) and document.get("key") == key and isinstance(document.get("bound"), dict):
             out[scenario] = document["bound"]
     return out
