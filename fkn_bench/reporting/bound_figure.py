@@ -54,12 +54,12 @@ def bound_figure(bound: Bound, estimators: Mapping[str, Mapping[str, ArrayF]] | 
     dt = float(times[1] - times[0]) if times.size > 1 else 0.0
     figure = new_figure(10, 10)
     axes = figure.subplots(len(GROUPS), 1, sharex=True)
-    inertia = " (inertia estimated)" if bound.inertia == "estimated" else ""
+    inertia = ", inertia estimated" if bound.inertia == "estimated" else ""
     for ax, group in zip(axes, GROUPS):
-        ax.semilogy(times, _finite(bound.curves[group]), color="k", linewidth=1.6, label=f"bound (PCRB){inertia}")
+        ax.semilogy(times, _finite(bound.curves[group]), color="k", linewidth=1.6, label=f"bound (PCRB{inertia})")
         if known is not None:
             ax.semilogy(times, _finite(known.curves[group]), color="k", linestyle="--", linewidth=1.0,
-                        label="bound (PCRB), inertia known")
+                        label="bound (PCRB, inertia known)")
         for label, curves in (estimators or {}).items():
             ax.semilogy(times, _finite(curves[group]), linewidth=1.0, label=f"{label} (RMS over episodes)")
         ax.axvline(bound.cut * dt, color="tab:red", linestyle=":", linewidth=1.0,
