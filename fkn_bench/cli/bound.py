@@ -237,16 +237,15 @@ def _stored(args: argparse.Namespace) -> int:
 
     def progress(scenario: str) -> None:
         episodes = len(bound_key(results, scenario)["seeds"])
-        print(f"[bound] {scenario}: computing the bound of {episodes} episodes", file=sys.stderr)
+        print(f"[bound] {scenario}: computing the bound of {episodes} episodes ({bound_path(args.results, scenario)})",
+              file=sys.stderr)
 
     with directory_lock(args.results, "bounds (fkn-bench bound --results)"):
         written = store_bounds(args.results, results, force=args.force, progress=progress)
     for scenario in scenarios:
         if bound_key(results, scenario) is None:
             print(f"[bound] {scenario}: no bound (recorded episodes have no stated prior)", file=sys.stderr)
-        elif scenario in written:
-            print(f"[bound] {scenario}: wrote {bound_path(args.results, scenario)}", file=sys.stderr)
-        else:
+        elif scenario not in written:
             print(f"[bound] {scenario}: the stored bound is up to date ({bound_path(args.results, scenario)})",
                   file=sys.stderr)
     bounds = ResultStore(args.results).load().bounds
