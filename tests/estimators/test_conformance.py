@@ -89,6 +89,8 @@ def test_registered_estimator_survives_30_percent_garbage(name: str, garbage) ->
     with warnings.catch_warnings():
         warnings.simplefilter("error", RuntimeWarning)
         check_survives_garbage(estimator, z, mask, scenario.dt)
+        if not estimator.causal:  # a smoother has no online step (test_base: it says so)
+            return
         estimator.reset(dt=scenario.dt)
         for t in range(300):
             estimate = estimator.step({"pose": z[0, t], "valid": bool(mask[0, t])})
