@@ -63,6 +63,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="compute and store the bounds of these results (fkn-bench run --out) and print each "
                              "estimator's efficiency (--results alone: leaderboards/results, here or in the checkout)")
     parser.add_argument("--force", action="store_true", help="--results: recompute the stored bounds")
+    parser.add_argument("--quiet", action="store_true",
+                        help="--results: store the bounds and print only the progress lines, not the tables")
     add_scenario_file_option(parser)
     parser.set_defaults(handler=run)
 
@@ -76,8 +78,9 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"--{given[0]} goes with --scenario alone: with --results the stored results' seeds, "
                              f"split and cut are used")
         return _stored(args)
-    if args.force:
-        raise UsageError("--force goes with --results (it recomputes the stored bounds)")
+    for name, what in (("force", "it recomputes the stored bounds"), ("quiet", "it leaves out the tables")):
+        if getattr(args, name):
+            raise UsageError(f"--{name} goes with --results ({what})")
     if not args.scenario:
         hint = "--plot draws one scenario's bound: give --scenario NAME" if args.plot else (
             "give --scenario NAME (the bound of its episodes) or --results DIR (the bounds of stored results)")
@@ -248,6 +251,8 @@ def _stored(args: argparse.Namespace) -> int:
         elif scenario not in written:
             print(f"[bound] {scenario}: the stored bound is up to date ({bound_path(args.results, scenario)})",
                   file=sys.stderr)
+    if args.quiet:
+        return 0
     bounds = ResultStore(args.results).load().bounds
     tables = [_efficiency_table(results, scenario, bounds[scenario]) for scenario in scenarios if scenario in bounds]
     print("\n\n".join(tables))

@@ -147,8 +147,8 @@ class Bound:
 
 def efficiency(bound: float, rmse: float) -> float:
     """``bound / rmse`` (1.0: the best possible; NaN where either is not a positive finite
-    number)."""
-    if not (math.isfinite(bound) and math.isfinite(rmse)) or rmse <= 0 or bound < 0:
+    number: a zero bound is a quantity the stated prior fixes, where no ratio says anything)."""
+    if not (math.isfinite(bound) and math.isfinite(rmse)) or rmse <= 0 or bound <= 0:
         return math.nan
     return bound / rmse
 

@@ -98,3 +98,4 @@ def test_bad_settings_and_efficiency() -> None:
         posterior_bound(SPIN, 1, inertia="guessed")
     assert efficiency(0.5, 1.0) == 0.5
     assert math.isnan(efficiency(0.5, 0.0)) and math.isnan(efficiency(math.nan, 1.0))
+    assert math.isnan(efficiency(0.0, 1.0))  # a quantity the prior fixes: no ratio
