@@ -263,6 +263,11 @@ def _label(summary: dict[str, Any]) -> str:
             + (" (non-causal reference)" if summary.get("non_causal") else ""))
 
 
+def _efficiency(value: float) -> str:
+    """An efficiency to two decimals (– where undefined)."""
+    return _DASH if value is None or not math.isfinite(value) else f"{value:.2f}"
+
+
 def _bound_cell(bound: dict[str, Any], key: str, digits: int = 3) -> str:
     summary = bound["summary"][key]
     mean, se = summary["mean"], summary["standard_error"]
@@ -289,7 +294,7 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
             _with_interval(s),
             _versus_above(test, i == 0) if number is not None else _DASH,
             f"{_fmt(st['median'], 4)} [{_fmt(st['q25'], 3)}, {_fmt(st['q75'], 3)}]",
-            _fmt(efficiencies(s, bound)["state"], 2),
+            _efficiency(efficiencies(s, bound)["state"]),
             *(_fmt(s[k]) for k in (*GROUP_RMSE_KEYS.values(), "settling_time_s")),
             _pct(s["settled_fraction"]),
             _pct(s.get("lost_track_fraction", s["diverged_fraction"])),
@@ -395,7 +400,7 @@ def _efficiency_table(summaries: Sequence[dict[str, Any]], bound: dict[str, Any]
     rows = [[BOUND_LABEL, *(_bound_cell(bound, k, 4 if k == "state" else 3) for k in EFFICIENCY_KEYS)]]
     for s in summaries:
         values = efficiencies(s, bound)
-        rows.append([_label(s), *(_fmt(values[k], 2) for k in EFFICIENCY_KEYS)])
+        rows.append([_label(s), *(_efficiency(values[k]) for k in EFFICIENCY_KEYS)])
     units = ", ".join(f"{g} {GROUP_UNITS[g]}" for g in GROUPS)
     notes = [f"First row: the bound of the 13-state RMSE and of each group's RMSE ({units}), mean over the test "
              "episodes ± Monte-Carlo standard error. Other rows: efficiency = bound / RMSE, the bound averaged over the "
@@ -550,7 +555,7 @@ def _section(results: Results, section: str, scenarios: Sequence[str], ranked: d
         f"- [{s}]({u}.md) ([HTML]({u}.html), [CSV]({u}.csv)): best {ranked[s][0]['estimator']} "
         f"({_fmt(ranked[s][0]['state_rmse'], 4)}"
         + (f"; {BOUND_LABEL} {_fmt(results.bounds[s]['summary']['state']['mean'], 4)}, efficiency "
-           f"{_fmt(efficiencies(ranked[s][0], results.bounds[s])['state'], 2)}" if s in results.bounds else "") + ")"
+           f"{_efficiency(efficiencies(ranked[s][0], results.bounds[s])['state'])}" if s in results.bounds else "") + ")"
         for s, u in ((s, quote(path_name(s))) for s in scenarios) if ranked[s]
     ]
     return lines + [""]
