@@ -133,7 +133,7 @@ def _scenario_bound(args: argparse.Namespace, scenario: Any, estimators: list[An
     bound, known = _bounds(args, scenario)
     lines = [_heading(bound, scenario), _bound_table(bound, known)]
     lines.append("prior (stated by the scenario):")
-    lines += [f"  {name}: {text}" for name, text in scenario.describe_prior().items()]
+    lines += [f"  {name}: {text}" for name, text in scenario.describe_prior().items() if name != "splits"]
     if scenario.outlier_fraction or scenario.sign_flip_probability:
         lines.append("outliers and sign flips are not in the bound: it is the bound of the inlier model")
     if args.plot:
