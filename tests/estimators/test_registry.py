@@ -181,7 +181,7 @@ def test_the_built_ins_are_the_packages_own_entry_points(monkeypatch: pytest.Mon
     own = [e for e in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP) if registry._is_builtin(e)]
     assert [e.value for e in sorted(own, key=lambda e: e.name)] == [
         "fkn_bench.estimators.builtin", "fkn_bench.flexkalmannet.registration", "fkn_bench.baselines.registration",
-        "fkn_bench.kalmannet.registration", "fkn_bench.estimators.gated"]
+        "fkn_bench.kalmannet.registration", "fkn_bench.estimators.gated", "fkn_bench.estimators.matched"]
     assert all(e.attr is None for e in own)  # modules, each registering several estimators
     plugin = importlib.metadata.EntryPoint("plugin-constant", "fake_fkn_plugin:make_constant", ENTRY_POINT_GROUP)
     monkeypatch.setattr(registry, "_LOADED", False)
