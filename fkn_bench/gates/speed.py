@@ -603,6 +603,8 @@ def online_step_check(name: str, *, min_ratio: float | None = None) -> RatioChec
     from fkn_bench.estimators.conformance import build_for_checks
 
     cls = type(build_for_checks(name))
+    if not getattr(cls, "causal", True):
+        raise ValueError(f"{name} is non-causal: it has no online step to time")
 
     def setup() -> Workloads:
         z, m, dt = episodes_for("ds1", FILTER_BATCH, FILTER_STEPS)
@@ -625,7 +627,8 @@ def online_step_check(name: str, *, min_ratio: float | None = None) -> RatioChec
 
 def estimator_checks(names: Sequence[str] | None = None) -> list[RatioCheck]:
     """``online-step`` checks of ``names`` (default: every registered estimator that builds for a
-    named scenario; an unavailable one, e.g. untrained, has nothing to time)."""
+    named scenario; an unavailable one, e.g. untrained, and a non-causal one, a smoother, have
+    nothing to time)."""
     from fkn_bench.estimators import estimator_names
 
     checks = []

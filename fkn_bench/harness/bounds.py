@@ -28,7 +28,9 @@ __all__ = ["BOUNDS_DIR", "BOUND_FORMAT", "bound_key", "bound_path", "store_bound
 
 BOUNDS_DIR = "bounds"
 BOUND_FORMAT = "fkn-bench-bound"
-BOUND_FORMAT_VERSION = 1
+BOUND_FORMAT_VERSION = 2
+"""Raised when the bound's computation changes, so that stored bounds are recomputed (2: a free
+tumble of a time-split scenario starts at the split, :mod:`fkn_bench.metrics.bound`)."""
 
 
 def bound_path(root: str | Path, scenario: str) -> Path:

@@ -133,3 +133,11 @@ def test_gate_calibration_prints_ratios_and_a_threshold(monkeypatch: pytest.Monk
     entry = json.loads(capsys.readouterr().out)["fake-forward"]
     assert entry["n"] == 2 and entry["median"] == 1.5 and entry["doubled_max"] == 0.75
     assert entry["suggested_min_ratio"] == 1.0  # 0.7 x 1.5 to two digits
+
+
+def test_a_non_causal_estimator_has_no_online_step_to_time() -> None:
+    from fkn_bench.gates.speed import estimator_checks, online_step_check
+
+    with pytest.raises(ValueError, match="non-causal"):
+        online_step_check("smoother-matched")
+    assert "online-step:oracle-matched" in [c.name for c in estimator_checks(["oracle-matched", "smoother-matched"])]
