@@ -68,6 +68,7 @@ from fkn_bench.envs.measurements import MeasurementGenerator
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
 from fkn_bench.recordings.plausibility import QUATERNION_TOLERANCE, first_implausible
+from fkn_bench.recordings.opening import open_recording
 from fkn_bench.recordings.reader import (
     McapRecording,
     PoseSeries,
@@ -324,7 +325,7 @@ def read_recording(
     """
     if twist_frame not in ("auto", "world", "body"):
         raise ValueError(f"twist_frame must be 'auto', 'world' or 'body' (got {twist_frame!r})")
-    rec = McapRecording(path, repair=repair)
+    rec = open_recording(path, repair=repair)
     metadata, recorded_topics, stored_scenario, notes = _recording_metadata(rec)
     base = get_scenario(scenario) if scenario is not None else (stored_scenario or get_scenario("ds1"))
 
