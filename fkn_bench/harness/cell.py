@@ -81,8 +81,10 @@ def run_cell(spec: CellSpec) -> CellRecord:
             estimator = copy.deepcopy(spec.resolved.estimator)
             measurements = np.array(episodes.measurements)  # private copies: estimators get writable input
             valid = np.array(episodes.valid)
+            stated = {"measurement_covariances": episodes.measurement_covariances} if getattr(
+                estimator, "uses_measurement_covariances", False) else {}  # each step's R from its message
             with measure() as batched:
-                estimates = estimator.estimate(measurements, valid, dt)
+                estimates = estimator.estimate(measurements, valid, dt, **stated)
             scores = score_run(
                 episodes.truth, estimates.means, dt, error_covariances=estimates.error_covariances,
                 innovations=estimates.innovations, innovation_covariances=estimates.innovation_covariances,
@@ -91,6 +93,9 @@ def run_cell(spec: CellSpec) -> CellRecord:
         except Exception as exc:  # noqa: BLE001 - an estimator's failure is a result
             return _failure(spec, exc)
         notes: dict[str, Any] = {}
+        defaults = estimates.extras.get("measurement_noise_defaults")
+        if defaults is not None:  # measured steps without a usable stated covariance: the default R
+            notes["measurement_noise_defaults"] = int(np.sum(defaults))
         trained_on = (getattr(estimator, "metadata", None) or {}).get("scenario")
         if trained_on:  # a learned or tuned estimator: the training set its parameters come from
             notes["trained_on"] = trained_on.get("name") if isinstance(trained_on, dict) else str(trained_on)
