@@ -11,7 +11,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fkn_bench.envs.episodes import EpisodeStream
+from fkn_bench.envs.episodes import EpisodeStream, measurement_covariances
 from fkn_bench.envs.rendering import HISTORY_STEPS
 from fkn_bench.envs.rewards import DEFAULT_WEIGHTS, WEIGHT_LIMIT, attitude_error_angle, estimate_cost_scalar
 from fkn_bench.envs.spaces import MeasuredPose, action_space, action_values, observation_space
@@ -157,6 +157,9 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
     * ``**overrides``: any scenario field, e.g. ``noise_scale=5.0``, ``measurement_every=10``,
       ``dropout=0.2``, ``sign_flip_probability=0.5``, ``dynamics="free"``.
     * ``expose_truth``: put the true 13-dim state in ``info["truth"]`` (never in the observation).
+    * A scenario with ``measurement_covariance=True`` puts the covariance the step's measurement
+      states, ``(6, 6)`` in the error order ``[dtheta (rad), dr (m)]`` (NaN without a
+      measurement), in ``info["measurement_covariance"]``.
     * ``reward_weights``: mapping with keys ``attitude``, ``position``, ``omega``, ``velocity``,
       each a real number in ``[0, 1e6]`` (not a string or a bool).
     * ``render_mode``: ``None``, ``"ansi"`` (a one-line text summary), ``"rgb_array"`` (frames,
@@ -259,6 +262,10 @@ class AstrobeeTumbleEnv(_EpisodeWalk, gym.Env[dict[str, Any], ArrayF]):
         info: dict[str, Any] = {"step": self._index, "episode_seed": self.episode_seed}
         if self.expose_truth:
             info["truth"] = self._truth[0, self._index - self._chunk_start].copy()
+        if self.scenario.measurement_covariance:  # what the measurement states of its own noise
+            i = self._index - self._chunk_start
+            info["measurement_covariance"] = measurement_covariances(
+                self.scenario, self._index, self._valid[0:1, i : i + 1])[0, 0]
         return info
 
     # ------------------------------------------------------------------ Gymnasium API

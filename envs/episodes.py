@@ -39,6 +39,11 @@ class Episodes:
         truth: true states ``(B, T, 13)``.
         measurements: measured poses ``(B, T, 7)``, NaN where missing.
         valid: measurement validity ``(B, T)``.
+        measurement_covariances: the covariance each measurement states of its own error,
+            ``(B, T, 6, 6)`` in the error order ``[dtheta (rad), dr (m)]`` (world-frame attitude
+            error, ``fkn_bench/DESIGN.md``), NaN where a measurement states none; None when no
+            measurement does (a recording's ``PoseWithCovarianceStamped`` topic, or a scenario
+            with ``measurement_covariance = True``, carry them).
     """
 
     scenario: Scenario
@@ -48,6 +53,7 @@ class Episodes:
     truth: Float[ArrayF, "B T 13"]
     measurements: Float[ArrayF, "B T 7"]
     valid: Bool[ArrayB, "B T"]
+    measurement_covariances: Float[ArrayF, "B T 6 6"] | None = None
 
     @property
     def batch_size(self) -> int:
@@ -82,6 +88,7 @@ class Episodes:
             truth=self.truth[picked],
             measurements=self.measurements[picked],
             valid=self.valid[picked],
+            measurement_covariances=None if self.measurement_covariances is None else self.measurement_covariances[picked],
         )
 
     def window(self, start: int, stop: int) -> Episodes:
@@ -94,6 +101,8 @@ class Episodes:
             truth=self.truth[:, start:stop],
             measurements=self.measurements[:, start:stop],
             valid=self.valid[:, start:stop],
+            measurement_covariances=(None if self.measurement_covariances is None
+                                     else self.measurement_covariances[:, start:stop]),
         )
 
     def split(self, name: str) -> Episodes:
@@ -316,4 +325,19 @@ def generate_episodes(
     source.seek(start)
     times, truth, measurements, valid = source.advance(stop - start)
     truth, measurements = np.ascontiguousarray(truth), np.ascontiguousarray(measurements)
-    return Episodes(scenario, tuple(seed_list), start, times, truth, measurements, valid)
+    covariances = measurement_covariances(scenario, start, valid) if scenario.measurement_covariance else None
+    return Episodes(scenario, tuple(seed_list), start, times, truth, measurements, valid, covariances)
+
+
+def measurement_covariances(scenario: Scenario, start: int, valid: Bool[ArrayB, "B T"]) -> Float[ArrayF, "B T 6 6"]:
+    """The covariance each measurement of steps ``start ..`` states (``measurement_covariance =
+    True``, :class:`~fkn_bench.scenarios.Scenario`): ``diag(s_att^2 I3, s_pos^2 I3)`` with the
+    standard deviations in force at its step, NaN where there is no measurement."""
+    batch, steps = valid.shape
+    factor = scenario.noise_factor(np.arange(start, start + steps)) ** 2
+    variances = np.array([scenario.sigma_attitude_effective**2] * 3 + [scenario.sigma_position_effective**2] * 3)
+    out = np.zeros((batch, steps, 6, 6))
+    index = np.arange(6)
+    out[:, :, index, index] = factor[None, :, None] * variances
+    out[~valid] = np.nan
+    return out

@@ -164,12 +164,15 @@ def _finite_rows(estimates: Estimates) -> ArrayB:
 
 
 def restart_diverged(
-    estimates: Estimates, rerun: Callable[[ArrayF, ArrayB], Estimates], measurements: ArrayF, mask: ArrayB
+    estimates: Estimates, rerun: Callable[..., Estimates], measurements: ArrayF, mask: ArrayB, *,
+    per_step_inputs: tuple[ArrayF, ...] = (),
 ) -> Estimates:
     """``estimates`` with every sequence that stopped being finite restarted (module docstring).
 
-    ``rerun(measurements, mask)`` filters a sub-batch from scratch (the estimator's own
-    ``estimate`` with the same ``dt``, which applies this rule itself). A sequence whose outputs
+    ``rerun(measurements, mask, *inputs)`` filters a sub-batch from scratch (the estimator's own
+    ``estimate`` with the same ``dt``, which applies this rule itself); ``inputs`` are
+    ``per_step_inputs`` (other ``(B, T, ...)`` arrays, e.g. measurement covariances) sliced like
+    the measurements. A sequence whose outputs
     are first non-finite at step ``t0`` is filtered again from ``t0`` on, as a new sequence that
     initialises at its first usable measurement from ``t0``; its outputs replace those from ``t0``
     on. Each restart starts later than the previous one (a fresh sequence is finite at its first
@@ -193,7 +196,8 @@ def restart_diverged(
     restarted = np.zeros((batch, steps), dtype=bool) if restarted is None else restarted.astype(bool)
     for row in np.flatnonzero(~ok.all(1)):
         t0 = int(np.argmin(ok[row]))
-        fresh = rerun(measurements[row : row + 1, t0:], mask[row : row + 1, t0:])
+        fresh = rerun(measurements[row : row + 1, t0:], mask[row : row + 1, t0:],
+                      *(array[row : row + 1, t0:] for array in per_step_inputs))
         for name, array in per_step.items():
             array[row, t0:] = getattr(fresh, name)[0]
         for name, array in extras.items():

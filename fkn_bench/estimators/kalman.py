@@ -23,6 +23,7 @@ from fkn_bench.filters.pose import (
     state_covariance_from_error,
     with_unit_quaternion,
 )
+from fkn_bench.estimators.message_noise import MEASUREMENT_NOISE_MODES, message_noise
 from fkn_bench.linalg import symmetrize
 from fkn_bench.models.noise import NoiseParameters
 from fkn_bench.models.registry import DEFAULT_MODEL, make_model, model_spec
@@ -98,6 +99,11 @@ class KalmanEstimator(RecursiveEstimator):
         gate: chi-square innovation gate probability, e.g. 0.999 (None: no gate): an update
             whose normalised innovation squared exceeds that quantile is skipped
             (:meth:`~fkn_bench.filters.KalmanFilter.set_gate`), in ``estimate`` and ``step`` alike.
+        measurement_noise: ``"default"`` (``R`` above at every step) or ``"message"``: in
+            ``estimate``, each step's ``R`` from the covariance its measurement states
+            (``measurement_covariances``; :mod:`fkn_bench.estimators.message_noise`: validated, a
+            step without a usable one takes ``R``, counted in ``Estimates.extras
+            ["measurement_noise_defaults"]``); the online ``step`` uses ``R``.
         name, description: registry name and one-line description.
     """
 
@@ -114,9 +120,14 @@ class KalmanEstimator(RecursiveEstimator):
         r_cov: Sequence[Sequence[float]] | None = None,
         p0_cov: Sequence[Sequence[float]] | None = None,
         gate: float | None = None,
+        measurement_noise: str = "default",
         name: str = "kalman",
         description: str = "",
     ) -> None:
+        if measurement_noise not in MEASUREMENT_NOISE_MODES:
+            raise ValueError(f"measurement_noise must be one of {', '.join(MEASUREMENT_NOISE_MODES)} "
+                             f"(got {measurement_noise!r})")
+        self.measurement_noise = measurement_noise
         if variant not in VARIANTS:
             raise ValueError(f"unknown filter variant {variant!r}; valid variants: {', '.join(VARIANTS)}")
         model_spec(model)  # (ValueError naming the valid models)
@@ -198,13 +209,30 @@ class KalmanEstimator(RecursiveEstimator):
         """The constant ``Q``, ``R``, ``P0`` as torch tensors."""
         return NoiseParameters(*(torch.from_numpy(m.copy()) for m in self._numpy_noise))
 
-    def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
+    @property
+    def uses_measurement_covariances(self) -> bool:
+        """Whether ``estimate`` takes ``measurement_covariances`` (``measurement_noise="message"``)."""
+        return self.measurement_noise == "message"
+
+    def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float, *,
+                 measurement_covariances: ArrayF | None = None) -> Estimates:
+        """Filter whole sequences; with ``measurement_noise="message"``, ``measurement_covariances``
+        ``(B, T, 6, 6)`` (:attr:`fkn_bench.envs.Episodes.measurement_covariances`) give each step's
+        ``R``."""
         z, m, step = check_batch_inputs(measurements, mask, dt)
+        noise, extras = self.noise_parameters(), None
+        if self.uses_measurement_covariances:
+            R, defaults = message_noise(measurement_covariances, z, m, self._numpy_noise[1])
+            noise = NoiseParameters(noise.process, torch.from_numpy(R), noise.initial)
+            extras = {"measurement_noise_defaults": defaults}
         # overflow in a diverging sequence is handled by the restart rule (no warning)
         with torch.no_grad(), torch_threads(), np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-            result = self.filter.run(self.noise_parameters(), torch.from_numpy(z), torch.from_numpy(m), dt=step)
-            estimates = filter_result_to_estimates(result, self.filter)
-        return restart_diverged(estimates, lambda zs, ms: self.estimate(zs, ms, step), z, m)
+            result = self.filter.run(noise, torch.from_numpy(z), torch.from_numpy(m), dt=step)
+            estimates = filter_result_to_estimates(result, self.filter, extras=extras)
+        if not self.uses_measurement_covariances or measurement_covariances is None:
+            return restart_diverged(estimates, lambda zs, ms: self.estimate(zs, ms, step), z, m)
+        return restart_diverged(estimates, lambda zs, ms, cs: self.estimate(zs, ms, step, measurement_covariances=cs),
+                                z, m, per_step_inputs=(np.asarray(measurement_covariances, dtype=float),))
 
     def _online_report(self, state: Any) -> tuple[ArrayF, ArrayF]:
         mean, covariance = state.mean[0], state.covariance[0]
@@ -224,11 +252,13 @@ class KalmanEstimator(RecursiveEstimator):
                 config[f"{entry}_std"] = np.sqrt(np.diag(matrix)).tolist()
         if self.filter.gate is not None:
             config["gate"] = self.filter.gate
+        if self.measurement_noise != "default":
+            config["measurement_noise"] = self.measurement_noise
         config.update(name=self.name, description=self.description)
         return config
 
     CONFIG_KEYS = frozenset({"variant", "model", "inertia", "q_std", "r_std", "p0_std", "q_cov", "r_cov", "p0_cov", "gate",
-                             "name", "description"})
+                             "measurement_noise", "name", "description"})
     """Keys of :meth:`to_config` (subclasses add theirs)."""
 
     @classmethod

@@ -134,6 +134,11 @@ class Scenario:
         A fraction ``outlier_fraction`` of the surviving measurements is replaced by gross errors
         (uniformly random attitude, position offset N(0, ``outlier_position_sigma``^2) per axis)
         and each measured quaternion is negated with probability ``sign_flip_probability``.
+        With ``measurement_covariance`` each measurement also states its noise covariance, as a
+        ``PoseWithCovarianceStamped`` would: ``diag(s_att^2 I3, s_pos^2 I3)`` with the standard
+        deviations in force at its step (the noise step included; outliers state the nominal
+        noise, as a sensor that does not know it failed would), in the error order ``[dtheta,
+        dr]`` (:attr:`fkn_bench.envs.Episodes.measurement_covariances`).
         ``noise_step_scale`` multiplies both noise standard deviations in the middle third of
         each split (steps ``[a + (b - a) // 3, a + 2 (b - a) // 3)`` of each split ``[a, b)`` of
         train, val and test: every sequence trained on or evaluated is calm, noisy, calm; see
@@ -176,6 +181,7 @@ class Scenario:
     outlier_position_sigma: float = 1.0
     sign_flip_probability: float = 0.0
     noise_step_scale: float = 1.0
+    measurement_covariance: bool = False
     kick_rate: float = 0.0
     kick_length: int = 0
     kick_sigma: float = 0.0
@@ -259,6 +265,8 @@ class Scenario:
         bounds = self.split_bounds()
         _check(all(stop - start >= 2 for start, stop in bounds.values()), "split",
                "fractions giving every split at least 2 samples", self.split)
+        _check(isinstance(self.measurement_covariance, bool), "measurement_covariance", "true or false",
+               self.measurement_covariance)
         set_(self, "tags", tuple(str(t) for t in self.tags))
 
     # ------------------------------------------------------------------ derived values
@@ -396,6 +404,7 @@ _LATER_DEFAULTS: dict[str, Any] = {
     "omega0_frame": "world", "inertia_error": 0.0, "noise_step_scale": 1.0, "kick_rate": 0.0, "kick_length": 0,
     "kick_sigma": 0.0, "kick_decay": 5.0, "omega0_axis": "fixed", "omega0_magnitude": None,
     "omega0_magnitude_distribution": "log-uniform", "velocity0_std": 0.0, "split_mode": "time",
+    "measurement_covariance": False,
 }
 """Fields added after the first release, with the defaults that leave them out of the hash."""
 

@@ -219,6 +219,7 @@ _CHANGES = {
     "free_substeps": 2,
     "dataset_seed": 1,
     "model_family": "ds2",
+    "measurement_covariance": True,
 }
 
 
