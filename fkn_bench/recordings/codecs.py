@@ -2,28 +2,21 @@
 
 Three wire formats:
 
-* ROS 2 CDR (MCAP message encoding ``cdr``), written by ``mcap-ros2-support``
-  (:func:`encode_ros2`) and read here: a 4-byte encapsulation header (``00 01 00 00``,
-  little-endian plain CDR; ``00 00`` big-endian is also read), then the fields, each aligned to
-  its own size counted from the end of the encapsulation header; ``builtin_interfaces/Time`` is
-  ``int32 sec, uint32 nanosec``; a string is a ``uint32`` length that counts a terminating NUL,
-  the bytes and the NUL.
-* ROS 1 (message encoding ``ros1``, read only): little-endian, no alignment, ``std_msgs/Header``
-  is ``uint32 seq, time stamp (uint32 secs, uint32 nsecs), string frame_id``; a string is a
-  ``uint32`` length and the bytes, without NUL.
-* JSON ``foxglove.PoseInFrame`` (message encoding ``json``).
+* ROS 2 CDR (message encoding ``cdr``): written by ``mcap-ros2-support`` (:func:`encode_ros2`,
+  from the schema texts of :mod:`~fkn_bench.recordings.schemas`), read by ``rosbags``' typestore
+  of the standard ROS 2 (Humble) messages (:func:`decode_stamped`).
+* ROS 1 (message encoding ``ros1``, read only): read by ``rosbags``' typestore of the standard
+  ROS 1 (Noetic) messages, whose ``std_msgs/Header`` has ``seq``.
+* JSON ``foxglove.PoseInFrame`` (message encoding ``json``), written and read here.
 
 Every supported ROS type is a header, optionally a second string (``nav_msgs/Odometry``'s
-``child_frame_id``) and a run of ``float64`` fields; :data:`LAYOUTS` lists them in ROS order
-(positions ``x y z``, quaternions ``x y z w``, twists ``linear`` then ``angular``). The decoders
-are written here (rather than taken from the libraries) so that a bad message is reported by the
-field that cannot be read.
+``child_frame_id``) and ``float64`` fields; :data:`LAYOUTS` lists those fkn-bench writes in ROS
+order (positions ``x y z``, quaternions ``x y z w``, twists ``linear`` then ``angular``).
 """
 
 from __future__ import annotations
 
 import json
-import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -31,6 +24,8 @@ from typing import Any
 
 import numpy as np
 from mcap_ros2._dynamic import serialize_dynamic
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
 
 from fkn_bench.recordings.schemas import canonical_type_name, ros2_schema_text
 from fkn_bench.types import ArrayF
@@ -97,12 +92,6 @@ def split_stamp(stamps_ns: ArrayF) -> tuple[np.ndarray, np.ndarray]:
     return sec, nsec
 
 
-def _align(offset: int, size: int) -> int:
-    """CDR alignment: offsets count from the end of the 4-byte encapsulation header."""
-    body = offset - 4
-    return 4 + (body + size - 1) // size * size
-
-
 @lru_cache(maxsize=None)
 def _ros2_encoder(type_name: str) -> Callable[[Any], bytes]:
     name = "/msg/".join(type_name.split("/"))
@@ -133,69 +122,70 @@ def encode_ros2(
     ]
 
 
+@lru_cache(maxsize=None)
+def _typestore(encoding: str) -> Typestore:
+    """rosbags' typestore of the standard messages of ``encoding``: ROS 1 Noetic for ``ros1``
+    (``std_msgs/Header`` with ``seq``), ROS 2 Humble for ``cdr``."""
+    return get_typestore(Stores.ROS1_NOETIC if encoding == "ros1" else Stores.ROS2_HUMBLE)
+
+
+def _xyz(v: Any) -> tuple[float, float, float]:
+    return (v.x, v.y, v.z)
+
+
+def _pose_fields(p: Any) -> tuple[float, ...]:
+    return (*_xyz(p.position), *_xyz(p.orientation), p.orientation.w)
+
+
+def _twist_fields(t: Any) -> tuple[float, ...]:
+    return (*_xyz(t.linear), *_xyz(t.angular))
+
+
+_FIELDS: dict[str, Callable[[Any], tuple[float, ...]]] = {
+    "geometry_msgs/PoseStamped": lambda m: _pose_fields(m.pose),
+    "geometry_msgs/TwistStamped": lambda m: _twist_fields(m.twist),
+    "geometry_msgs/PoseWithCovarianceStamped": lambda m: (*_pose_fields(m.pose.pose), *m.pose.covariance.tolist()),
+    "nav_msgs/Odometry": lambda m: (
+        *_pose_fields(m.pose.pose), *m.pose.covariance.tolist(), *_twist_fields(m.twist.twist)
+    ),
+}
+"""Canonical type name -> the float64 fields :func:`decode_stamped` returns, in ROS order: pose
+(position, quaternion xyzw), its covariance (36, row-major), twist (linear, angular)."""
+
+
 def decode_stamped(type_name: str, encoding: str, data: bytes) -> tuple[int, str, str, tuple[float, ...]]:
-    """Parse one message of a type in :data:`LAYOUTS`, or (``encoding="json"``) a
-    ``foxglove.PoseInFrame`` (:func:`decode_pose_in_frame`).
+    """Parse one ``PoseStamped``, ``PoseWithCovarianceStamped``, ``Odometry`` or
+    ``TwistStamped`` (ROS 2 CDR or ROS 1, deserialised by rosbags' typestore of the standard
+    messages), or (``encoding="json"``) a ``foxglove.PoseInFrame`` (:func:`decode_pose_in_frame`).
 
     Returns:
-        ``(stamp_ns, frame_id, child_frame_id, values)`` with ``values`` the type's float64
-        fields in ROS order (``child_frame_id`` is ``""`` for types without one).
+        ``(stamp_ns, frame_id, child_frame_id, values)``; ``values`` are the type's float64 fields
+        in ROS order (:data:`_FIELDS`: ``PoseStamped`` 7, ``PoseWithCovarianceStamped`` 43,
+        ``Odometry`` 49 (its twist covariance is not read), ``TwistStamped`` 6);
+        ``child_frame_id`` is ``""`` for types without one.
 
     Raises:
-        DecodeError: naming the field that could not be read.
+        DecodeError: with rosbags' account of what could not be read.
     """
     if encoding == "json":
         stamp, frame_id, values = decode_pose_in_frame(data)
         return stamp, frame_id, "", values
-    layout = LAYOUTS[canonical_type_name(type_name)]
-    size = len(data)
-    if encoding == "cdr":
-        if size < 4 or data[0] != 0 or data[1] not in (0, 1):
-            head = data[:4].hex(" ") if size else "nothing"
-            raise DecodeError(
-                f"unsupported CDR encapsulation header {head} (expected 00 01 00 00, plain little-endian CDR)"
-            )
-        order = "<" if data[1] == 1 else ">"
-        pos, stamp_fmt, nul = 4, order + "iI", True
-    elif encoding == "ros1":
-        order, pos, stamp_fmt, nul = "<", 4, "<II", False
+    name = canonical_type_name(type_name)
+    if encoding == "ros1":
+        deserialize = _typestore(encoding).deserialize_ros1
+    elif encoding == "cdr":
+        deserialize = _typestore(encoding).deserialize_cdr
     else:
         raise DecodeError(f"unknown message encoding {encoding!r}")
-    if size < pos + 8:
-        raise DecodeError(f"{size} bytes are too short for the header stamp")
-    sec, nsec = struct.unpack_from(stamp_fmt, data, pos)
-    pos += 8
-
-    def string(pos: int, what: str) -> tuple[str, int]:
-        if encoding == "cdr":
-            pos = _align(pos, 4)
-        if pos + 4 > size:
-            raise DecodeError(f"message ends before the length of {what}")
-        (length,) = struct.unpack_from(order + "I", data, pos)
-        start, stop = pos + 4, pos + 4 + length
-        if stop > size:
-            raise DecodeError(f"{what} claims {length} bytes but the message has only {size - start} left")
-        raw = data[start:stop]
-        if nul:
-            if length == 0 or raw[-1] != 0:
-                raise DecodeError(f"{what} is not NUL-terminated")
-            raw = raw[:-1]
-        try:
-            return raw.decode("utf-8"), stop
-        except UnicodeDecodeError:
-            raise DecodeError(f"{what} is not valid UTF-8") from None
-
-    frame_id, pos = string(pos, "header.frame_id")
-    child = ""
-    if layout.child_frame:
-        child, pos = string(pos, "child_frame_id")
-    if encoding == "cdr":
-        pos = _align(pos, 8)
-    need = pos + 8 * layout.n_doubles
-    if need > size:
-        raise DecodeError(f"message has {size} bytes; {layout.name} with these frame ids needs {need}")
-    values = struct.unpack_from(f"{order}{layout.n_doubles}d", data, pos)
-    return sec * _NS + nsec, frame_id, child, values
+    try:
+        message = deserialize(data, name.replace("/", "/msg/"))
+    except Exception as exc:  # SerdeError, and whatever a malformed buffer makes the generated code raise
+        raise DecodeError(str(exc).strip() or type(exc).__name__) from None
+    stamp = message.header.stamp
+    return (
+        stamp.sec * _NS + stamp.nanosec, message.header.frame_id, getattr(message, "child_frame_id", ""),
+        _FIELDS[name](message),
+    )
 
 
 def encode_pose_in_frame(stamps_ns: np.ndarray, frame_id: str, values: ArrayF) -> list[bytes]:

@@ -1,36 +1,20 @@
 """Read pose and twist topics from MCAP files, with clear errors and documented repairs.
 
-Supported messages (by schema name and MCAP message encoding):
+:class:`McapRecording` finds a topic's messages in the file; decoding, the checks of the
+messages and their repairs are :class:`~fkn_bench.recordings.base.Recording`'s (the messages
+supported, the problems and repairs are listed in :mod:`fkn_bench.recordings.base`). The log time
+of a message is its MCAP ``log_time``.
 
-* ROS 2 (``cdr``) and ROS 1 (``ros1``): ``geometry_msgs/PoseStamped``,
-  ``geometry_msgs/PoseWithCovarianceStamped``, ``nav_msgs/Odometry`` (poses, and Odometry's
-  twist) and ``geometry_msgs/TwistStamped`` (twists); ``geometry_msgs/msg/X`` and
-  ``geometry_msgs/X`` name the same type.
-* ``json``: ``foxglove.PoseInFrame``.
-
-Messages of a topic are taken in log-time order (ties in file order); "message #i" in errors and
-reports counts from 0 in that order. Time stamps are the message's own (``header.stamp``,
-``timestamp`` for Foxglove); with ``time_source="auto"`` a topic whose stamps are all zero (an
-unset header, as some simulators publish) uses the MCAP log time instead, and says so.
-
-Problems, and what ``repair=True`` does about them (without it, each raises
-:class:`RecordingError` naming the file, the topic and the message):
+Problems of the file, and what ``repair=True`` does about them (without it, each raises
+:class:`~fkn_bench.recordings.base.RecordingError` naming the file):
 
 * file truncated or not closed (no footer), or an unreadable summary: read the records before
   the damage, front to back;
 * corrupt chunk (CRC mismatch, undecodable or unknown compression): skip it (its messages are
-  lost);
-* undecodable message, non-finite values, implausible values (a position beyond +-1e6 m, a
-  rate beyond +-1e3 rad/s or m/s: :mod:`fkn_bench.recordings.plausibility`), zero quaternion,
-  zero stamp among non-zero ones: drop the message;
-* quaternion norm off 1 by more than ``quaternion_tolerance`` (default 1e-6): renormalise it;
-* header stamps going backwards: sort the messages by stamp (stable);
-* duplicate header stamps: keep the first message of each stamp.
+  lost).
 
-Every repair is listed in the result's ``repairs`` (and issued as a
-:class:`RecordingRepairWarning` by the replay functions). Empty files, files that are not MCAP
-(ROS 1 ``.bag`` and ROS 2 ``.db3`` files get a conversion hint), unknown encodings or types, and
-missing topics (the message lists the topics and types found) are always errors.
+Empty files and files that are not MCAP are always errors (ROS 1 ``.bag`` and ROS 2 ``.db3``
+files are named as such: :func:`~fkn_bench.recordings.opening.open_recording` reads them).
 """
 
 from __future__ import annotations
@@ -44,139 +28,48 @@ from pathlib import Path
 from typing import Any
 
 import lz4.frame
-import numpy as np
 import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.reader import SeekingReader
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 
-from fkn_bench.geometry.quaternion import xyzw_to_wxyz
-from fkn_bench.recordings.codecs import DecodeError, decode_stamped
-from fkn_bench.recordings.plausibility import component_limits, first_implausible
+from fkn_bench.recordings.base import (
+    POSE_TYPES,
+    TWIST_TYPES,
+    PoseSeries,
+    Recording,
+    RecordingError,
+    RecordingRepairWarning,
+    TopicInfo,
+    TopicNotFoundError,
+    TwistSeries,
+    describe_exception,
+)
 from fkn_bench.recordings.schemas import canonical_type_name
-from fkn_bench.types import STATE_NAMES
-from fkn_bench.wording import option, option_name
+from fkn_bench.wording import option
 
 __all__ = [
     "RecordingError", "TopicNotFoundError", "RecordingRepairWarning", "TopicInfo", "PoseSeries",
-    "TwistSeries", "McapRecording", "POSE_TYPES", "TWIST_TYPES", "MCAP_MAGIC", "read_metadata",
-    "list_topics"
+    "TwistSeries", "McapRecording", "POSE_TYPES", "TWIST_TYPES", "MCAP_MAGIC"
 ]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-_NS = 1_000_000_000
-
-POSE_TYPES: tuple[str, ...] = (
-    "geometry_msgs/PoseStamped",
-    "geometry_msgs/PoseWithCovarianceStamped",
-    "nav_msgs/Odometry",
-    "foxglove.PoseInFrame",
-)
-"""Canonical names of the types a pose topic may have."""
-TWIST_TYPES: tuple[str, ...] = ("geometry_msgs/TwistStamped", "nav_msgs/Odometry")
-"""Canonical names of the types a twist topic may have."""
-
-_ODOMETRY = "nav_msgs/Odometry"
-_SUPPORTED = set(POSE_TYPES) | set(TWIST_TYPES)
-_ENCODINGS = {"cdr": "ROS 2 CDR", "ros1": "ROS 1", "json": "JSON"}
 _RECORD_HEAD = struct.Struct("<BQ")
 _MESSAGE_HEAD = struct.Struct("<HIQQ")
 _OPCODE_MESSAGE = 0x05
-_OTHER_FORMATS = {  # file start -> what the file is and how to convert it
-    b"#ROSBAG": "this is a ROS 1 bag (.bag), not MCAP; convert it with `mcap convert FILE.bag FILE.mcap` "
-    "(the mcap CLI) and replay the .mcap",
-    b"SQLite format 3": "this is a ROS 2 sqlite3 bag (.db3), not MCAP; convert it with `ros2 bag convert` "
-    "(storage 'mcap') or `mcap convert`, and replay the .mcap",
+_SUPPORTED = set(POSE_TYPES) | set(TWIST_TYPES)
+OTHER_FORMATS: dict[bytes, str] = {  # file start -> what the file is
+    b"#ROSBAG": "a ROS 1 bag (.bag)",
+    b"SQLite format 3": "a ROS 2 sqlite3 bag (.db3)",
 }
+"""Starts of the bag files that :func:`~fkn_bench.recordings.opening.open_recording` reads with
+:class:`~fkn_bench.recordings.bags.BagRecording`, and what they are."""
 _DECOMPRESS = {
     "zstd": lambda chunk: zstandard.decompress(chunk.data, max_output_size=chunk.uncompressed_size),
     "lz4": lambda chunk: lz4.frame.decompress(chunk.data),
     "": lambda chunk: chunk.data,
 }
-
-
-class RecordingError(ValueError):
-    """A recording that cannot be used as asked; the message names the file (and the topic and
-    message where one is at fault) and how to proceed."""
-
-    def __init__(self, message: str, *, path: Path | None = None, topic: str | None = None, index: int | None = None):
-        super().__init__(message)
-        self.path = path
-        self.topic = topic
-        self.index = index
-
-
-class TopicNotFoundError(RecordingError):
-    """A requested topic is absent; the message lists the topics and types found."""
-
-
-class RecordingRepairWarning(UserWarning):
-    """A documented repair was applied to a recording (see :mod:`fkn_bench.recordings.reader`)."""
-
-
-@dataclass(frozen=True)
-class TopicInfo:
-    """One topic of a recording."""
-
-    topic: str
-    schema_name: str
-    schema_encoding: str
-    message_encoding: str
-    message_count: int | None
-    """Messages on the topic (None when the file has no statistics record)."""
-
-    @property
-    def type_name(self) -> str:
-        """Canonical type name (``geometry_msgs/PoseStamped``)."""
-        return canonical_type_name(self.schema_name)
-
-    def describe(self) -> str:
-        count = "?" if self.message_count is None else self.message_count
-        return f"{self.topic}  {self.schema_name or '(no schema)'} ({self.message_encoding}, {count} messages)"
-
-
-@dataclass(frozen=True, eq=False, kw_only=True)
-class _Series:
-    """What every validated series of one topic has (see :class:`PoseSeries`)."""
-
-    topic: str
-    type_name: str
-    encoding: str
-    stamps_ns: np.ndarray
-    frame_id: str
-    indices: np.ndarray
-    time_source: str
-    repairs: tuple[str, ...] = ()
-    notes: tuple[str, ...] = ()
-
-
-@dataclass(frozen=True, eq=False, kw_only=True)
-class PoseSeries(_Series):
-    """Validated poses of one topic, sorted by stamp.
-
-    Attributes:
-        topic, type_name, encoding: where they came from.
-        stamps_ns: ``(N,)`` int64 stamps (ns), strictly increasing.
-        poses: ``(N, 7)`` ``[qw, qx, qy, qz, rx, ry, rz]`` (converted from ROS x, y, z, w).
-        frame_id, child_frame_id: of the first message (child only for Odometry).
-        twists: ``(N, 6)`` Odometry twist ``[angular(3), linear(3)]`` in ``child_frame_id``, or None.
-        indices: ``(N,)`` message numbers (log-time order) the rows come from.
-        time_source: ``"header"`` or ``"log"``.
-        repairs, notes: what was repaired, and other remarks.
-    """
-
-    poses: np.ndarray
-    child_frame_id: str
-    twists: np.ndarray | None
-
-
-@dataclass(frozen=True, eq=False, kw_only=True)
-class TwistSeries(_Series):
-    """Validated twists of one topic: ``twists (N, 6)`` = ``[angular(3), linear(3)]`` in
-    ``frame_id``; other attributes as :class:`PoseSeries`."""
-
-    twists: np.ndarray
 
 
 @dataclass
@@ -188,16 +81,7 @@ class _Raw:
     messages: list[tuple[int, int, bytes]] = field(default_factory=list)
 
 
-def _describe(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
-
-
-def _seconds(ns: int) -> str:
-    return f"{ns / _NS:.9f} s"
-
-
-class McapRecording:
+class McapRecording(Recording):
     """An MCAP file opened for reading pose topics.
 
     Opening checks the file (see the module docstring for the errors and repairs) and reads its
@@ -209,10 +93,7 @@ class McapRecording:
     """
 
     def __init__(self, path: str | Path, *, repair: bool = False) -> None:
-        self.path = Path(path)
-        self.repair = bool(repair)
-        self.repairs: list[str] = []
-        self.notes: list[str] = []
+        super().__init__(path, repair=repair)
         self._check_file()
         self._summary = None
         self._linear: dict[int, _Raw] | None = None
@@ -223,16 +104,6 @@ class McapRecording:
         self._open_summary()
 
     # ------------------------------------------------------------------ opening
-    def _error(self, message: str, **where: Any) -> RecordingError:
-        return RecordingError(f"{self.path}: {message}", path=self.path, **where)
-
-    def _repair(self, error: str, note: str, repairs: list[str] | None = None, **where: Any) -> None:
-        """Raise ``error`` (which says how to repair) unless repairing; else record ``note`` in
-        ``repairs`` (default: the file's)."""
-        if not self.repair:
-            raise self._error(error, **where)
-        (self.repairs if repairs is None else repairs).append(note)
-
     def _skip_chunk(self, where: str, problem: str) -> None:
         self._repair(
             f"{where} {problem}. Pass {option('repair')} to skip damaged chunks (their messages are lost)",
@@ -250,9 +121,11 @@ class McapRecording:
             raise self._error("the file is empty (0 bytes); it is not an MCAP recording")
         with path.open("rb") as fh:
             head = fh.read(16)
-        for start, hint in _OTHER_FORMATS.items():
+        for start, what in OTHER_FORMATS.items():
             if head.startswith(start):
-                raise self._error(hint)
+                raise self._error(
+                    f"this is {what}, not MCAP; open it with fkn_bench.recordings.open_recording, which reads bags"
+                )
         if not head.startswith(MCAP_MAGIC):
             if MCAP_MAGIC.startswith(head):
                 raise self._error(f"the file is truncated: {self.size} bytes, fewer than the MCAP magic")
@@ -272,7 +145,7 @@ class McapRecording:
                     fh.seek(0)
                     self._summary = SeekingReader(fh, validate_crcs=True).get_summary()
                 except Exception as exc:  # any failure here means a damaged end of file
-                    problem = f"its summary section cannot be read ({_describe(exc)})"
+                    problem = f"its summary section cannot be read ({describe_exception(exc)})"
         if problem is not None:
             self._repair(
                 f"{problem}. Pass {option('repair')} to read the messages stored before the damage, or recover the "
@@ -295,7 +168,7 @@ class McapRecording:
             try:
                 data = decompress(chunk)
             except Exception as exc:
-                problem = f"its {chunk.compression} data cannot be decompressed ({_describe(exc)})"
+                problem = f"its {chunk.compression} data cannot be decompressed ({describe_exception(exc)})"
             else:
                 if len(data) != chunk.uncompressed_size:
                     problem = f"{len(data)} bytes decompressed, {chunk.uncompressed_size} expected"
@@ -316,7 +189,7 @@ class McapRecording:
                 replace(chunk, compression="", data=data, uncompressed_crc=0, uncompressed_size=len(data))
             )
         except Exception as exc:
-            self._skip_chunk(where, f"is corrupt ({_describe(exc)})")
+            self._skip_chunk(where, f"is corrupt ({describe_exception(exc)})")
             return []
 
     def _scan_linear(self) -> None:
@@ -352,7 +225,7 @@ class McapRecording:
                 except StopIteration:
                     break
                 except Exception as exc:
-                    problem = f"record {count} (near byte {fh.tell()}), which cannot be read ({_describe(exc)})"
+                    problem = f"record {count} (near byte {fh.tell()}), which cannot be read ({describe_exception(exc)})"
                     self._repair(
                         f"{problem}; the file is truncated or corrupt. Pass {option('repair')} to use the messages before "
                         "the damage",
@@ -387,7 +260,7 @@ class McapRecording:
                     fh.seek(start + 1 + 8)
                     chunk = Chunk.read(ReadDataStream(fh))
                 except Exception as exc:
-                    self._skip_chunk(where, f"cannot be read ({_describe(exc)})")
+                    self._skip_chunk(where, f"cannot be read ({describe_exception(exc)})")
                     continue
                 data = self._chunk_data(chunk, where)
                 if data is None:
@@ -436,14 +309,6 @@ class McapRecording:
             out[channel.topic] = TopicInfo(channel.topic, name, encoding, channel.message_encoding, n)
         return out
 
-    def describe_topics(self) -> str:
-        topics = self.topics()
-        if not topics:
-            return "the recording has no topics"
-        width = max(len(t) for t in topics)
-        lines = [f"  {info.topic:<{width}}  {info.describe()[len(info.topic) + 2:]}" for info in topics.values()]
-        return "topics in this recording:\n" + "\n".join(lines)
-
     def metadata(self) -> dict[str, dict[str, str]]:
         """Metadata records ``{name: {key: value}}`` (later records of a name win)."""
         records: list[Metadata] = self._linear_metadata
@@ -455,18 +320,6 @@ class McapRecording:
                 self.notes.append(f"metadata could not be read ({type(exc).__name__}: {exc})")
         return {record.name: dict(record.metadata) for record in records}
 
-    def require_topic(self, topic: str, role: str) -> TopicInfo:
-        """Info of ``topic`` or :class:`TopicNotFoundError` listing the topics found."""
-        topics = self.topics()
-        if topic not in topics:
-            raise TopicNotFoundError(
-                f"{self.path}: {role} topic {topic!r} not found; {self.describe_topics()}", path=self.path, topic=topic
-            )
-        info = topics[topic]
-        if info.message_count == 0:
-            raise self._error(f"{role} topic {topic!r} has no messages", topic=topic)
-        return info
-
     def prefetch(self, topics: Iterable[str]) -> None:
         """Read the raw messages of several topics in one pass over the file (cached)."""
         wanted = [t for t in dict.fromkeys(topics) if t not in self._cache]
@@ -475,7 +328,7 @@ class McapRecording:
             for topic in wanted:
                 self._cache[topic] = [r for r in raw.values() if r.channel.topic == topic and r.messages]
 
-    def _raw(self, topic: str) -> _Raw:
+    def _payloads(self, topic: str) -> list[tuple[int, bytes]]:
         """Raw messages of ``topic`` in log-time order (ties in file order)."""
         self.prefetch([topic])
         parts = self._cache[topic]
@@ -484,194 +337,7 @@ class McapRecording:
         schemas = {(p.schema.name if p.schema else "", p.channel.message_encoding) for p in parts}
         if len(schemas) > 1:
             raise self._error(f"topic {topic!r} mixes several types/encodings {sorted(schemas)}", topic=topic)
-        merged = _Raw(parts[0].channel, parts[0].schema, [m for p in parts for m in p.messages])
-        merged.messages.sort(key=lambda m: (m[0], m[1]))
-        return merged
+        messages = sorted((m for p in parts for m in p.messages), key=lambda m: (m[0], m[1]))
+        return [(log_time, data) for log_time, _, data in messages]
 
     # ------------------------------------------------------------------ decoding and checks
-    def _series(
-        self, topic: str, role: str, allowed: tuple[str, ...], time_source: str, with_poses: bool,
-        quaternion_tolerance: float = 1e-6,
-    ) -> dict[str, Any]:
-        """The fields of a :class:`PoseSeries` of ``topic`` (``poses`` None unless ``with_poses``,
-        ``twists`` None unless the type has a twist): the messages that pass the checks of the
-        module docstring (or are repaired), in stamp order."""
-        info = self.require_topic(topic, role)
-        type_name, encoding = info.type_name, info.message_encoding
-        if encoding not in _ENCODINGS:
-            raise self._error(
-                f"{role} topic {topic!r} uses message encoding {encoding!r} (schema {info.schema_name!r}, schema "
-                f"encoding {info.schema_encoding!r}); fkn-bench reads 'cdr' (ROS 2), 'ros1' (ROS 1) and 'json' "
-                "(foxglove.PoseInFrame)",
-                topic=topic,
-            )
-        if type_name not in allowed or (encoding == "json") != (type_name == "foxglove.PoseInFrame"):
-            raise self._error(
-                f"{role} topic {topic!r} has type {info.schema_name or '(no schema)'!r} ({encoding}); a {role} topic "
-                f"must be one of {', '.join(allowed)} (JSON only for foxglove.PoseInFrame)",
-                topic=topic,
-            )
-        repairs: list[str] = []
-        notes: list[str] = []
-
-        def refuse(i: int, error: str, note: str) -> None:
-            """Raise ``error`` about message #i unless repairing; else record ``note``."""
-            self._repair(f"{role} topic {topic!r}: message #{i} {error}", f"{topic}: {note}", repairs,
-                         topic=topic, index=i)
-
-        # decode, in log-time order
-        rows: list[tuple[int, int, int, str, str, tuple[float, ...]]] = []
-        dropped: list[tuple[int, int, BaseException]] = []
-        for i, (log_time, _, data) in enumerate(self._raw(topic).messages):
-            try:
-                stamp, frame, child, values = decode_stamped(type_name, encoding, data)
-            except (DecodeError, struct.error) as exc:
-                dropped.append((i, log_time, exc))
-                continue
-            rows.append((i, log_time, stamp, frame, child, values))
-        if dropped:
-            i, log_time, exc = dropped[0]
-            refuse(
-                i,
-                f"(log time {_seconds(log_time)}) cannot be decoded as {info.schema_name} ({_ENCODINGS[encoding]}): "
-                f"{exc}. Pass {option('repair')} to drop undecodable messages",
-                f"dropped {len(dropped)} undecodable message(s) (first: #{i})",
-            )
-        if not rows:
-            raise self._error(f"{role} topic {topic!r} has no decodable messages", topic=topic)
-        numbers, log, header, frames, children, columns = zip(*rows)
-        indices = np.array(numbers, dtype=np.int64)
-        values = np.array(columns, dtype=np.float64)
-        keep = np.ones(len(indices), dtype=bool)
-
-        # time stamps
-        if time_source not in ("auto", "header", "log"):
-            raise ValueError(f"time_source must be 'auto', 'header' or 'log' (got {time_source!r})")
-        zero = np.array(header) == 0
-        if time_source == "log" or (time_source == "auto" and zero.all()):
-            if time_source == "auto":
-                notes.append(f"{topic}: every header stamp is zero; used the MCAP log times instead")
-            stamps, source = np.array(log, dtype=np.int64), "log"
-        elif zero.all():
-            raise self._error(
-                f"{role} topic {topic!r}: every header stamp is zero; use {option('time_source', 'log')} (or 'auto')",
-                topic=topic, index=int(indices[0]),
-            )
-        else:
-            if zero.any():
-                first = int(indices[np.argmax(zero)])
-                refuse(
-                    first,
-                    "has a zero header stamp while others do not. "
-                    f"Pass {option('repair')} to drop such messages, or {option('time_source', 'log')}",
-                    f"dropped {int(zero.sum())} message(s) with a zero header stamp (first: #{first})",
-                )
-                keep &= ~zero
-            stamps, source = np.array(header, dtype=np.int64), "header"
-
-        # values: ROS order position(3), orientation xyzw(4) [, pose cov(36), twist linear(3) angular(3), ...]
-        poses = twists = None
-        if with_poses:
-            poses = np.concatenate([xyzw_to_wxyz(values[:, 3:7]), values[:, 0:3]], axis=1)
-        if type_name in TWIST_TYPES:
-            linear = 43 if type_name == _ODOMETRY else 0
-            twists = np.concatenate([values[:, linear + 3 : linear + 6], values[:, linear : linear + 3]], axis=1)
-        checked = np.concatenate([a for a in (poses, twists) if a is not None], axis=1)
-        names = (STATE_NAMES[:7] if poses is not None else ()) + (STATE_NAMES[7:] if twists is not None else ())
-        ok = np.isfinite(checked).all(axis=1)
-        zero_q = np.zeros_like(ok)
-        if poses is not None:
-            zero_q = ok & (np.linalg.norm(np.nan_to_num(poses[:, :4]), axis=1) < 1e-9)
-        ok &= ~zero_q
-        beyond = ok.copy()
-        with np.errstate(invalid="ignore"):
-            beyond[ok] = np.any(np.abs(checked[ok]) > component_limits(names), axis=1)
-        ok &= ~beyond
-        bad = keep & ~ok
-        if bad.any():
-            i = int(np.argmax(bad))
-            what = ("a zero quaternion" if zero_q[i] else
-                    f"an implausible value ({first_implausible(checked[i], names, quaternion_tolerance=None)[1]})"
-                    if beyond[i] else "a non-finite value (NaN or infinity)")
-            refuse(
-                int(indices[i]),
-                f"has {what}; pass {option('repair')} to drop such messages",
-                f"dropped {int(bad.sum())} message(s) with non-finite or implausible values or zero quaternions "
-                f"(first: #{int(indices[i])})",
-            )
-        keep &= ok
-        if poses is not None:
-            norms = np.linalg.norm(poses[:, :4], axis=1)
-            bad_norm = keep & (np.abs(norms - 1.0) > quaternion_tolerance)
-            if bad_norm.any():
-                i = int(np.argmax(bad_norm))
-                refuse(
-                    int(indices[i]),
-                    f"has a quaternion of norm {norms[i]:.9g}, not 1 (tolerance {quaternion_tolerance:g}); pass "
-                    f"{option('repair')} to renormalise such quaternions, or a larger {option_name('quaternion_tolerance')}",
-                    f"renormalised {int(bad_norm.sum())} quaternion(s) with a norm off 1 by more than "
-                    f"{quaternion_tolerance:g} (first: #{int(indices[i])}, norm {norms[i]:.9g})",
-                )
-                poses[bad_norm, :4] /= norms[bad_norm, None]
-
-        # order: sort by stamp, drop duplicate stamps
-        rows_kept = np.flatnonzero(keep)
-        kept_stamps, kept_indices = stamps[rows_kept], indices[rows_kept]
-        order = np.arange(len(rows_kept))
-        back = np.flatnonzero(np.diff(kept_stamps) < 0) + 1
-        if len(back):
-            i = int(back[0])
-            refuse(
-                int(kept_indices[i]),
-                f"has stamp {_seconds(int(kept_stamps[i]))}, earlier than message #{int(kept_indices[i - 1])} "
-                f"({_seconds(int(kept_stamps[i - 1]))}): the time stamps are not monotonic. Pass {option('repair')} to "
-                "sort the messages by stamp",
-                f"sorted the messages by stamp ({len(back)} went backwards; first: #{int(kept_indices[i])})",
-            )
-            order = np.argsort(kept_stamps, kind="stable")
-        same = np.flatnonzero(np.diff(kept_stamps[order]) == 0) + 1
-        if len(same):
-            i = int(same[0])
-            this, before = int(kept_indices[order[i]]), int(kept_indices[order[i - 1]])
-            refuse(
-                this,
-                f"has the same stamp {_seconds(int(kept_stamps[order[i]]))} as message #{before} (duplicate time "
-                f"stamps). Pass {option('repair')} to keep only the first message of each stamp",
-                f"dropped {len(same)} message(s) with a duplicate stamp, keeping the first of each "
-                f"(first dropped: #{this})",
-            )
-            order = np.delete(order, same)
-        order = rows_kept[order]
-        if len(order) == 0:
-            raise self._error(f"{role} topic {topic!r} has no usable messages", topic=topic)
-        return dict(
-            topic=topic, type_name=type_name, encoding=encoding, stamps_ns=stamps[order], indices=indices[order],
-            time_source=source, repairs=tuple(repairs), notes=tuple(notes), frame_id=frames[0],
-            child_frame_id=children[0], poses=None if poses is None else poses[order],
-            twists=None if twists is None else twists[order],
-        )
-
-    def read_poses(
-        self, topic: str, *, role: str = "pose", time_source: str = "auto", quaternion_tolerance: float = 1e-6
-    ) -> PoseSeries:
-        """Validated poses of ``topic`` (see module docstring for the checks and repairs)."""
-        return PoseSeries(**self._series(topic, role, POSE_TYPES, time_source, True, quaternion_tolerance))
-
-    def read_twists(self, topic: str, *, role: str = "twist", time_source: str = "auto") -> TwistSeries:
-        """Validated twists of ``topic`` (``TwistStamped``, or the twist part of ``Odometry``)."""
-        fields = self._series(topic, role, TWIST_TYPES, time_source, False)
-        del fields["poses"]
-        child_frame_id = fields.pop("child_frame_id")
-        if fields["type_name"] == _ODOMETRY:
-            fields["frame_id"] = child_frame_id
-        return TwistSeries(**fields)
-
-
-def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
-    """Metadata records of an MCAP file (see :class:`McapRecording`)."""
-    return McapRecording(path).metadata()
-
-
-def list_topics(path: str | Path) -> dict[str, TopicInfo]:
-    """Topics of an MCAP file with types, encodings and message counts."""
-    return McapRecording(path).topics()
