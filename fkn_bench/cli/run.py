@@ -21,12 +21,22 @@ Examples::
     fkn-bench run --all --out leaderboards/results            # every estimator x scenario, each its test episodes
     fkn-bench run --all --backend dask --workers 4              # on a local Dask cluster
     fkn-bench run --recording run.mcap --estimator manual-ekf    # replay a recording (MCAP)
+    fkn-bench run --recording run.mcap --estimate-topic /loc/pose --estimate myfilter.tum --estimator manual-ekf
 
 With ``--recording`` the whole recording is one episode (truth from ``--truth-topic``, by default
 the truth of an fkn-bench recording or Astrobee's ``<robot>/loc/truth/pose``); measurements come
 from ``--measurement-topic`` as recorded, or are synthesised from the truth with the noise model
 of the recording's scenario, one noise draw per seed (``--seeds``; default 1 with recorded
 measurements, which do not depend on the seed).
+
+Other programs' estimates of the recording are scored beside the estimators, with the same
+metrics: ``--estimate-topic TOPIC`` (a pose topic of the recording: ``PoseStamped``,
+``PoseWithCovarianceStamped`` or ``Odometry``) and ``--estimate FILE`` (TUM ``.tum``/``.txt`` or
+``.csv``, :mod:`fkn_bench.recordings.trajectories`), each a row ``external:<topic>`` or
+``external:<file name>`` (no cost columns: fkn-bench did not run them). They are interpolated onto
+the truth's grid on the truth's clock (slerp for the attitude) within ``--association-tolerance``
+seconds of their stamps (default: twice their median interval); ``--align se3`` first aligns them
+rigidly to the truth (Umeyama) and prints the transform (:mod:`fkn_bench.envs.association`).
 """
 
 from __future__ import annotations
@@ -97,6 +107,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="message times: header stamps, MCAP log times, or auto (header unless all zero)")
     replay.add_argument("--quaternion-tolerance", type=float, default=1e-6, metavar="TOL",
                         help="largest accepted |norm - 1| of a recorded quaternion (default: 1e-6)")
+    external = parser.add_argument_group("external estimates (with --recording)")
+    external.add_argument("--estimate-topic", action="append", default=[], metavar="TOPIC",
+                          help="score another program's estimate on this pose topic of the recording (PoseStamped, "
+                               "PoseWithCovarianceStamped, Odometry) as row external:TOPIC (repeatable)")
+    external.add_argument("--estimate", action="append", default=[], metavar="FILE.tum|FILE.csv",
+                          help="score the estimate in this TUM or CSV file (times on the recording's clock) as row "
+                               "external:FILE-NAME (repeatable)")
+    external.add_argument("--align", choices=("none", "se3"), default="none",
+                          help="align external estimates rigidly to the truth first (se3: Umeyama, no scale; "
+                               "default: none)")
+    external.add_argument("--association-tolerance", type=float, metavar="SECONDS",
+                          help="largest gap between a truth step and the estimate stamps around it that is "
+                               "interpolated (default: twice the estimate's median interval)")
     add_scenario_file_option(parser)
     parser.set_defaults(handler=run)
 
@@ -109,6 +132,13 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise UsageError("--rerun needs --out (without it nothing is reused)")
     if args.force and not args.out:
         raise UsageError("--force needs --out (without it nothing is written)")
+    external = args.estimate_topic or args.estimate
+    if (external or args.align != "none" or args.association_tolerance is not None) and not args.recording:
+        raise UsageError("--estimate-topic, --estimate, --align and --association-tolerance need --recording")
+    if (args.align != "none" or args.association_tolerance is not None) and not external:
+        raise UsageError("--align and --association-tolerance need --estimate-topic or --estimate")
+    if args.association_tolerance is not None and not args.association_tolerance > 0:
+        raise UsageError(f"--association-tolerance must be a positive number of seconds (got {args.association_tolerance})")
 
 
 @contextmanager
@@ -215,6 +245,23 @@ def _recording_source(args: argparse.Namespace) -> Any:
     return source
 
 
+def _external_estimators(args: argparse.Namespace, recording: Any) -> list[Any]:
+    """The resolved external estimates of ``--estimate-topic`` and ``--estimate`` (their problems
+    are usage errors naming the topic or file); each one's association summary goes to stderr."""
+    from fkn_bench.harness.sources import external_estimators
+    from fkn_bench.recordings import RecordingError
+
+    if not (args.estimate_topic or args.estimate):
+        return []
+    with usage_errors(RecordingError, OSError, ValueError):
+        resolved = external_estimators(recording, args.estimate_topic, args.estimate,
+                                       tolerance_s=args.association_tolerance,
+                                       align=None if args.align == "none" else args.align)
+    for pair in resolved:
+        print(pair.estimator.associated.summary(), file=sys.stderr)
+    return resolved
+
+
 def _parameter_sources(resolved: Any) -> list[str]:
     """One line per learned or tuned estimator: the parameter file (or checkpoint) it runs with,
     and the scenario those parameters were trained on (several scenarios sharing a file: one line)."""
@@ -249,6 +296,7 @@ def run(args: argparse.Namespace) -> int:
     _check_arguments(args)
     load_scenario_files(args)
     seeds: Any = None  # range(--seeds), or a dataset's own seeds
+    external: list[Any] = []  # resolved external estimates (--estimate-topic, --estimate)
     if args.dataset:
         dataset = _dataset_source(args)
         seeds = dataset.seeds if args.seeds == DEFAULT_SEEDS else None
@@ -262,10 +310,11 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"--cut {args.cut} leaves nothing to score in the recording ({recording.scenario.n_steps} steps)")
         scenarios = [recording.scenario]
         sources = [recording]
+        external = _external_estimators(args, recording)
     else:
         scenarios = _scenarios(args)
         sources = [SimulatedSource(scenario, args.split) for scenario in scenarios]
-    resolved = _estimators(args, scenarios)
+    resolved = _estimators(args, scenarios) + external
     for line in _parameter_sources(resolved):
         print(line, file=sys.stderr)
     settings = MetricSettings(cut=args.cut)
@@ -301,6 +350,8 @@ def run(args: argparse.Namespace) -> int:
                       "failed": outcome.failed},
             "results": summaries,
         }
+        if external:
+            document["external"] = {pair.name: pair.estimator.report() for pair in external}
         print(json.dumps(to_jsonable(document), indent=2))
     else:
         # on a terminal the table fits its width (two stacked tables when needed); piped or

@@ -14,6 +14,11 @@ stay apart.
 
 An estimator that raises does not stop the grid: the cell is recorded as failed, with the error,
 and each of its seeds counts as diverged.
+
+An estimator with ``recorded = True`` (another program's output,
+:class:`fkn_bench.estimators.external.ExternalEstimates`) is scored like any other, but its costs
+are left empty (NaN: fkn-bench did not run it) and its ``report()`` goes into the cell's notes
+(``external``).
 """
 
 from __future__ import annotations
@@ -99,8 +104,13 @@ def run_cell(spec: CellSpec) -> CellRecord:
         trained_on = (getattr(estimator, "metadata", None) or {}).get("scenario")
         if trained_on:  # a learned or tuned estimator: the training set its parameters come from
             notes["trained_on"] = trained_on.get("name") if isinstance(trained_on, dict) else str(trained_on)
+        recorded = getattr(estimator, "recorded", False) is True  # another program's output: nothing to time
+        if recorded:
+            notes["external"] = estimator.report()
         if getattr(estimator, "causal", True) is False:  # a smoother: it reads the whole episode, no online step
             notes["non_causal"] = True
+            us_online = float("nan")
+        elif recorded:
             us_online = float("nan")
         else:
             try:
@@ -114,6 +124,8 @@ def run_cell(spec: CellSpec) -> CellRecord:
         "us_per_step_online": us_online,
         "peak_memory_mib": batched.peak_memory_mib,
     }
+    if recorded:
+        cost = {name: float("nan") for name in cost}
     rows = [score_rows(spec.label, spec.scenario, spec.seeds, scores),
             cost_rows(spec.label, spec.scenario, spec.seeds, cost)]
     return _record(spec, "ok", rows, nees=scores.nees_sums, nis=scores.nis_sums, notes=notes)

@@ -1,6 +1,8 @@
 """Where a grid cell's episodes come from: :class:`SimulatedSource` generates a scenario's split,
 :class:`RecordingSource` replays an MCAP recording; other sources plug in by implementing
-:class:`EpisodeSource` (the cell code only calls its members)."""
+:class:`EpisodeSource` (the cell code only calls its members). :func:`external_estimators` turns
+another program's estimates of a recording (a topic of it, or a TUM/CSV file) into resolved
+estimators that the grid runs beside fkn-bench's (:mod:`fkn_bench.envs.association`)."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ from typing import Any, Protocol, runtime_checkable
 from fkn_bench.envs import Episodes, generate_episodes
 from fkn_bench.scenarios import SPLITS, Scenario
 
-__all__ = ["EpisodeSource", "SimulatedSource", "RecordingSource"]
+__all__ = ["EpisodeSource", "SimulatedSource", "RecordingSource", "external_estimators"]
 
 
 @runtime_checkable
@@ -162,3 +164,49 @@ class RecordingSource:
             measurements=np.concatenate([p.measurements for p in parts]),
             valid=np.concatenate([p.valid for p in parts]),
         ))
+
+
+def external_estimators(
+    source: RecordingSource,
+    topics: Sequence[str] = (),
+    files: Sequence[str] = (),
+    *,
+    tolerance_s: float | None = None,
+    align: str | None = None,
+) -> list[Any]:
+    """One :class:`~fkn_bench.harness.ResolvedEstimator` per external estimate of ``source``'s
+    recording: its pose ``topics`` and text ``files`` (TUM or CSV), each an
+    :class:`~fkn_bench.estimators.external.ExternalEstimates` on the recording's grid named
+    ``external:<topic>`` / ``external:<file name>``, with the association ``tolerance_s`` (None:
+    the default) and ``align`` (None or ``"se3"``). The fingerprint is the estimate's digest, so
+    resume recomputes a cell whose estimate changed.
+
+    Raises:
+        RecordingError: an unreadable topic or file, or an estimate that cannot be associated or
+            aligned (naming the topic or file).
+        ValueError: two sources with one row name (files of the same name).
+    """
+    from fkn_bench.envs.association import grid_stamps, series_from_file, series_from_topic
+    from fkn_bench.estimators.external import ExternalEstimates
+    from fkn_bench.harness.estimators import ResolvedEstimator
+    from fkn_bench.recordings import open_recording
+
+    options = dict(source.options)
+    trajectory = source.trajectory()
+    grid = grid_stamps(trajectory.start_stamp_ns, trajectory.times)
+    series = []
+    if topics:
+        recording = open_recording(source.path, repair=bool(options.get("repair", False)))
+        read = {k: options[k] for k in ("time_source", "quaternion_tolerance") if k in options}
+        series += [series_from_topic(recording, topic, **read) for topic in dict.fromkeys(topics)]
+    series += [series_from_file(path) for path in dict.fromkeys(files)]
+    names = [s.name for s in series]
+    repeated = sorted({n for n in names if names.count(n) > 1})
+    if repeated:
+        raise ValueError(f"several external estimates would be named {', '.join(repeated)}; give the files distinct names")
+    out = []
+    for one in series:
+        estimator = ExternalEstimates.from_series(one, grid, trajectory.scenario.dt, tolerance_s=tolerance_s,
+                                                  truth=trajectory.truth, align=align)
+        out.append(ResolvedEstimator(one.name, source.label, estimator, fingerprint=estimator.associated.digest[:16]))
+    return out

@@ -1,0 +1,106 @@
+"""Rigid alignment of two point sets: the least-squares rotation and translation (no scale).
+
+:func:`umeyama` solves ``min_{R, t} sum_i ||y_i - (R x_i + t)||^2`` over rotations ``R``
+(``det R = +1``) and translations ``t`` in closed form (Umeyama, "Least-squares estimation of
+transformation parameters between two point patterns", IEEE TPAMI 13(4), 1991, Theorem without
+the scale factor): with the means ``mu_x``, ``mu_y`` and the cross-covariance
+``Sigma = (1/n) sum_i (y_i - mu_y)(x_i - mu_x)^T = U D V^T`` (SVD),
+``R = U S V^T`` where ``S = diag(1, 1, det(U) det(V))`` (a reflection is never returned), and
+``t = mu_y - R mu_x``. The solution is unique when ``rank(Sigma) >= 2`` (the points are not all on
+one line); otherwise :func:`umeyama` raises.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fkn_bench.geometry import quaternion as quat
+from fkn_bench.types import ArrayF, Float
+
+__all__ = ["RigidTransform", "umeyama", "matrix_to_quaternion"]
+
+
+@dataclass(frozen=True, eq=False)
+class RigidTransform:
+    """``y = R x + t``.
+
+    Attributes:
+        rotation: ``(3, 3)`` rotation matrix ``R`` (``det R = +1``).
+        translation: ``(3,)`` ``t``, in the units of the points.
+        rms_residual: root mean square of ``||y_i - (R x_i + t)||`` over the fitted points.
+        points: number of point pairs fitted.
+    """
+
+    rotation: Float[ArrayF, "3 3"]
+    translation: Float[ArrayF, "3"]
+    rms_residual: float
+    points: int
+
+    @property
+    def quaternion(self) -> Float[ArrayF, "4"]:
+        """``R`` as a unit quaternion ``[qw, qx, qy, qz]`` (Hamilton, ``qw >= 0``)."""
+        return matrix_to_quaternion(self.rotation)
+
+    @property
+    def angle(self) -> float:
+        """Rotation angle of ``R``, rad, in ``[0, pi]``."""
+        return float(np.linalg.norm(quat.to_rotation_vector(self.quaternion)))
+
+    def apply(self, points: Float[ArrayF, "N 3"]) -> Float[ArrayF, "N 3"]:
+        """``R x + t`` for each row ``x``."""
+        return np.asarray(points, dtype=np.float64) @ self.rotation.T + self.translation
+
+
+def matrix_to_quaternion(rotation: Float[ArrayF, "3 3"]) -> Float[ArrayF, "4"]:
+    """The unit quaternion ``[qw, qx, qy, qz]`` (``qw >= 0``) of a rotation matrix, with
+    ``quat.to_matrix(q) == rotation``: Shepperd's method (J. Guidance and Control 1(3), 1978),
+    which takes the square root of the largest of ``4 qw^2, 4 qx^2, 4 qy^2, 4 qz^2`` for accuracy."""
+    m = np.asarray(rotation, dtype=np.float64)
+    trace = np.trace(m)
+    squares = np.array([1 + trace, 1 + 2 * m[0, 0] - trace, 1 + 2 * m[1, 1] - trace, 1 + 2 * m[2, 2] - trace])
+    k = int(np.argmax(squares))
+    s = np.sqrt(squares[k])  # = 2 |q_k|
+    skew = np.array([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])  # 4 qw [qx, qy, qz]
+    if k == 0:
+        q = np.array([s / 2, *(skew / (2 * s))])
+    else:
+        i = k - 1
+        j, l = (i + 1) % 3, (i + 2) % 3
+        q = np.empty(4)
+        q[0] = skew[i] / (2 * s)
+        q[1 + i] = s / 2
+        q[1 + j] = (m[j, i] + m[i, j]) / (2 * s)
+        q[1 + l] = (m[l, i] + m[i, l]) / (2 * s)
+    q /= np.linalg.norm(q)
+    return -q if q[0] < 0 else q
+
+
+def umeyama(source: Float[ArrayF, "N 3"], target: Float[ArrayF, "N 3"]) -> RigidTransform:
+    """The rotation and translation that carry ``source`` onto ``target`` in the least-squares
+    sense (module docstring).
+
+    Raises:
+        ValueError: shapes differ or are not ``(N, 3)``, values are not finite, fewer than 3
+            points, or the points are (nearly) collinear, where the rotation about their line is
+            not determined.
+    """
+    x = np.asarray(source, dtype=np.float64)
+    y = np.asarray(target, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] != 3 or x.shape != y.shape:
+        raise ValueError(f"source and target must both have shape (N, 3) (got {x.shape} and {y.shape})")
+    if len(x) < 3:
+        raise ValueError(f"a rigid alignment needs at least 3 point pairs (got {len(x)})")
+    if not (np.isfinite(x).all() and np.isfinite(y).all()):
+        raise ValueError("the points to align must be finite")
+    mu_x, mu_y = x.mean(axis=0), y.mean(axis=0)
+    sigma = (y - mu_y).T @ (x - mu_x) / len(x)
+    u, d, vt = np.linalg.svd(sigma)
+    if d[1] <= 1e-12 * max(d[0], np.finfo(float).tiny):
+        raise ValueError("the points to align are (nearly) collinear: the rotation about their line is not determined")
+    s = np.diag([1.0, 1.0, np.sign(np.linalg.det(u) * np.linalg.det(vt)) or 1.0])
+    rotation = u @ s @ vt
+    translation = mu_y - rotation @ mu_x
+    residual = y - (x @ rotation.T + translation)
+    return RigidTransform(rotation, translation, float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))), len(x))
