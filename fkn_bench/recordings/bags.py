@@ -23,7 +23,8 @@ with ``repair=True``, the messages read before the damage.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from rosbags.highlevel import AnyReader
@@ -98,15 +99,18 @@ class BagRecording(Recording):
             if head.startswith(magic) and path.suffix != suffix:
                 raise self._error(f"this is {what}; rosbags reads it only under a name ending in {suffix} (rename it)")
 
-    def _open(self) -> AnyReader:
-        """An open AnyReader of the bag (a context manager that closes it)."""
-        reader = None
+    @contextmanager
+    def _open(self) -> Iterator[AnyReader]:
+        """An open AnyReader of the bag, closed on leaving the context."""
         try:
             reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
             reader.open()
         except Exception as exc:  # AnyReaderError, ReaderError, TypesysError, sqlite and OS errors
             raise self._error(f"rosbags cannot read this {self.kind}: {_one_line(describe_exception(exc))}") from None
-        return reader
+        try:
+            yield reader
+        finally:
+            reader.close()
 
     def _describe(self, connections: Iterable[Connection]) -> dict[str, TopicInfo]:
         """One :class:`TopicInfo` per topic (counts summed over its connections)."""
