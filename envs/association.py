@@ -37,8 +37,13 @@ CSV, :mod:`fkn_bench.recordings.trajectories`: :func:`series_from_file`) as an
   notes.
 * **Alignment** (optional, :func:`align_se3`): the rotation and translation that carry the
   associated estimated positions onto the true ones in the least-squares sense (Umeyama 1991,
-  without scale: :func:`fkn_bench.geometry.alignment.umeyama`) are applied to every estimated
-  step: ``r' = R r + t``, ``q' = q_R (x) q`` (the estimate's world frame rotated into the truth's),
+  without scale: :func:`fkn_bench.geometry.alignment.umeyama`). Where the true positions stay
+  within :data:`MIN_PLANAR_SPREAD` (0.1 m RMS) of one line -- an Astrobee tumbling in place, or
+  drifting straight, as every simulated scenario -- positions leave the rotation about that line
+  to their noise, so the rotation is the mean of ``R_true R_est^T`` over the associated attitudes
+  instead (:func:`fkn_bench.geometry.alignment.attitude_alignment`; same body frame assumed) and
+  the translation from the positions; the report names the method. The transform is applied to
+  every estimated step: ``r' = R r + t``, ``q' = q_R (x) q`` (the estimate's world frame rotated into the truth's),
   world-frame rates and velocities ``R w``, ``R v``, pose covariances ``diag(R, R) P diag(R, R)^T``.
   For estimates in another world frame (a map frame); it hides a constant offset of an estimate in
   the truth's frame, so it is off by default.
@@ -59,14 +64,14 @@ import numpy as np
 
 from fkn_bench.envs.replay import _resample_linear, finite_difference_twist, resample_truth
 from fkn_bench.geometry import quaternion as quat
-from fkn_bench.geometry.alignment import RigidTransform, umeyama
+from fkn_bench.geometry.alignment import RigidTransform, attitude_alignment, umeyama
 from fkn_bench.linalg import symmetrize
 from fkn_bench.recordings import RecordingError
 from fkn_bench.recordings.trajectories import TEXT_QUATERNION_TOLERANCE, read_trajectory
 from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
 __all__ = [
-    "DEFAULT_TOLERANCE_INTERVALS", "EXTERNAL_PREFIX", "ExternalSeries", "AssociatedEstimate", "series_from_topic",
+    "DEFAULT_TOLERANCE_INTERVALS", "EXTERNAL_PREFIX", "MIN_PLANAR_SPREAD", "ExternalSeries", "AssociatedEstimate", "series_from_topic",
     "series_from_file", "associate", "align_se3", "grid_stamps",
 ]
 
@@ -74,6 +79,10 @@ DEFAULT_TOLERANCE_INTERVALS = 2.0
 """Default association tolerance, in median intervals of the estimate's stamps."""
 EXTERNAL_PREFIX = "external:"
 """Row names of external estimates: ``external:<topic>`` or ``external:<file name>``."""
+
+MIN_PLANAR_SPREAD = 0.1
+"""Smallest RMS distance (m) of the true positions from their best-fit line for which
+:func:`align_se3` takes the rotation from the positions (module docstring)."""
 
 _WORLD_FRAMES = ("", "world")
 _PRIOR = np.array([1.0] + [0.0] * 12)
@@ -218,7 +227,7 @@ class AssociatedEstimate:
                                "steps": len(self.states), **self.counts}
         if self.alignment is not None:
             a = self.alignment
-            out["alignment"] = {"method": "se3 (Umeyama 1991, no scale)", "rotation_deg": float(np.degrees(a.angle)),
+            out["alignment"] = {"method": f"se3, rotation from the {a.method}", "rotation_deg": float(np.degrees(a.angle)),
                                 "rotation_quaternion_wxyz": [float(v) for v in a.quaternion],
                                 "translation_m": [float(v) for v in a.translation],
                                 "rms_residual_m": a.rms_residual, "points": a.points}
@@ -233,7 +242,7 @@ class AssociatedEstimate:
         if self.alignment is not None:
             a = self.alignment
             t = ", ".join(f"{v:.6g}" for v in a.translation)
-            lines.append(f"  aligned (SE(3), Umeyama) over {a.points} steps: rotation {np.degrees(a.angle):.6g} deg, "
+            lines.append(f"  aligned (SE(3), rotation from the {a.method}) over {a.points} steps: rotation {np.degrees(a.angle):.6g} deg, "
                          f"translation [{t}] m, residual RMS {a.rms_residual:.6g} m")
         return "\n".join(lines)
 
@@ -286,13 +295,19 @@ def align_se3(estimate: AssociatedEstimate, truth: Float[ArrayF, "T 13"]) -> Ass
     """``estimate`` rigidly aligned to ``truth`` over its associated steps (module docstring).
 
     Raises:
-        RecordingError: fewer than 3 associated steps, or collinear positions (the alignment is
-            not determined).
+        RecordingError: the alignment is not determined (non-finite values).
     """
     truth = np.asarray(truth, dtype=np.float64)
     mask = estimate.associated
+    true_positions, positions = truth[mask, 4:7], estimate.states[mask, 4:7]
+    centred = true_positions - true_positions.mean(axis=0)
+    spread = np.linalg.svd(centred, compute_uv=False)[1] / np.sqrt(len(centred)) if len(centred) >= 3 else 0.0
     try:
-        transform = umeyama(estimate.states[mask, 4:7], truth[mask, 4:7])
+        if spread >= MIN_PLANAR_SPREAD:
+            transform = umeyama(positions, true_positions)
+        else:
+            transform = attitude_alignment(positions, true_positions, quat.to_matrix(estimate.states[mask, :4]),
+                                           quat.to_matrix(truth[mask, :4]))
     except ValueError as exc:
         raise RecordingError(f"{estimate.name}: cannot align (SE(3)) to the truth over its {int(mask.sum())} "
                              f"associated steps: {exc}") from None

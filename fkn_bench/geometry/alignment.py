@@ -8,6 +8,13 @@ the scale factor): with the means ``mu_x``, ``mu_y`` and the cross-covariance
 ``R = U S V^T`` where ``S = diag(1, 1, det(U) det(V))`` (a reflection is never returned), and
 ``t = mu_y - R mu_x``. The solution is unique when ``rank(Sigma) >= 2`` (the points are not all on
 one line); otherwise :func:`umeyama` raises.
+
+Points on one line (a target tumbling in place, or drifting in a straight line) leave the rotation
+about that line to their noise. :func:`attitude_alignment` takes the rotation from attitude pairs
+instead: the chordal L2 mean of ``R_i = T_i S_i^T`` over pairs of body-to-world rotations of the
+target (``T_i``) and the source (``S_i``), ``argmax_R trace(R^T sum_i T_i S_i^T)`` (Hartley,
+Trumpf, Dai and Li, "Rotation averaging", IJCV 103(3), 2013), solved by the same SVD, and
+``t = mu_y - R mu_x`` from the positions.
 """
 
 from __future__ import annotations
@@ -19,7 +26,7 @@ import numpy as np
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.types import ArrayF, Float
 
-__all__ = ["RigidTransform", "umeyama", "matrix_to_quaternion"]
+__all__ = ["RigidTransform", "umeyama", "attitude_alignment", "matrix_to_quaternion"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -31,12 +38,14 @@ class RigidTransform:
         translation: ``(3,)`` ``t``, in the units of the points.
         rms_residual: root mean square of ``||y_i - (R x_i + t)||`` over the fitted points.
         points: number of point pairs fitted.
+        method: ``"positions"`` (:func:`umeyama`) or ``"attitudes"`` (:func:`attitude_alignment`).
     """
 
     rotation: Float[ArrayF, "3 3"]
     translation: Float[ArrayF, "3"]
     rms_residual: float
     points: int
+    method: str = "positions"
 
     @property
     def quaternion(self) -> Float[ArrayF, "4"]:
@@ -96,11 +105,43 @@ def umeyama(source: Float[ArrayF, "N 3"], target: Float[ArrayF, "N 3"]) -> Rigid
         raise ValueError("the points to align must be finite")
     mu_x, mu_y = x.mean(axis=0), y.mean(axis=0)
     sigma = (y - mu_y).T @ (x - mu_x) / len(x)
-    u, d, vt = np.linalg.svd(sigma)
-    if d[1] <= 1e-12 * max(d[0], np.finfo(float).tiny):
+    if np.linalg.svd(sigma, compute_uv=False)[1] <= 1e-12 * max(np.abs(sigma).max(), np.finfo(float).tiny):
         raise ValueError("the points to align are (nearly) collinear: the rotation about their line is not determined")
-    s = np.diag([1.0, 1.0, np.sign(np.linalg.det(u) * np.linalg.det(vt)) or 1.0])
-    rotation = u @ s @ vt
-    translation = mu_y - rotation @ mu_x
+    return _transform(_rotation(sigma), x, y, "positions")
+
+
+def attitude_alignment(
+    source: Float[ArrayF, "N 3"], target: Float[ArrayF, "N 3"],
+    source_rotations: Float[ArrayF, "N 3 3"], target_rotations: Float[ArrayF, "N 3 3"],
+) -> RigidTransform:
+    """The rotation that carries the source's attitudes onto the target's (chordal L2 mean of
+    ``T_i S_i^T``) and the translation ``mu_target - R mu_source`` (module docstring).
+
+    Raises:
+        ValueError: shapes that do not match ``(N, 3)`` and ``(N, 3, 3)``, no pairs, or
+            non-finite values.
+    """
+    x = np.asarray(source, dtype=np.float64)
+    y = np.asarray(target, dtype=np.float64)
+    s_rot = np.asarray(source_rotations, dtype=np.float64)
+    t_rot = np.asarray(target_rotations, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] != 3 or x.shape != y.shape or s_rot.shape != (len(x), 3, 3) or s_rot.shape != t_rot.shape:
+        raise ValueError(f"positions must be (N, 3) and rotations (N, 3, 3) (got {x.shape}, {y.shape}, {s_rot.shape}, "
+                         f"{t_rot.shape})")
+    if len(x) == 0:
+        raise ValueError("an alignment needs at least one pair")
+    if not all(np.isfinite(a).all() for a in (x, y, s_rot, t_rot)):
+        raise ValueError("the poses to align must be finite")
+    return _transform(_rotation(np.einsum("nij,nkj->ik", t_rot, s_rot) / len(x)), x, y, "attitudes")
+
+
+def _rotation(sigma: Float[ArrayF, "3 3"]) -> Float[ArrayF, "3 3"]:
+    """``argmax_R trace(R^T sigma)`` over rotations: ``U diag(1, 1, det(U) det(V)) V^T``."""
+    u, _, vt = np.linalg.svd(sigma)
+    return u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u) * np.linalg.det(vt)) or 1.0]) @ vt
+
+
+def _transform(rotation: ArrayF, x: ArrayF, y: ArrayF, method: str) -> RigidTransform:
+    translation = y.mean(axis=0) - rotation @ x.mean(axis=0)
     residual = y - (x @ rotation.T + translation)
-    return RigidTransform(rotation, translation, float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))), len(x))
+    return RigidTransform(rotation, translation, float(np.sqrt(np.mean(np.sum(residual**2, axis=1)))), len(x), method)
