@@ -12,7 +12,8 @@ How the episode is built:
   recording's metadata; else the single topic named ``<robot>/loc/truth/pose`` (Astrobee's
   ground truth, e.g. ``/loc/truth/pose`` or ``/honey/loc/truth/pose``). Pose topics may be
   ``PoseStamped``, ``PoseWithCovarianceStamped``, ``Odometry`` (ROS 1 or 2) or JSON
-  ``foxglove.PoseInFrame`` (see :mod:`fkn_bench.recordings.reader` for validation and repairs).
+  ``foxglove.PoseInFrame`` (see :mod:`fkn_bench.recordings.base` for validation and repairs), in
+  an MCAP file, a ROS 1 bag or a ROS 2 bag (:func:`~fkn_bench.recordings.open_recording`).
 * **Time grid.** Step ``k`` is at ``t0 + k dt`` where ``t0`` is the first truth stamp and ``dt``
   the scenario's (``dt=None``), a given number of seconds, or ``"native"`` (the median interval
   of the truth messages, to the ns). The grid ends at the last truth stamp. ``Episodes.times``
@@ -69,9 +70,9 @@ from fkn_bench.geometry import quaternion as quat
 from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
 from fkn_bench.recordings.plausibility import QUATERNION_TOLERANCE, first_implausible
 from fkn_bench.recordings.opening import open_recording
-from fkn_bench.recordings.reader import (
-    McapRecording,
+from fkn_bench.recordings.base import (
     PoseSeries,
+    Recording,
     RecordingError,
     RecordingRepairWarning,
     TopicNotFoundError,
@@ -247,7 +248,7 @@ def finite_difference_twist(stamps_ns: np.ndarray, poses: Float[ArrayF, "N 7"]) 
 
 
 # ---------------------------------------------------------------------------- reading
-def _recording_metadata(rec: McapRecording) -> tuple[dict[str, dict[str, str]], dict[str, str], Scenario | None, list[str]]:
+def _recording_metadata(rec: Recording) -> tuple[dict[str, dict[str, str]], dict[str, str], Scenario | None, list[str]]:
     metadata = rec.metadata()
     notes: list[str] = []
     topics: dict[str, str] = {}
@@ -265,7 +266,7 @@ def _recording_metadata(rec: McapRecording) -> tuple[dict[str, dict[str, str]], 
     return metadata, topics, scenario, notes
 
 
-def _pick_truth_topic(rec: McapRecording, recorded_topics: Mapping[str, str]) -> str:
+def _pick_truth_topic(rec: Recording, recorded_topics: Mapping[str, str]) -> str:
     topics = rec.topics()
     named = recorded_topics.get("truth_pose")
     if named and named in topics:
@@ -307,14 +308,16 @@ def read_recording(
     """Read a recording's truth (and measurements) onto a uniform time grid.
 
     Args:
-        path: the ``.mcap`` file (ROS 2, ROS 1 or Foxglove JSON poses).
+        path: the recording: an ``.mcap`` file (ROS 2, ROS 1 or Foxglove JSON poses), a ROS 1
+            ``.bag``, a ROS 2 bag directory or ``.db3`` file (:func:`~fkn_bench.recordings.open_recording`).
         truth_topic: pose topic of the ground truth; None: see module docstring (fkn-bench
             recordings and Astrobee's ``<robot>/loc/truth/pose`` need none).
         measurement_topic: pose topic of the measurements, used as is; None: synthesise them.
         twist_topic: ``"auto"``, None (finite differences) or a ``TwistStamped``/``Odometry`` topic.
         scenario: base scenario (name or :class:`Scenario`); None: the recording's, else ``ds1``.
         dt: grid step, s; None: the scenario's; ``"native"``: the truth's median interval.
-        repair: apply the documented repairs instead of raising (:mod:`fkn_bench.recordings.reader`).
+        repair: apply the documented repairs instead of raising (:mod:`fkn_bench.recordings.base`,
+            :mod:`fkn_bench.recordings.reader`).
         time_source: ``"auto"`` (header stamps, log time if all are zero), ``"header"``, ``"log"``.
         twist_frame: ``"auto"``, ``"world"`` or ``"body"`` (see module docstring).
         quaternion_tolerance: largest accepted ``|norm - 1|`` of a recorded quaternion.

@@ -15,7 +15,7 @@ error of the reader: file, episode or topic, step or message) when it is not *pl
 Such values are not scored: a NaN truth makes the seed's score NaN, which an average over seeds
 would otherwise leave out without a word, and 1e300 overflows the squared errors, which would read
 as the estimator diverging. Recorded poses and twists (truth and measurement topics) are held to
-the same position and rate limits when they are read (:mod:`fkn_bench.recordings.reader`).
+the same position and rate limits when they are read (:mod:`fkn_bench.recordings.base`).
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ ROS message definitions are stored in MCAP ``Schema`` records the way ``rosbag2`
 followed by the definition of every type it depends on, each after a line of 80 ``=`` and a
 ``MSG: package/Type`` line. The field lists below are those of the standard ROS 2
 ``geometry_msgs``, ``std_msgs``, ``builtin_interfaces`` and ``nav_msgs`` packages. (The reader
-needs no schema text: it knows the wire layout of each type it reads, ROS 1 ones included.)
+needs no schema text: it decodes with ``rosbags``' typestores of the standard messages,
+:mod:`~fkn_bench.recordings.codecs`.)
 
 Foxglove schemas (``foxglove.PoseInFrame``) are JSON Schema documents (schema encoding
 ``jsonschema``, message encoding ``json``); Foxglove recognises them by name and draws the poses
