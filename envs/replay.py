@@ -64,7 +64,7 @@ from typing import Any
 
 import numpy as np
 
-from fkn_bench.envs.episodes import Episodes
+from fkn_bench.envs.episodes import Episodes, measurement_covariances
 from fkn_bench.envs.measurements import MeasurementGenerator
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.limits import ESTIMATION_BYTES_PER_STEP, check_memory
@@ -152,6 +152,9 @@ class RecordedTrajectory:
         valid: ``(T,)`` validity of the recorded measurements, or None.
         start_stamp_ns: stamp of step 0 in the recording, ns.
         report: :class:`ReplayReport`.
+        measurement_covariances: ``(T, 6, 6)`` the covariances the recorded measurements state
+            (``PoseWithCovarianceStamped``, ``Odometry``; error order ``[dtheta, dr]``, NaN where a
+            step has none), or None.
     """
 
     scenario: Scenario
@@ -161,6 +164,7 @@ class RecordedTrajectory:
     valid: Bool[ArrayB, "T"] | None
     start_stamp_ns: int
     report: ReplayReport
+    measurement_covariances: Float[ArrayF, "T 6 6"] | None = None
 
     @property
     def n_steps(self) -> int:
@@ -175,12 +179,17 @@ class RecordedTrajectory:
         seed = int(seed)
         if seed < 0:
             raise ValueError(f"seed must be a non-negative integer (got {seed})")
+        covariances = None
         if self.measurements is not None and self.valid is not None:
             measurements, valid = self.measurements.copy(), self.valid.copy()
+            if self.measurement_covariances is not None:
+                covariances = self.measurement_covariances[None].copy()
         else:
             pose = np.ascontiguousarray(self.truth[None, :, :7].transpose(0, 2, 1))
             generated, valid_b = MeasurementGenerator(self.scenario, [seed]).generate(pose, 0)
             measurements, valid = generated.transpose(0, 2, 1)[0], valid_b[0]
+            if self.scenario.measurement_covariance:
+                covariances = measurement_covariances(self.scenario, 0, valid[None])
         return Episodes(
             scenario=self.scenario,
             seeds=(seed,),
@@ -189,6 +198,7 @@ class RecordedTrajectory:
             truth=self.truth[None].copy(),
             measurements=np.ascontiguousarray(measurements[None]),
             valid=valid[None].copy(),
+            measurement_covariances=covariances,
         )
 
 
@@ -416,11 +426,11 @@ def read_recording(
         )
 
     # measurements
-    measurements = valid = None
+    measurements = valid = covariances = None
     if measurement_topic is not None:
         meas = read(rec.read_poses(measurement_topic, role="measurement", time_source=time_source,
                                    quaternion_tolerance=quaternion_tolerance))
-        measurements, valid = _snap_measurements(meas, grid, step, notes)
+        measurements, valid, covariances = _snap_measurements(meas, grid, step, notes)
         measurement_source = f"topic {measurement_topic}"
     else:
         measurement_source = f"synthesised ({base.name} noise model)"
@@ -471,11 +481,14 @@ def read_recording(
         valid=valid,
         start_stamp_ns=int(grid[0]),
         report=report,
+        measurement_covariances=covariances,
     )
 
 
-def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float, notes: list[str]) -> tuple[ArrayF, ArrayB]:
-    """Assign each measurement to the nearest grid step (the last one wins a step); remarks go to ``notes``."""
+def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float,
+                       notes: list[str]) -> tuple[ArrayF, ArrayB, ArrayF | None]:
+    """Assign each measurement (and the covariance it states, if its type carries one) to the
+    nearest grid step (the last one wins a step); remarks go to ``notes``."""
     n = len(grid)
     k = np.floor((series.stamps_ns - grid[0]).astype(np.float64) / (dt * 1e9) + 0.5).astype(np.int64)
     inside = (k >= 0) & (k < n)
@@ -487,6 +500,10 @@ def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float, notes: l
     valid = np.zeros(n, dtype=bool)
     measurements[k_in] = poses  # later rows win a shared step (stamps are sorted)
     valid[k_in] = True
+    covariances = None
+    if series.covariances is not None:
+        covariances = np.full((n, 6, 6), np.nan)
+        covariances[k_in] = series.covariances[inside]
     shared = len(k_in) - int(valid.sum())
     if shared:
         notes.append(f"{series.topic}: {shared} measurement(s) shared a step with a later one; kept the latest")
@@ -494,7 +511,7 @@ def _snap_measurements(series: PoseSeries, grid: np.ndarray, dt: float, notes: l
         offset = np.abs(series.stamps_ns[inside] - grid[k_in]).max() / 1e9
         if offset > 1e-6:
             notes.append(f"{series.topic}: measurements moved to the nearest step (up to {offset * 1e3:.4g} ms)")
-    return measurements, valid
+    return measurements, valid, covariances
 
 
 def load_episodes(path: str | Path, *, seed: int = 0, **options: Any) -> Episodes:

@@ -48,8 +48,9 @@ def _generate(scenario: Scenario, seeds: tuple[int, ...], split: str) -> Episode
 
 
 def _frozen(episodes: Episodes) -> Episodes:
-    for array in (episodes.truth, episodes.measurements, episodes.valid, episodes.times):
-        array.flags.writeable = False  # shared between the cells of one process: never mutate
+    for array in (episodes.truth, episodes.measurements, episodes.valid, episodes.times, episodes.measurement_covariances):
+        if array is not None:
+            array.flags.writeable = False  # shared between the cells of one process: never mutate
     return episodes
 
 
@@ -163,6 +164,8 @@ class RecordingSource:
             truth=np.concatenate([p.truth for p in parts]),
             measurements=np.concatenate([p.measurements for p in parts]),
             valid=np.concatenate([p.valid for p in parts]),
+            measurement_covariances=(None if first.measurement_covariances is None
+                                     else np.concatenate([p.measurement_covariances for p in parts])),
         ))
 
 

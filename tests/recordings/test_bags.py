@@ -198,3 +198,19 @@ def test_missing_empty_and_unknown(tmp_path, ros1_bag) -> None:
         open_recording(tmp_path / "dir")
     with pytest.raises(TopicNotFoundError, match=r"truth topic '/nope' not found; topics in this recording:\n.*/loc/truth/pose"):
         load_episodes(ros1_bag, truth_topic="/nope")
+
+
+def test_a_recorded_measurement_covariance_becomes_that_steps_r(ros1_bag, capsys: pytest.CaptureFixture[str]) -> None:
+    """The replayed episode carries the covariances on the measurements' steps, and
+    ``--estimator-option measurement_noise=message`` filters with them (the two messages without a
+    usable one take the default R, which the run's notes count)."""
+    episodes = load_episodes(ros1_bag, measurement_topic=MEASURED)
+    covariances = episodes.measurement_covariances[0]
+    stated = np.isfinite(covariances).all(axis=(1, 2))
+    assert stated.sum() == episodes.valid.sum() - len(BAD_COVARIANCES)
+    assert np.array_equal(covariances[stated][0], open_recording(ros1_bag).read_poses(MEASURED).covariances[0])
+    told = make_estimator("manual-mekf", scenario=episodes.scenario, measurement_noise="message")
+    estimates = told.estimate(episodes.measurements, episodes.valid, DT,
+                              measurement_covariances=episodes.measurement_covariances)
+    assert estimates.extras["measurement_noise_defaults"].tolist() == [len(BAD_COVARIANCES)]
+    assert np.isfinite(estimates.means).all()
