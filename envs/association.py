@@ -160,7 +160,7 @@ def series_from_topic(recording: Any, topic: str, *, time_source: str = "auto",
     return ExternalSeries(
         name=f"{EXTERNAL_PREFIX}{topic}", source=f"topic {topic} ({short}, {len(pose.stamps_ns)} messages)",
         stamps_ns=pose.stamps_ns, poses=pose.poses, twist_stamps_ns=stamps, twists=twists, twist_source=source,
-        digest=_digest(pose.stamps_ns, pose.poses, stamps, twists),
+        covariances=pose.covariances, digest=_digest(pose.stamps_ns, pose.poses, stamps, twists, pose.covariances),
     )
 
 

@@ -312,6 +312,13 @@ class Estimator(ABC):
     causal: bool = True
     """False for an estimator whose estimate at a step uses later measurements (a smoother): an
     offline reference, not a filter; it has no online ``step`` and reports label it."""
+    recorded: bool = False
+    """True for another program's recorded output (:class:`fkn_bench.estimators.external.ExternalEstimates`):
+    scored, not timed; the harness leaves its costs empty."""
+    uses_measurement_covariances: bool = False
+    """True for an estimator whose ``estimate`` takes ``measurement_covariances`` (``(B, T, 6, 6)``,
+    :attr:`fkn_bench.envs.Episodes.measurement_covariances`; a Kalman estimator with
+    ``measurement_noise="message"``): the harness passes the episodes' stated covariances."""
 
     @abstractmethod
     def estimate(self, measurements: Float[ArrayF, "B T 7"], mask: Bool[ArrayB, "B T"], dt: float) -> Estimates:

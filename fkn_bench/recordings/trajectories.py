@@ -77,13 +77,9 @@ class TrajectorySeries(PoseSeries):
 
     ``topic`` is the file path, ``type_name`` ``"tum"`` or ``"csv"``, ``encoding`` ``"text"``,
     ``frame_id`` and ``child_frame_id`` ``"world"`` (so ``twists``, when present, are world-frame:
-    ``[w (3), v (3)]``), ``indices`` the line numbers (from 1), ``time_source`` ``"file"``.
-
-    Attributes:
-        covariances: ``(N, 6, 6)`` pose covariances of ``[dtheta, dr]``, or None.
+    ``[w (3), v (3)]``), ``indices`` the line numbers (from 1), ``time_source`` ``"file"``,
+    ``covariances`` the ``(N, 6, 6)`` pose covariances of ``[dtheta, dr]`` or None.
     """
-
-    covariances: np.ndarray | None = None
 
 
 def _error(path: Path, line: int | None, message: str) -> RecordingError:
