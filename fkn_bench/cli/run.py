@@ -277,6 +277,19 @@ def _parameter_sources(resolved: Any) -> list[str]:
     return [f"{name} on {', '.join(scenarios)}: parameters {source}" for (name, source), scenarios in used.items()]
 
 
+def _default_noise_notes(results: Any) -> list[str]:
+    """One line per estimator and scenario whose measured steps took the default R for want of a
+    usable stated covariance (``measurement_noise=message``; the cells' notes count them)."""
+    counts: dict[tuple[str, str], int] = {}
+    for record in results.records:
+        if "measurement_noise_defaults" in record.notes:
+            key = (record.label, record.scenario)
+            counts[key] = counts.get(key, 0) + int(record.notes["measurement_noise_defaults"])
+    return [f"fkn-bench run: {label} on {scenario}: {count} measured step(s) stated no usable covariance "
+            "(missing, not finite, not symmetric or not positive definite) and took the estimator's own R"
+            for (label, scenario), count in counts.items() if count]
+
+
 def run(args: argparse.Namespace) -> int:
     from fkn_bench.harness import (
         MetricSettings,
@@ -338,6 +351,8 @@ def run(args: argparse.Namespace) -> int:
         raise Interrupted(f"the finished cells are saved in {args.out}: run the same command again to resume") from None
     order = [(estimator_label(r.name, r.options), r.scenario) for r in resolved]
     summaries = summarize_results(outcome.results, order)
+    for line in _default_noise_notes(outcome.results):
+        print(line, file=sys.stderr)
     if args.json:
         document = {
             "fkn_bench_command": "run",

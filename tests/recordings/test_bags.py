@@ -214,3 +214,7 @@ def test_a_recorded_measurement_covariance_becomes_that_steps_r(ros1_bag, capsys
                               measurement_covariances=episodes.measurement_covariances)
     assert estimates.extras["measurement_noise_defaults"].tolist() == [len(BAD_COVARIANCES)]
     assert np.isfinite(estimates.means).all()
+    code = main(["run", "--recording", str(ros1_bag), "--measurement-topic", MEASURED, "--estimator", "manual-mekf",
+                 "--estimator-option", "measurement_noise=message", "--cut", "5", "--no-progress"])
+    assert code == 0
+    assert f"{len(BAD_COVARIANCES)} measured step(s) stated no usable covariance" in capsys.readouterr().err
