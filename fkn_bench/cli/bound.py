@@ -264,7 +264,7 @@ def _efficiency_table(results: Any, scenario: str, bound: dict[str, Any]) -> str
     from fkn_bench.harness.summary import GROUP_RMSE_KEYS
     from fkn_bench.metrics import GROUP_UNITS, GROUPS
     from fkn_bench.reporting.bounds import BOUND_LABEL, efficiencies
-    from fkn_bench.reporting.leaderboard import ranked_summaries, reference_summaries
+    from fkn_bench.reporting.leaderboard import ranked_and_references
     from fkn_bench.reporting.report import format_number, text_table
 
     keys = ("state", *GROUPS)
@@ -273,7 +273,7 @@ def _efficiency_table(results: Any, scenario: str, bound: dict[str, Any]) -> str
     rows = [[BOUND_LABEL, str(summary["state"]["episodes"]),
              *(f"{format_number(summary[k]['mean'])} ± {_standard_error(summary[k]['mean'], summary[k]['standard_error'])}"
                for k in keys)]]
-    for s in [*ranked_summaries(results, scenario), *reference_summaries(results, scenario)]:
+    for s in [entry for group in ranked_and_references(results, scenario) for entry in group]:
         eff = efficiencies(s, bound)
         rmse = {"state": s["state_rmse"], **{g: s[GROUP_RMSE_KEYS[g]] for g in GROUPS}}
         label = s["estimator"] + (" (non-causal reference)" if s.get("non_causal") else "")

@@ -431,21 +431,26 @@ def _summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
     return [summarize_pair(results, e, scenario) for e in estimators]
 
 
+def ranked_and_references(results: Results, scenario: str) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """:func:`ranked_summaries` and :func:`reference_summaries` of ``scenario``, each pair summarised once."""
+    summaries = _summaries(results, scenario)
+    return (rank([s for s in summaries if not s.get("non_causal")]), rank([s for s in summaries if s.get("non_causal")]))
+
+
 def ranked_summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
     """The summaries of every causal estimator stored for ``scenario``, ranked (:func:`rank`)."""
-    return rank([s for s in _summaries(results, scenario) if not s.get("non_causal")])
+    return ranked_and_references(results, scenario)[0]
 
 
 def reference_summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
     """The summaries of the non-causal estimators (smoothers) stored for ``scenario``, by score:
     shown as references, not ranked (an estimator that reads the whole episode is no filter)."""
-    return rank([s for s in _summaries(results, scenario) if s.get("non_causal")])
+    return ranked_and_references(results, scenario)[1]
 
 
 def _scenario_files(results: Results, scenario: str, ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest | None],
-                    figure: bool = False) -> dict[str, str]:
+                    references: Sequence[dict[str, Any]] = (), figure: bool = False) -> dict[str, str]:
     quoted = quoted_rows(scenario)
-    references = reference_summaries(results, scenario)
     bound = results.bounds.get(scenario)
     shown = [*ranked, *references]
     runs = max(s["runs"] for s in shown)
@@ -680,10 +685,12 @@ def _build(results: Results, notes: str | None, draw: bool = False) -> tuple[dic
     scenarios = scenario_order(results.scenarios())
     drawn = figure_scenarios(scenarios)
     files: dict[str, str] = {}
-    ranked = _ranked(results, scenarios)
+    both = {scenario: ranked_and_references(results, scenario) for scenario in scenarios}
+    ranked = {scenario: both[scenario][0] for scenario in scenarios}
     tests = {scenario: tie_tests(ranked[scenario]) for scenario in scenarios}
     for scenario in scenarios:
-        files.update(_scenario_files(results, scenario, ranked[scenario], tests[scenario], figure=scenario in drawn))
+        files.update(_scenario_files(results, scenario, ranked[scenario], tests[scenario], both[scenario][1],
+                                     figure=scenario in drawn))
     files["README.md"] = _index(results, scenarios, ranked, tests, notes)
     files["results.csv"] = rows_to_csv(deterministic_rows(results.rows), float_format=CSV_FLOAT_FORMAT)
     files["provenance.json"] = _provenance(results, scenarios)
