@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 
-from fkn_bench.envs.replay import _resample_linear, finite_difference_twist, resample_truth
+from fkn_bench.envs.replay import _resample_linear, body_to_world, finite_difference_twist, resample_truth
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.geometry.alignment import RigidTransform, attitude_alignment, umeyama
 from fkn_bench.linalg import symmetrize
@@ -119,7 +119,7 @@ def _world_twists(stamps_ns: np.ndarray, poses: ArrayF, twist_stamps_ns: np.ndar
     if not body:
         return twists
     attitude = resample_truth(stamps_ns, poses, twist_stamps_ns)[0][:, :4]
-    return np.concatenate([quat.rotate(attitude, twists[:, :3]), quat.rotate(attitude, twists[:, 3:])], axis=1)
+    return body_to_world(attitude, twists)
 
 
 def _digest(*arrays: Any) -> str:

@@ -83,7 +83,7 @@ from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
 __all__ = [
     "ASTROBEE_TRUTH_PATTERN", "ReplayReport", "RecordedTrajectory", "read_recording",
-    "load_episodes", "resample_truth", "finite_difference_twist"
+    "load_episodes", "resample_truth", "finite_difference_twist", "body_to_world"
 ]
 
 ASTROBEE_TRUTH_PATTERN = re.compile(r"^(/[^/]+)*/loc/truth/pose$|^loc/truth/pose$")
@@ -240,6 +240,12 @@ def _resample_linear(stamps_ns: np.ndarray, values: ArrayF, grid_ns: np.ndarray)
     out = values[lo] + frac[:, None] * (values[hi] - values[lo])
     out[exact >= 0] = values[exact[exact >= 0]]
     return out
+
+
+def body_to_world(attitudes: Float[ArrayF, "N 4"], twists: Float[ArrayF, "N 6"]) -> Float[ArrayF, "N 6"]:
+    """Body-frame twists ``[angular(3), linear(3)]`` rotated into the world frame by ``attitudes``
+    (body to world, wxyz)."""
+    return np.concatenate([quat.rotate(attitudes, twists[:, :3]), quat.rotate(attitudes, twists[:, 3:])], axis=1)
 
 
 def finite_difference_twist(stamps_ns: np.ndarray, poses: Float[ArrayF, "N 7"]) -> Float[ArrayF, "N 6"]:
@@ -414,7 +420,7 @@ def read_recording(
     if beyond and twist_stamps is not truth.stamps_ns:
         notes.append(f"{twist_name}: {beyond} step(s) lie outside the twist messages; held their first/last value")
     if frame == "body":
-        twists = np.concatenate([quat.rotate(poses[:, :4], twists[:, :3]), quat.rotate(poses[:, :4], twists[:, 3:])], axis=1)
+        twists = body_to_world(poses[:, :4], twists)
     states = np.concatenate([poses, twists], axis=1)
     implausible = first_implausible(states, quaternion_tolerance=max(quaternion_tolerance, QUATERNION_TOLERANCE))
     if implausible is not None:  # e.g. a finite-difference velocity of two poses 1 ns apart

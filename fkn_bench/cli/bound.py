@@ -172,11 +172,11 @@ def _bound_table(bound: Any, known: Any) -> str:
 
 
 def _standard_error(mean: float, error: float) -> str:
-    """Two significant digits; 0 for rounding noise (below 1e-9 of the mean: episodes whose bound
-    is the same, e.g. the position's of one measurement schedule)."""
+    """Two significant digits of the shown error (:func:`fkn_bench.reporting.bounds.shown_standard_error`)."""
+    from fkn_bench.reporting.bounds import shown_standard_error
     from fkn_bench.reporting.report import format_number
 
-    return format_number(0.0 if abs(error) <= 1e-9 * abs(mean) else error, 2)
+    return format_number(shown_standard_error(mean, error), 2)
 
 
 def _draw(args: argparse.Namespace, scenario: Any, bound: Any, known: Any, estimators: list[Any]) -> Path:
@@ -263,7 +263,7 @@ def _efficiency_table(results: Any, scenario: str, bound: dict[str, Any]) -> str
     """The bound row and each stored estimator's RMSE with its efficiency (module docstring)."""
     from fkn_bench.harness.summary import GROUP_RMSE_KEYS
     from fkn_bench.metrics import GROUP_UNITS, GROUPS
-    from fkn_bench.reporting.bounds import BOUND_LABEL, efficiencies
+    from fkn_bench.reporting.bounds import BOUND_LABEL, efficiencies, format_efficiency
     from fkn_bench.reporting.leaderboard import ranked_and_references
     from fkn_bench.reporting.report import format_number, text_table
 
@@ -277,15 +277,9 @@ def _efficiency_table(results: Any, scenario: str, bound: dict[str, Any]) -> str
         eff = efficiencies(s, bound)
         rmse = {"state": s["state_rmse"], **{g: s[GROUP_RMSE_KEYS[g]] for g in GROUPS}}
         label = s["estimator"] + (" (non-causal reference)" if s.get("non_causal") else "")
-        rows.append([label, str(s["runs"]), *(f"{format_number(rmse[k])} ({_ratio(eff[k])})" for k in keys)])
+        rows.append([label, str(s["runs"]), *(f"{format_number(rmse[k])} ({format_efficiency(eff[k], '-')})" for k in keys)])
     inertia = f", inertia {bound['inertia']}" if bound.get("inertia") else ""
     title = (f"{scenario}: {bound['split']} split, scored from step {bound['cut']}{inertia}; "
              f"each cell RMSE (efficiency = bound / RMSE, 1.00 the best possible for a filter; a non-causal "
              f"smoother reads later measurements and may pass it)")
     return title + "\n" + text_table(header, rows)
-
-
-def _ratio(value: float) -> str:
-    import math
-
-    return f"{value:.2f}" if math.isfinite(value) else "-"

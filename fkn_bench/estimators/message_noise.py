@@ -15,8 +15,9 @@ where ``s^2 = q^T R0_qq q`` is the filter's own (default) measurement variance a
 covariance says nothing about the quaternion's norm, and a zero variance there would make the
 innovation covariance singular.
 
-Validation, per measured step: ``C`` must be finite, symmetric (to ``1e-9`` of its largest
-entry) and positive definite; a step whose ``C`` is missing (NaN) or fails takes the filter's
+Validation, per measured step, by the recordings' rule
+(:func:`fkn_bench.recordings.base.checked_covariances`): ``C`` must be finite, symmetric (to
+``1e-9`` of its largest entry) and positive definite; a step whose ``C`` is missing (NaN) or fails takes the filter's
 default ``R``, and the count of such steps is reported (``Estimates.extras``,
 ``"measurement_noise_defaults"``, per sequence).
 """
@@ -26,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from fkn_bench.geometry.quaternion import theta_matrix
+from fkn_bench.recordings.base import checked_covariances
 from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
 __all__ = ["MEASUREMENT_NOISE_MODES", "usable_covariances", "message_noise"]
@@ -33,21 +35,10 @@ __all__ = ["MEASUREMENT_NOISE_MODES", "usable_covariances", "message_noise"]
 MEASUREMENT_NOISE_MODES: tuple[str, ...] = ("default", "message")
 """``measurement_noise`` of the Kalman estimators: their own ``R``, or each message's covariance."""
 
-SYMMETRY_TOLERANCE = 1e-9
-"""Largest asymmetry ``|C - C^T|`` a stated covariance may have, relative to its largest entry."""
-
-
 def usable_covariances(covariances: Float[ArrayF, "... 6 6"]) -> Bool[ArrayB, "..."]:
-    """Where a stated covariance is finite, symmetric and positive definite (module docstring)."""
-    C = np.asarray(covariances, dtype=float)
-    ok = np.all(np.isfinite(C), axis=(-2, -1))
-    scale = np.where(ok, np.max(np.abs(np.where(np.isfinite(C), C, 0.0)), axis=(-2, -1)), 1.0)
-    ok &= np.max(np.abs(C - np.swapaxes(C, -1, -2)), axis=(-2, -1), initial=0.0, where=np.isfinite(C)) <= SYMMETRY_TOLERANCE * scale
-    if ok.any():
-        symmetric = 0.5 * (C[ok] + np.swapaxes(C[ok], -1, -2))
-        positive = np.linalg.eigvalsh(symmetric)[..., 0] > 0
-        ok[ok] = positive
-    return ok
+    """Where a stated covariance is finite, symmetric and positive definite (the recordings' rule,
+    :func:`fkn_bench.recordings.base.checked_covariances`)."""
+    return checked_covariances(covariances)[1]
 
 
 def message_noise(
@@ -69,9 +60,10 @@ def message_noise(
     C = np.asarray(covariances, dtype=float)
     if C.shape != (batch, steps, 6, 6):
         raise ValueError(f"measurement covariances must have shape {(batch, steps, 6, 6)} (got {C.shape})")
-    use = mask & usable_covariances(C)
+    checked, usable = checked_covariances(C)
+    use = mask & usable
     if use.any():
-        c = 0.5 * (C[use] + np.swapaxes(C[use], -1, -2))
+        c = checked[use]
         if m == 6:
             R[use] = c
         elif m == 7:

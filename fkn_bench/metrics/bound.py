@@ -71,6 +71,7 @@ from typing import Any, Literal
 
 import numpy as np
 
+from fkn_bench.geometry import quaternion as quat
 from fkn_bench.metrics.errors import GROUP_UNITS, GROUPS
 from fkn_bench.types import ArrayB, ArrayF, Bool, Float
 
@@ -307,7 +308,7 @@ def posterior_bound(
             return
         P = posterior[:, lo - a : hi - a]
         diag = np.diagonal(P, axis1=2, axis2=3)
-        theta = _theta(q_truth[:, lo - start : hi - start])  # (B, L, 4, 3)
+        theta = quat.theta_matrix(q_truth[:, lo - start : hi - start])  # (B, L, 4, 3): dq = Theta dtheta / 2
         attitude = P[:, :, 0:3, 0:3]
         components[:, lo - start : hi - start, 0:4] = 0.25 * np.einsum("blij,bljk,blik->bli", theta, attitude, theta)
         components[:, lo - start : hi - start, 4:13] = diag[:, :, 3:12]
@@ -335,11 +336,3 @@ def _rate_mask(n: int) -> ArrayF:
     mask = np.zeros((n, n))
     mask[6:9, 6:9] = 1.0
     return mask
-
-
-def _theta(q: Float[ArrayF, "... 4"]) -> Float[ArrayF, "... 4 3"]:
-    """``Theta(q) (..., 4, 3)`` with ``[0, v] (x) q = Theta(q) v`` (the world-frame perturbation:
-    ``dq = 1/2 Theta(q) dtheta``)."""
-    from fkn_bench.geometry import quaternion as quat
-
-    return quat.theta_matrix(q)

@@ -67,7 +67,7 @@ from fkn_bench.wording import option, option_name
 __all__ = [
     "RecordingError", "TopicNotFoundError", "RecordingRepairWarning", "TopicInfo", "PoseSeries",
     "TwistSeries", "Recording", "POSE_TYPES", "TWIST_TYPES", "ROS_TO_FKN_COVARIANCE_ORDER",
-    "pose_covariances"
+    "pose_covariances", "checked_covariances"
 ]
 
 _NS = 1_000_000_000
@@ -198,20 +198,26 @@ def pose_covariances(ros: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Returns:
         ``(covariances (N, 6, 6), valid (N,))``: reordered to ``[dtheta(3), dr(3)]`` and
-        symmetrised where valid (finite, symmetric to 1e-9 of the largest entry, positive
-        definite), NaN elsewhere.
+        :func:`checked_covariances`.
     """
     order = list(ROS_TO_FKN_COVARIANCE_ORDER)
-    c = np.asarray(ros, dtype=np.float64).reshape(-1, 6, 6)[:, order][:, :, order]
-    finite = np.isfinite(c).all(axis=(1, 2))
-    c = np.where(finite[:, None, None], c, 0.0)
-    transposed = c.transpose(0, 2, 1)
-    scale = np.abs(c).max(axis=(1, 2), initial=0.0)
-    valid = finite & (scale > 0) & (np.abs(c - transposed).max(axis=(1, 2), initial=0.0) <= _SYMMETRY_TOLERANCE * scale)
+    return checked_covariances(np.asarray(ros, dtype=np.float64).reshape(-1, 6, 6)[:, order][:, :, order])
+
+
+def checked_covariances(covariances: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(symmetrised (..., n, n), valid (...))`` of stated covariances ``(..., n, n)``: valid
+    where finite, symmetric to ``1e-9`` of the largest entry and positive definite (symmetrised
+    there), NaN elsewhere."""
+    c = np.asarray(covariances, dtype=np.float64)
+    finite = np.isfinite(c).all(axis=(-2, -1))
+    c = np.where(finite[..., None, None], c, 0.0)
+    transposed = np.swapaxes(c, -1, -2)
+    scale = np.abs(c).max(axis=(-2, -1), initial=0.0)
+    valid = finite & (scale > 0) & (np.abs(c - transposed).max(axis=(-2, -1), initial=0.0) <= _SYMMETRY_TOLERANCE * scale)
     symmetric = 0.5 * (c + transposed)
     if valid.any():
-        valid[valid] = np.linalg.eigvalsh(symmetric[valid])[:, 0] > 0
-    return np.where(valid[:, None, None], symmetric, np.nan), valid
+        valid[valid] = np.linalg.eigvalsh(symmetric[valid])[..., 0] > 0
+    return np.where(valid[..., None, None], symmetric, np.nan), valid
 
 
 class Recording:

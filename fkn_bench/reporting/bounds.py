@@ -8,8 +8,8 @@ twice the bound's.
 
 It can exceed 1 by a few percent without any estimator beating the bound: the leaderboard's RMSE
 is the mean over episodes of each episode's RMSE, and the mean of square roots is below the root
-of the mean square that the bound bounds (an efficient Kalman filter of ``free-tumble``'s position
-scores about 1.02 this way), and the bound of a nonlinear model is evaluated along
+of the mean square that the bound bounds (the model-matched oracle, whose own covariance is the
+bound, scores 1.02 on ``free-tumble``'s position: ``leaderboards/free-tumble.md``), and the bound of a nonlinear model is evaluated along
 each episode's truth. Well above 1 it says the estimator knows more than the scenario's stated
 prior (the paper's fixed-truth scenarios: every episode the same rate, which the learned filters
 memorise) or that the bound's inlier model does not describe the data (outliers).
@@ -27,7 +27,8 @@ from fkn_bench.harness.summary import GROUP_RMSE_KEYS
 from fkn_bench.metrics import GROUPS
 from fkn_bench.metrics.bound import efficiency
 
-__all__ = ["BOUND_LABEL", "BOUND_NOTE", "EFFICIENCY_KEYS", "bound_means", "efficiencies"]
+__all__ = ["BOUND_LABEL", "BOUND_NOTE", "EFFICIENCY_KEYS", "bound_means", "efficiencies", "shown_standard_error",
+           "format_efficiency"]
 
 BOUND_LABEL = "bound (PCRB)"
 """The label of a scenario's bound row."""
@@ -68,6 +69,18 @@ def efficiencies(summary: Mapping[str, Any], bound: Mapping[str, Any] | None) ->
     means = bound_means(bound, summary.get("seeds"))
     rmse = {"state": summary["state_rmse"], **{g: summary[GROUP_RMSE_KEYS[g]] for g in GROUPS}}
     return {k: efficiency(means[k], _float(rmse[k])) for k in EFFICIENCY_KEYS}
+
+
+def shown_standard_error(mean: float, error: float | None) -> float | None:
+    """The Monte-Carlo standard error a report shows: 0 where it is rounding noise (at most 1e-9
+    of the mean: every episode has the same bound, e.g. the position's under one measurement
+    schedule)."""
+    return 0.0 if error is not None and abs(error) <= 1e-9 * abs(mean) else error
+
+
+def format_efficiency(value: float | None, missing: str = "–") -> str:
+    """An efficiency to two decimals, ``missing`` where it is undefined."""
+    return missing if value is None or not math.isfinite(value) else f"{value:.2f}"
 
 
 def _float(value: Any) -> float:

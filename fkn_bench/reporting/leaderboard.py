@@ -76,7 +76,8 @@ from fkn_bench.harness.summary import GROUP_RMSE_KEYS, summarize_pair
 from fkn_bench.io import to_jsonable
 from fkn_bench.metrics import DIVERGENCE_REASONS, GROUP_UNITS, GROUPS
 from fkn_bench.metrics.statistics import ALPHA, INTERVAL_METHOD, TEST_METHOD, PairedTest, paired_test
-from fkn_bench.reporting.bounds import BOUND_LABEL, BOUND_NOTE, EFFICIENCY_KEYS, bound_means, efficiencies
+from fkn_bench.reporting.bounds import (BOUND_LABEL, BOUND_NOTE, EFFICIENCY_KEYS, bound_means, efficiencies,
+                                       format_efficiency, shown_standard_error)
 from fkn_bench.reporting.figures import png_bytes
 from fkn_bench.reporting.manifest import check_files, write_files
 from fkn_bench.reporting.plots import comparison_chart, comparison_data
@@ -263,16 +264,9 @@ def _label(summary: dict[str, Any]) -> str:
             + (" (non-causal reference)" if summary.get("non_causal") else ""))
 
 
-def _efficiency(value: float) -> str:
-    """An efficiency to two decimals (– where undefined)."""
-    return _DASH if value is None or not math.isfinite(value) else f"{value:.2f}"
-
-
 def _bound_cell(bound: dict[str, Any], key: str, digits: int = 3) -> str:
     summary = bound["summary"][key]
-    mean, se = summary["mean"], summary["standard_error"]
-    se = 0.0 if se is not None and abs(se) <= 1e-9 * abs(mean) else se  # one value for every episode, to rounding
-    return f"{_fmt(mean, digits)} ±{_fmt(se, 2)}"
+    return f"{_fmt(summary['mean'], digits)} ±{_fmt(shown_standard_error(summary['mean'], summary['standard_error']), 2)}"
 
 
 def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow], tests: Sequence[PairedTest | None],
@@ -294,7 +288,7 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
             _with_interval(s),
             _versus_above(test, i == 0) if number is not None else _DASH,
             f"{_fmt(st['median'], 4)} [{_fmt(st['q25'], 3)}, {_fmt(st['q75'], 3)}]",
-            _efficiency(efficiencies(s, bound)["state"]),
+            format_efficiency(efficiencies(s, bound)["state"]),
             *(_fmt(s[k]) for k in (*GROUP_RMSE_KEYS.values(), "settling_time_s")),
             _pct(s["settled_fraction"]),
             _pct(s.get("lost_track_fraction", s["diverged_fraction"])),
@@ -400,7 +394,7 @@ def _efficiency_table(summaries: Sequence[dict[str, Any]], bound: dict[str, Any]
     rows = [[BOUND_LABEL, *(_bound_cell(bound, k, 4 if k == "state" else 3) for k in EFFICIENCY_KEYS)]]
     for s in summaries:
         values = efficiencies(s, bound)
-        rows.append([_label(s), *(_efficiency(values[k]) for k in EFFICIENCY_KEYS)])
+        rows.append([_label(s), *(format_efficiency(values[k]) for k in EFFICIENCY_KEYS)])
     units = ", ".join(f"{g} {GROUP_UNITS[g]}" for g in GROUPS)
     notes = [f"First row: the bound of the 13-state RMSE and of each group's RMSE ({units}), mean over the test "
              "episodes ± Monte-Carlo standard error. Other rows: efficiency = bound / RMSE, the bound averaged over the "
@@ -560,7 +554,7 @@ def _section(results: Results, section: str, scenarios: Sequence[str], ranked: d
         f"- [{s}]({u}.md) ([HTML]({u}.html), [CSV]({u}.csv)): best {ranked[s][0]['estimator']} "
         f"({_fmt(ranked[s][0]['state_rmse'], 4)}"
         + (f"; {BOUND_LABEL} {_fmt(results.bounds[s]['summary']['state']['mean'], 4)}, efficiency "
-           f"{_efficiency(efficiencies(ranked[s][0], results.bounds[s])['state'])}" if s in results.bounds else "") + ")"
+           f"{format_efficiency(efficiencies(ranked[s][0], results.bounds[s])['state'])}" if s in results.bounds else "") + ")"
         for s, u in ((s, quote(path_name(s))) for s in scenarios) if ranked[s]
     ]
     return lines + [""]

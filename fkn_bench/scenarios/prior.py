@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fkn_bench.geometry import quaternion as quat
 from fkn_bench.scenarios.scenario import Scenario
 from fkn_bench.types import ArrayF
 
@@ -95,15 +96,6 @@ def log_ratio_variance(spread: float) -> float:
     return (second(hi) - second(lo)) / (2.0 * spread) - mean * mean
 
 
-def _rotation(q: tuple[float, ...]) -> ArrayF:
-    w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 def error_prior(scenario: Scenario, *, ratios: bool | None = None) -> ErrorPrior:
     """The prior of ``scenario``'s initial state (module docstring). ``ratios``: carry the log
     inertia ratios (default: when the scenario's dynamics are free and its inertia uncertain,
@@ -121,7 +113,7 @@ def error_prior(scenario: Scenario, *, ratios: bool | None = None) -> ErrorPrior
     omega0 = np.array(sc.omega0)
     axis = omega0 / np.linalg.norm(omega0) if omega0.any() else np.zeros(3)
     if sc.omega0_frame == "body" and sc.attitude0 is not None:
-        axis = _rotation(sc.attitude0) @ axis
+        axis = quat.to_matrix(np.array(sc.attitude0)) @ axis
     isotropic = sc.omega0_axis == "uniform" or (sc.omega0_frame == "body" and sc.attitude0 is None)
     if isotropic:  # uniform in direction: zero mean, E[m^2] / 3 per axis
         rate_mean = np.zeros(3)
