@@ -15,36 +15,21 @@ References
     * Torque-free motion: Euler's equations ``J dw/dt = -w x (J w)`` for the body rate ``w`` and
       ``q' = 1/2 q (x) [0, w]`` (Landau & Lifshitz, Mechanics, sections 35-37; Markley &
       Crassidis, Fundamentals of Spacecraft Attitude Determination and Control, 2014, ch. 3),
-      integrated with the classical fourth-order Runge-Kutta method.
+      integrated with the classical fourth-order Runge-Kutta method: the rigid-body model's
+      propagation (:mod:`fkn_bench.models.rigid_body`), which the simulator calls
+      (:mod:`fkn_bench.models.rigid_body_kernels`) instead of writing the physics again.
 """
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from fkn_bench.geometry import quaternion as quat
+from fkn_bench.models.rigid_body import euler_coefficients
+from fkn_bench.models.rigid_body_kernels import body_rates, integrate_samples
 from fkn_bench.types import ArrayF
 
 __all__ = ["ForcedRotation", "FreeTumble", "PerturbedRotation"]
-
-
-def _rotate(q: ArrayF, v: ArrayF) -> ArrayF:
-    """Rotate ``v (B, 3)`` by unit ``q (B, 4)`` with element-wise arithmetic only."""
-    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
-    vx, vy, vz = v[:, 0], v[:, 1], v[:, 2]
-    # t = 2 vec(q) x v ;  v' = v + w t + vec(q) x t
-    tx = 2.0 * (y * vz - z * vy)
-    ty = 2.0 * (z * vx - x * vz)
-    tz = 2.0 * (x * vy - y * vx)
-    return np.stack(
-        [
-            vx + w * tx + (y * tz - z * ty),
-            vy + w * ty + (z * tx - x * tz),
-            vz + w * tz + (x * ty - y * tx),
-        ],
-        axis=1,
-    )
 
 
 class _RandomAccess:
@@ -156,14 +141,14 @@ class PerturbedRotation(_RandomAccess):
 class FreeTumble:
     """Torque-free rigid body with principal moments ``inertia``, integrated with RK4.
 
-    Each sample interval ``dt`` is split into ``substeps`` RK4 steps; the quaternion is
-    renormalised at every sample (the integrator itself does not). The integration runs compiled
-    (:func:`_advance_free_tumble`, numba): the same IEEE operations in the same order as the
-    element-wise numpy arithmetic it replaced (bit for bit the same samples: no fused
-    multiply-adds, no reordering), about 200 times faster at a handful of episodes, where numpy's
-    per-call overhead dominated (seeking to ds1's test split took seconds per scenario). With Astrobee's inertia and
-    ``dt = 0.1`` s, one sub-step conserves kinetic energy and world-frame angular momentum to
-    about 1e-13 (ds1 rates) and 4e-10 (ds2 rates) relative over 16000 samples.
+    The propagation is the rigid-body model's (:mod:`fkn_bench.models.rigid_body`: Euler's
+    equations with :func:`~fkn_bench.models.rigid_body.euler_coefficients` and the quaternion
+    kinematics), run compiled one trajectory at a time
+    (:func:`fkn_bench.models.rigid_body_kernels.integrate_samples`). Each sample interval ``dt``
+    is split into ``substeps`` RK4 steps; the quaternion is renormalised at every sample (the
+    integrator itself does not). With Astrobee's inertia and ``dt = 0.1`` s, one sub-step
+    conserves kinetic energy and world-frame angular momentum to about 1e-13 (ds1 rates) and
+    4e-10 (ds2 rates) relative over 16000 samples.
 
     Args:
         attitude0: initial attitudes ``(B, 4)``.
@@ -184,11 +169,8 @@ class FreeTumble:
     ) -> None:
         q0 = np.array(attitude0, dtype=float)
         J = np.broadcast_to(np.array(inertia, dtype=float), (q0.shape[0], 3))
-        jx, jy, jz = J[:, 0], J[:, 1], J[:, 2]
-        # Euler's equations: dw_x = (Jy - Jz)/Jx w_y w_z and cyclic
-        self._coeff = np.stack([(jy - jz) / jx, (jz - jx) / jy, (jx - jy) / jz], axis=1)
-        conjugate = q0 * np.array([1.0, -1.0, -1.0, -1.0])  # the world rate in the body frame:
-        omega_body = _rotate(conjugate, np.array(omega_world0, dtype=float))
+        self._coeff = np.array([euler_coefficients(row) for row in J]).reshape(-1, 3)  # (B, 3)
+        omega_body = body_rates(q0, np.ascontiguousarray(omega_world0, dtype=float))
         self._y = np.concatenate([q0, omega_body], axis=1)
         self._h = float(dt) / int(substeps)
         self._substeps = int(substeps)
@@ -201,68 +183,10 @@ class FreeTumble:
         q_out = np.empty((n, 4, batch))
         w_out = np.empty((n, 3, batch))
         y = np.ascontiguousarray(self._y)
-        _advance_free_tumble(y, np.ascontiguousarray(self._coeff), self._h, self._substeps, self._started, q_out, w_out)
+        integrate_samples(y, self._coeff, self._h, self._substeps, self._started, q_out, w_out)
         self._started = self._started or n > 0
         self._y = y
         if step_major:
             return q_out, w_out
         return q_out.transpose(2, 1, 0), w_out.transpose(2, 1, 0)
 
-
-@numba.njit(cache=True)
-def _free_derivative(y: ArrayF, a: ArrayF, out: ArrayF) -> None:  # pragma: no cover - compiled
-    """``dy/dt`` of ``y = [q (wxyz), w_body]`` (7,) into ``out``: ``q' = q (x) [0, w] / 2`` and
-    Euler's equations ``w_x' = a_x w_y w_z`` (cyclic) with ``a = ((Jy - Jz)/Jx, ...)``; each
-    expression in the order the numpy version evaluated it."""
-    w, x, yq, z = y[0], y[1], y[2], y[3]
-    ox, oy, oz = y[4], y[5], y[6]
-    out[0] = -0.5 * (x * ox + yq * oy + z * oz)
-    out[1] = 0.5 * (w * ox + yq * oz - z * oy)
-    out[2] = 0.5 * (w * oy + z * ox - x * oz)
-    out[3] = 0.5 * (w * oz + x * oy - yq * ox)
-    out[4] = a[0] * oy * oz
-    out[5] = a[1] * oz * ox
-    out[6] = a[2] * ox * oy
-
-
-@numba.njit(cache=True)
-def _advance_free_tumble(y: ArrayF, coeff: ArrayF, h: float, substeps: int, started: bool,
-                         q_out: ArrayF, w_out: ArrayF) -> None:  # pragma: no cover - compiled
-    """Advance the states ``y (B, 7)`` (in place) by ``n = q_out.shape[0]`` samples and write each
-    sample's attitude ``q_out (n, 4, B)`` and world-frame rate ``w_out (n, 3, B)``; the first
-    sample is the current state when not ``started``. ``substeps`` classical RK4 steps of ``h``
-    seconds per sample, then the quaternion renormalised (:class:`FreeTumble`)."""
-    k1, k2, k3, k4, trial = np.empty(7), np.empty(7), np.empty(7), np.empty(7), np.empty(7)
-    half, sixth = 0.5 * h, h / 6.0
-    for b in range(y.shape[0]):
-        state = y[b]
-        a = coeff[b]
-        for i in range(q_out.shape[0]):
-            if started or i > 0:
-                for _ in range(substeps):
-                    _free_derivative(state, a, k1)
-                    for j in range(7):
-                        trial[j] = state[j] + half * k1[j]
-                    _free_derivative(trial, a, k2)
-                    for j in range(7):
-                        trial[j] = state[j] + half * k2[j]
-                    _free_derivative(trial, a, k3)
-                    for j in range(7):
-                        trial[j] = state[j] + h * k3[j]
-                    _free_derivative(trial, a, k4)
-                    for j in range(7):
-                        state[j] = state[j] + sixth * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
-                norm = np.sqrt(state[0] * state[0] + state[1] * state[1] + state[2] * state[2] + state[3] * state[3])
-                for j in range(4):
-                    state[j] = state[j] / norm
-            w, x, yq, z = state[0], state[1], state[2], state[3]
-            vx, vy, vz = state[4], state[5], state[6]
-            for j in range(4):
-                q_out[i, j, b] = state[j]
-            # the world rate: v' = v + w t + vec(q) x t with t = 2 vec(q) x v (_rotate)
-            tx = 2.0 * (yq * vz - z * vy)
-            ty = 2.0 * (z * vx - x * vz)
-            tz = 2.0 * (x * vy - yq * vx)
-            w_out[i, 0, b] = vx + w * tx + (yq * tz - z * ty)
-            w_out[i, 1, b] = vy + w * ty + (z * tx - x * tz)
-            w_out[i, 2, b] = vz + w * tz + (x * ty - yq * tx)

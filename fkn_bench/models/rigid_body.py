@@ -29,7 +29,10 @@ The Jacobian ``F = df/dx`` is analytic: the tangent of every Runge-Kutta stage i
 the Jacobian of the continuous dynamics (``d(q (x) [0, w])/dq = Omega_R(w)``,
 ``d/dw = Theta_R(q)``, ``d dw/dw`` bilinear in ``p`` and ``w``), so ``F`` is the exact derivative
 of the discrete map (the tests hold it to autograd). Everything is written once for numpy arrays
-(online) and torch tensors (batched, differentiable).
+(online) and torch tensors (batched, differentiable). The same equations, with the same
+coefficients (:func:`euler_coefficients`), run compiled one trajectory at a time in
+:mod:`fkn_bench.models.rigid_body_kernels`: the propagation the truth simulator calls
+(:class:`fkn_bench.envs.dynamics.FreeTumble`).
 """
 
 from __future__ import annotations
