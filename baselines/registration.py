@@ -1,5 +1,6 @@
 """Registers the five baselines of :mod:`fkn_bench.baselines` with the estimator registry
-(imported lazily by the registry)."""
+(imported lazily by the registry); the committed settings of the tuned ones are this package's
+``params/<name>-<family>.json``."""
 
 from __future__ import annotations
 
@@ -15,6 +16,9 @@ from fkn_bench.scenarios import Scenario
 from fkn_bench.training.artifacts import ArtifactError, artifact_factory, committed_artifact, read_artifact
 
 __all__: list[str] = []
+
+PARAMS_PACKAGE = "fkn_bench.baselines"
+"""The package whose ``params/`` holds the committed settings of the tuned estimators."""
 
 
 def _adaptive(cls: type, name: str, description: str, scenario: Scenario | None = None, **options: Any) -> Any:
@@ -54,7 +58,7 @@ for _cls, _description, _tuned in (
     (VBAKFEstimator, "Variational Bayesian adaptive EKF of Huang et al. 2018 (TAC 63(2)): inverse-Wishart P- and R, 10 iterations",
      "Variational Bayesian adaptive EKF of Huang et al. 2018, hyperparameters and initial noise swept"),
 ):
-    register_estimator(_cls.name, partial(_tuned_adaptive, _cls, _tuned), description=_tuned)
+    register_estimator(_cls.name, partial(_tuned_adaptive, _cls, _tuned), description=_tuned, params_package=PARAMS_PACKAGE)
     register_estimator(f"{_cls.name}-default", partial(_adaptive, _cls, f"{_cls.name}-default", f"{_description} (the paper's settings)"),
                        description=f"{_description} (the paper's settings)")
 for _name in TUNED_OBJECTIVES:
@@ -63,4 +67,5 @@ for _name in TUNED_OBJECTIVES:
         artifact_factory(_name, TunedEKFEstimator),
         description=DESCRIPTIONS[_name],
         trainable=tuned_trainable(_name),
+        params_package=PARAMS_PACKAGE,
     )

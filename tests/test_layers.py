@@ -72,12 +72,7 @@ ALLOWED: dict[tuple[str, str], str] = {
 }
 """Upward imports that are the design, ``{(module, imported module): why}``."""
 
-KNOWN_VIOLATIONS: set[tuple[str, str]] = {
-    # training/artifacts.py: the learned-parameter files are read from baselines/params
-    # (resources.files("fkn_bench.baselines")); issue 35, item 3 moves them to the packages that
-    # train them.
-    ("fkn_bench.training.artifacts", "fkn_bench.baselines"),
-}
+KNOWN_VIOLATIONS: set[tuple[str, str]] = set()
 """``(module, imported module)`` pairs that break the layer rule today and are being fixed in
 other work; remove each entry when its fix is merged (the test fails on an entry that no longer
 occurs, so the list cannot go stale)."""

@@ -4,9 +4,11 @@ with a ``Trainable`` declaration) to a scenario.
 Writes a checkpoint, the training history (CSV), the two training figures (PNG) and the learned
 parameters (JSON) into ``--out`` (default ``runs/<estimator>-<scenario>``); ``--write-artifact``
 also installs the parameters as the committed artefact the estimator runs from by default
-(``baselines/params/<estimator>-<family>.json``). Repeat ``--scenario`` to train on a mixture of
-scenarios; ``--family`` names the family the artefact is for (``default``: recordings and user
-scenarios). ``--model`` picks the filter's process model. Examples::
+(``<estimator>-<family>.json`` in the ``params/`` folder of the package that the estimator's
+registration names: ``fkn_bench/flexkalmannet/params``, ``fkn_bench/kalmannet/params``,
+``baselines/params``). Repeat ``--scenario`` to train on a mixture of scenarios; ``--family``
+names the family the artefact is for (``default``: recordings and user scenarios). ``--model``
+picks the filter's process model. Examples::
 
     fkn-bench train --estimator flexkalmannet --scenario ds1 --write-artifact
     fkn-bench train --estimator flexkalmannet --model rigid-body-ratios --scenario tumble-fast \\

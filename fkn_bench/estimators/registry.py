@@ -24,7 +24,12 @@ A factory is called as ``factory(scenario=scenario, **options)`` where ``scenari
 it) and returns an :class:`~fkn_bench.estimators.base.Estimator`. An estimator that can be
 trained also passes ``trainable=`` (a :class:`~fkn_bench.training.Trainable`: how to read its
 training options and which module to train); ``fkn-bench train`` and ``fkn-bench sweep`` then
-train it through :func:`fkn_bench.training.fit`.
+train it through :func:`fkn_bench.training.fit`. An estimator that runs from committed parameter
+files (``<name>-<family>.json``, and a network's ``.weights.pt`` beside it) passes
+``params_package=`` (e.g. ``"my_package"``): the package whose ``params/`` folder holds them,
+where :func:`fkn_bench.training.artifacts.artifact_path` looks for them and ``fkn-bench train
+--write-artifact`` and ``fkn-bench sweep --write-artifact`` install them (ship the folder as the
+package's data).
 
 A saved estimator file (:meth:`Estimator.save <fkn_bench.estimators.base.Estimator.save>`,
 read by :func:`load_estimator`) is data: the class it records must be one the registry has
@@ -76,14 +81,17 @@ class UnknownEstimatorError(KeyError):
 
 @dataclass(frozen=True)
 class EstimatorSpec:
-    """A registered estimator: its name, factory, one-line description, and for estimators that
-    ``fkn-bench train`` and ``fkn-bench sweep`` can fit, their
-    :class:`~fkn_bench.training.Trainable` declaration (None: not trainable)."""
+    """A registered estimator: its name, factory, one-line description, for estimators that
+    ``fkn-bench train`` and ``fkn-bench sweep`` can fit their
+    :class:`~fkn_bench.training.Trainable` declaration (None: not trainable), and for estimators
+    that run from committed parameter files the package whose ``params/`` folder holds them
+    (``params_package``; None: none committed, ``parameters=PATH`` only)."""
 
     name: str
     factory: EstimatorFactory
     description: str = ""
     trainable: Any = None
+    params_package: str | None = None
 
 
 _REGISTRY: dict[str, EstimatorSpec] = {}
@@ -96,20 +104,25 @@ def register_estimator(
     *,
     description: str = "",
     trainable: Any = None,
+    params_package: str | None = None,
     overwrite: bool = False,
 ) -> EstimatorSpec:
     """Register ``factory`` under ``name`` (see module docstring) and return its spec; a
     :class:`~fkn_bench.training.Trainable` ``trainable`` makes it trainable by
-    :func:`fkn_bench.training.fit` (``fkn-bench train``, ``fkn-bench sweep``)."""
+    :func:`fkn_bench.training.fit` (``fkn-bench train``, ``fkn-bench sweep``); ``params_package``
+    (a dotted package name) holds its committed parameter files in ``params/``."""
     if not isinstance(name, str) or not name or any(c.isspace() for c in name):
         raise ValueError(f"estimator name must be a non-empty string without spaces (got {name!r})")
     if not callable(factory):
         raise TypeError(f"factory for estimator {name!r} must be callable")
     if trainable is not None and not (callable(getattr(trainable, "config", None)) and callable(getattr(trainable, "build", None))):
         raise TypeError(f"trainable of estimator {name!r} must be a fkn_bench.training.Trainable (callable config and build)")
+    if params_package is not None and not (isinstance(params_package, str)
+                                           and all(part.isidentifier() for part in params_package.split("."))):
+        raise ValueError(f"params_package of estimator {name!r} must be a dotted package name (got {params_package!r})")
     if name in _REGISTRY and not overwrite:
         raise ValueError(f"estimator {name!r} is already registered (pass overwrite=True to replace it)")
-    spec = EstimatorSpec(name, factory, description, trainable)
+    spec = EstimatorSpec(name, factory, description, trainable, params_package)
     _REGISTRY[name] = spec
     return spec
 

@@ -2,12 +2,12 @@
 
 * :class:`FlexKalmanNetEstimator` (``flexkalmannet``, the paper's use): the filter variant with the
   constant parameters the trained network yields on its training data. Runs from a learned-
-  parameter artefact (the committed ``baselines/params/flexkalmannet-<family>.json`` by default,
+  parameter artefact (this package's committed ``params/flexkalmannet-<family>.json`` by default,
   chosen by the scenario's ``model_family``) or from a checkpoint.
 * :class:`AdaptiveFlexKalmanNetEstimator` (``flexkalmannet-tv``, or ``flexkalmannet`` with
   ``mode="time_varying"`` and a checkpoint): the network re-evaluated along the sequence, each
   step's parameters the mean of its outputs over the last ``history`` measurements. Runs from the
-  committed weights ``baselines/params/flexkalmannet-tv-<family>.json`` (and ``.weights.pt``) of a
+  committed weights ``params/flexkalmannet-tv-<family>.json`` (and ``.weights.pt``) of a
   network trained in that mode, or from a checkpoint.
 """
 
@@ -189,7 +189,7 @@ def flexkalmannet_tv_factory(
     """Registry factory of ``flexkalmannet-tv``: FlexKalmanNet trained and run in the time-varying
     mode, from ``checkpoint=PATH``, the ``parameters=PATH`` of a ``fkn-bench train --estimator
     flexkalmannet-tv`` run, or by default the committed weights of the scenario's model family
-    (``baselines/params/flexkalmannet-tv-<family>.json`` and ``.weights.pt``)."""
+    (``fkn_bench/flexkalmannet/params/flexkalmannet-tv-<family>.json`` and ``.weights.pt``)."""
     weights = trained_network("flexkalmannet-tv", "time-varying FlexKalmanNet", scenario, checkpoint, parameters)
     return AdaptiveFlexKalmanNetEstimator(
         checkpoint=weights, history=history, gate=gate, name="flexkalmannet-tv",

@@ -85,7 +85,7 @@ class KalmanNetEstimator(RecursiveEstimator):
     ) -> None:
         if (checkpoint is None) == (network is None):
             raise ValueError("give either checkpoint=PATH or network=KalmanNet(...)")
-        # a committed file is named by its label (fkn_bench.baselines/params/...), not by where this
+        # a committed file is named by its label (fkn_bench.kalmannet/params/...), not by where this
         # checkout is, so that configurations and their fingerprints do not depend on it
         self.checkpoint = None if checkpoint is None else artifact_label(resolve_artifact_label(checkpoint))
         self.metadata: dict[str, Any] = {}
@@ -152,7 +152,7 @@ def kalmannet_factory(
     """Registry factory of ``kalmannet``: a trained network from ``checkpoint=PATH``, from the
     ``parameters=PATH`` (``parameters.json``) of a ``fkn-bench train --estimator kalmannet`` run,
     or by default the committed weights of the scenario's model family
-    (``baselines/params/kalmannet-<family>.json`` and ``.weights.pt``)."""
+    (``fkn_bench/kalmannet/params/kalmannet-<family>.json`` and ``.weights.pt``)."""
     return KalmanNetEstimator(checkpoint=trained_network("kalmannet", "KalmanNet", scenario, checkpoint, parameters))
 
 

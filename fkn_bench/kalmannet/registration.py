@@ -1,5 +1,6 @@
 """Registers ``kalmannet`` and ``recursive-kalmannet`` with the estimator registry (imported
-lazily by the registry)."""
+lazily by the registry); their committed weights are this package's ``params/<name>-<family>.json``
+and ``.weights.pt``."""
 
 from __future__ import annotations
 
@@ -9,11 +10,15 @@ from fkn_bench.kalmannet.estimator import kalmannet_factory, recursive_kalmannet
 
 __all__: list[str] = []
 
+PARAMS_PACKAGE = "fkn_bench.kalmannet"
+"""The package whose ``params/`` holds the committed parameter files of these estimators."""
+
 register_estimator(
     "kalmannet",
     kalmannet_factory,
     description="KalmanNet (architecture 2): a recurrent network computes the Kalman gain",
     trainable=TRAINABLE,
+    params_package=PARAMS_PACKAGE,
 )
 
 register_estimator(
@@ -21,4 +26,5 @@ register_estimator(
     recursive_kalmannet_factory,
     description="Recursive KalmanNet (Mortada et al. 2025): recurrent networks compute the gain and the error covariance",
     trainable=RECURSIVE_TRAINABLE,
+    params_package=PARAMS_PACKAGE,
 )

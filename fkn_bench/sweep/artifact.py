@@ -4,10 +4,11 @@
 A sweep of ``<name>-default`` (the method with its paper's settings, which the trials' options
 override) installs the tuned settings of ``<name>``; a sweep of any other non-trainable estimator
 installs its own. The file is a learned-parameter artefact (:mod:`fkn_bench.training.artifacts`)
-at ``baselines/params/<name>-<family>.json``: ``estimator_config`` holds the options (the
-estimator's factory keywords), ``training`` how they were found (the search space and its
-fingerprint, the sampler, the trial counts, the best validation RMSE and trial), ``provenance``
-the run's versions, commit and command line.
+``<name>-<family>.json`` in the ``params/`` folder of the package that ``<name>``'s registration
+names (``params_package``; ``baselines/params`` for the adaptive baselines): ``estimator_config``
+holds the options (the estimator's factory keywords), ``training`` how they were found (the
+search space and its fingerprint, the sampler, the trial counts, the best validation RMSE and
+trial), ``provenance`` the run's versions, commit and command line.
 """
 
 from __future__ import annotations

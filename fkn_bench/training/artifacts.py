@@ -1,8 +1,10 @@
 """Learned-parameter artefacts: the small JSON files that let trained estimators run out of the box.
 
 ``fkn-bench train`` writes one next to its checkpoint, and the project commits one per trained
-estimator and model family under ``baselines/params/<estimator>-<family>.json`` (installed as
-``fkn_bench.baselines``), with the provenance of the run that produced it:
+estimator and model family as ``<package>/params/<estimator>-<family>.json``, in the package that
+the estimator's registration names (``params_package``, :mod:`fkn_bench.estimators.registry`:
+``fkn_bench/flexkalmannet/params``, ``fkn_bench/kalmannet/params``, ``baselines/params``), with the
+provenance of the run that produced it:
 
 ``format``, ``format_version``, ``estimator``, ``family`` (the scenario family it applies to,
 e.g. ds1), ``scenario`` (training scenario name and config hash), ``estimator_config`` (a
@@ -18,6 +20,7 @@ factory of every trained estimator: the committed artefact of the scenario's mod
 from __future__ import annotations
 
 import datetime as _dt
+import re
 import sys
 from importlib import resources
 from collections.abc import Callable, Mapping
@@ -39,6 +42,7 @@ __all__ = [
     "ARTIFACT_FORMAT_VERSION",
     "ArtifactError",
     "artifact_path",
+    "params_dir",
     "artifact_label",
     "install_artifact",
     "resolve_artifact_label",
@@ -63,33 +67,74 @@ class ArtifactError(ValueError):
     """A learned-parameter file that is missing, corrupt or of another format/version."""
 
 
-def _committed() -> Path:
-    return Path(str(resources.files("fkn_bench.baselines"))) / "params"
+def params_dir(package: str) -> Path:
+    """The ``params/`` folder of the (importable) package ``package`` in this installation."""
+    return Path(str(resources.files(package))) / "params"
+
+
+def _params_dirs() -> dict[str, Path]:
+    """``{package: its params folder}`` for every package that a registered estimator names as
+    the owner of its committed parameter files, in the order of registration."""
+    from fkn_bench.estimators.registry import estimator_specs
+
+    packages = dict.fromkeys(s.params_package for s in estimator_specs() if s.params_package is not None)
+    return {package: params_dir(package) for package in packages}
 
 
 def artifact_path(estimator: str, family: str) -> Path:
-    """Where the committed artefact of ``estimator`` for model family ``family`` lives."""
-    return _committed() / f"{estimator}-{family}.json"
+    """Where the committed artefact of ``estimator`` for model family ``family`` lives: the
+    ``params/`` folder of the package its registration names (``params_package``). Raises
+    :class:`ArtifactError` for an estimator registered without one."""
+    from fkn_bench.estimators.registry import estimator_spec
+
+    package = estimator_spec(estimator).params_package
+    if package is None:
+        raise ArtifactError(f"estimator {estimator!r} has no committed parameter files (its registration names no "
+                            "params_package): pass parameters=PATH")
+    return params_dir(package) / f"{estimator}-{family}.json"
+
+
+_LABEL = re.compile(r"(?P<package>[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)/params/(?P<file>.+)")
+"""An :func:`artifact_label`: ``<package>/params/<file>``."""
 
 
 def resolve_artifact_label(label: str | Path) -> Path:
-    """The file an :func:`artifact_label` names: ``fkn_bench.baselines/params/<file>`` in this
-    installation's committed parameters, anything else as a path."""
-    text = str(label)
-    prefix = "fkn_bench.baselines/params/"
-    return _committed() / text[len(prefix):] if text.startswith(prefix) else Path(text)
+    """The file an :func:`artifact_label` names, in this installation: ``<package>/params/<file>``
+    in the params folder of that package when it declares committed files and holds ``file``;
+    else (a label written before the file moved to another package, e.g.
+    ``fkn_bench.baselines/params/kalmannet-ds1.weights.pt`` before the learned estimators' files
+    moved to their own packages) in the one declared params folder that holds it. Anything else
+    is a path."""
+    match = _LABEL.fullmatch(str(label))
+    if match is None:
+        return Path(label)
+    package, name = match["package"], match["file"]
+    dirs = _params_dirs()
+    if package in dirs and (dirs[package] / name).is_file():
+        return dirs[package] / name
+    holders = [folder / name for folder in dirs.values() if (folder / name).is_file()]
+    if len(holders) == 1:
+        return holders[0]
+    return dirs[package] / name if package in dirs else Path(label)
 
 
 def artifact_label(path: str | Path) -> str:
-    """How an estimator's config names the artefact it was built from: ``fkn_bench.baselines/
-    params/<file>`` for a committed one (independent of where the package is installed, so that
-    configuration fingerprints, and with them the committed leaderboards, do not change with the
-    checkout's location), else the path as the user gave it."""
+    """How an estimator's config names the artefact it was built from: ``<package>/params/<file>``
+    for a committed one (e.g. ``fkn_bench.kalmannet/params/kalmannet-ds1.weights.pt``: independent
+    of where the package is installed, so that configuration fingerprints, and with them the
+    committed leaderboards, do not change with the checkout's location), else the path as the user
+    gave it."""
     try:
-        relative = Path(path).resolve().relative_to(_committed().resolve())
-    except (OSError, ValueError):
+        resolved = Path(path).resolve()
+    except OSError:
         return str(path)
-    return f"fkn_bench.baselines/params/{relative.as_posix()}"
+    for package, folder in _params_dirs().items():
+        try:
+            relative = resolved.relative_to(folder.resolve())
+        except (OSError, ValueError):
+            continue
+        return f"{package}/params/{relative.as_posix()}"
+    return str(path)
 
 
 def run_provenance() -> dict[str, Any]:

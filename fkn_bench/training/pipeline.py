@@ -16,7 +16,7 @@ per-epoch history, an ``on_epoch`` callback, and with ``out=DIR`` these files:
 * ``loss.png`` and ``parameters.png``: the loss curves and the learned standard deviations over
   epochs (FlexKalmanNet's Fig. 3 and 4);
 * ``parameters.json``: the learned-parameter artefact of the best epoch (the format of the
-  committed ``baselines/params/<estimator>-<family>.json``, see
+  committed ``<package>/params/<estimator>-<family>.json``, see
   :mod:`fkn_bench.training.artifacts`), with the test-split metrics and the per-epoch history
   (``training.history``: every column of ``history.csv`` but the seconds), so that a committed
   artefact can be checked against a short retraining.

@@ -168,7 +168,7 @@ def test_time_varying_training_deploys_the_network(tmp_path: Path, monkeypatch: 
     artifact = read_artifact(outcome.artifact)
     assert artifact["estimator"] == "flexkalmannet-tv" and set(artifact["estimator_config"]) == {"checkpoint"}
     assert outcome.config.mode == "time_varying" and outcome.config.history == 4
-    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path / "committed")
+    monkeypatch.setattr(artifacts, "params_dir", lambda package: tmp_path / "committed" / package)
     installed = artifacts.install_artifact(outcome.artifact, "flexkalmannet-tv", "ds1")
     assert (installed.parent / "flexkalmannet-tv-ds1.weights.pt").is_file()
     committed = make_estimator("flexkalmannet-tv", scenario=SHORT)
@@ -188,7 +188,7 @@ def test_time_varying_training_deploys_the_network(tmp_path: Path, monkeypatch: 
                           torch.as_tensor(test.truth), cut))
     # (to float32 rounding: the network runs in float32 on another thread count in training)
     assert artifact["training"]["test_rmse"] == pytest.approx(mse ** 0.5, rel=1e-4)
-    assert committed.to_config()["checkpoint"] == "fkn_bench.baselines/params/flexkalmannet-tv-ds1.weights.pt"
+    assert committed.to_config()["checkpoint"] == "fkn_bench.flexkalmannet/params/flexkalmannet-tv-ds1.weights.pt"
 
 
 def test_time_varying_estimator_refuses_the_constant_mode() -> None:

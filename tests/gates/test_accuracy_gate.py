@@ -201,7 +201,7 @@ def test_configurations_do_not_depend_on_the_checkout_location() -> None:
     from fkn_bench.scenarios import get_scenario
     from fkn_bench.training.artifacts import artifact_path
 
-    package_root = str(artifact_path("x", "y").parents[2])
+    package_root = str(artifact_path("akhlaghi", "ds1").parents[2])  # the checkout (or site-packages/fkn_bench)
     for name in estimator_names():
         for scenario in ("ds1", "ds2"):
             try:

@@ -152,7 +152,7 @@ def test_config_objectives_and_kalmannet_unchanged() -> None:
 def test_registered_trainable_and_unavailable_without_weights(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:  # noqa: ANN001
     from fkn_bench.training import artifacts
 
-    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path)  # no committed weights
+    monkeypatch.setattr(artifacts, "params_dir", lambda package: tmp_path)  # no committed weights
     spec = estimator_spec("recursive-kalmannet")
     assert spec.trainable is RECURSIVE_TRAINABLE
     with pytest.raises(ArtifactError, match="train one with `fkn-bench train --estimator recursive-kalmannet"):

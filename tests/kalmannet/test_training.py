@@ -82,12 +82,12 @@ def test_installed_weights_deploy_and_a_corrupt_file_is_refused(runs: list, tmp_
     from fkn_bench.training import artifacts
 
     outcome = runs[0]
-    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path)
+    monkeypatch.setattr(artifacts, "params_dir", lambda package: tmp_path / package)
     with pytest.raises(ArtifactError, match="no trained KalmanNet for model family 'ds1'.*--write-artifact"):
         make_estimator("kalmannet", scenario=get_scenario("ds1"))
     installed = artifacts.install_artifact(outcome.artifact, "kalmannet", "ds1")
-    weights = tmp_path / "kalmannet-ds1.weights.pt"
-    assert installed == tmp_path / "kalmannet-ds1.json" and weights.is_file()
+    weights = tmp_path / "fkn_bench.kalmannet" / "kalmannet-ds1.weights.pt"
+    assert installed == weights.with_name("kalmannet-ds1.json") and weights.is_file()
     assert set(read_artifact(installed)["estimator_config"]) == {"weights", "weights_sha256"}
     assert "trainer" not in torch.load(weights, weights_only=True)  # weights only, no optimiser state
     assert weights.stat().st_size < outcome.checkpoint.stat().st_size
@@ -96,7 +96,7 @@ def test_installed_weights_deploy_and_a_corrupt_file_is_refused(runs: list, tmp_
     episodes = generate_episodes(SHORT, [0], split="test")
     np.testing.assert_array_equal(committed.estimate(episodes.measurements, episodes.valid, SHORT.dt).means,
                                   trained.estimate(episodes.measurements, episodes.valid, SHORT.dt).means)
-    assert committed.to_config()["checkpoint"] == "fkn_bench.baselines/params/kalmannet-ds1.weights.pt"
+    assert committed.to_config()["checkpoint"] == "fkn_bench.kalmannet/params/kalmannet-ds1.weights.pt"
     assert KalmanNetEstimator(**committed.to_config()).to_config() == committed.to_config()
     data = bytearray(weights.read_bytes())
     data[len(data) // 2] ^= 0xFF

@@ -16,7 +16,7 @@ from fkn_bench.training import artifacts
 
 
 def test_a_sweep_of_the_papers_settings_installs_the_tuned_settings(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path)  # not the package's own files
+    monkeypatch.setattr(artifacts, "params_dir", lambda package: tmp_path)  # not the package's own files
     space = parse_space({"fixed": {"warmup": 20}, "params": {"forgetting": {"values": [0.9, 0.97]}}}, "inline")
     settings = SimpleNamespace(estimator="sage-husa-default", scenario=get_scenario("ds2"), space=space, sampler="random")
     result = SimpleNamespace(best_params={"forgetting": 0.97}, best_value=0.0123, best_stage="random", best_number=1,
@@ -31,6 +31,6 @@ def test_a_sweep_of_the_papers_settings_installs_the_tuned_settings(tmp_path: Pa
 
 
 def test_a_family_without_tuned_settings_names_the_sweep_that_makes_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(artifacts, "_committed", lambda: tmp_path)  # no committed settings at all
+    monkeypatch.setattr(artifacts, "params_dir", lambda package: tmp_path)  # no committed settings at all
     with pytest.raises(artifacts.ArtifactError, match="fkn-bench sweep --space akhlaghi --scenario ds2 --write-artifact"):
         make_estimator("akhlaghi", scenario=get_scenario("ds2"))

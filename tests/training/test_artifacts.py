@@ -1,10 +1,15 @@
-"""Trained estimators' configurations: a bad key is refused with the estimator's own class name."""
+"""Trained estimators' configurations (a bad key is refused with the estimator's own class name) and
+their committed parameter files (in the package each registration names, found by their labels)."""
 
 from __future__ import annotations
+
+import json
+from pathlib import Path
 
 import pytest
 
 from fkn_bench.estimators import make_estimator
+from fkn_bench.scenarios import get_scenario
 
 
 @pytest.mark.parametrize("name", ["flexkalmannet", "direct-tuned-ekf"])
@@ -87,3 +92,59 @@ def test_training_options_of_the_wrong_type_name_the_key_and_what_is_valid(estim
         trainable(estimator).config(options)
     assert str(info.value) == message
     assert trainable("flexkalmannet").config({"learn": "q_std,r_std", "lr": 1, "samples_per_window": None}).learn == ("q_std", "r_std")
+
+
+def test_each_committed_file_lives_in_the_package_its_estimator_registration_names() -> None:
+    """Issue 35, item 3: the parameter files belong to the package that trains them (the
+    registration's ``params_package``), and the training layer finds them through the registry."""
+    from fkn_bench.estimators import estimator_spec, estimator_specs
+    from fkn_bench.training.artifacts import artifact_path, params_dir, read_artifact
+
+    owners = {spec.name: spec.params_package for spec in estimator_specs() if spec.params_package is not None}
+    assert owners["flexkalmannet"] == owners["flexkalmannet-tv"] == "fkn_bench.flexkalmannet"
+    assert owners["kalmannet"] == owners["recursive-kalmannet"] == "fkn_bench.kalmannet"
+    assert owners["sage-husa"] == owners["nll-tuned-ekf"] == "fkn_bench.baselines"
+    assert estimator_spec("manual-ekf").params_package is None and "sage-husa-default" not in owners
+    for package in set(owners.values()):
+        files = sorted(params_dir(package).glob("*.json"))
+        assert files, f"{package} declares committed parameter files and has none"
+        for path in files:
+            estimator = read_artifact(path)["estimator"]
+            assert owners[estimator] == package and artifact_path(estimator, read_artifact(path)["family"]) == path, path
+
+
+def test_labels_name_the_owning_package_and_the_old_baselines_labels_still_resolve(tmp_path) -> None:  # noqa: ANN001
+    """A committed file's label is ``<package>/params/<file>``; the label of a file written
+    before it moved (``fkn_bench.baselines/params/<file>``, in stored results and old estimator
+    files) resolves to where it is now, and an estimator built from it names the new label."""
+    from fkn_bench.estimators import load_estimator
+    from fkn_bench.training.artifacts import artifact_label, artifact_path, resolve_artifact_label
+
+    weights = artifact_path("kalmannet", "ds1").with_name("kalmannet-ds1.weights.pt")
+    assert artifact_label(weights) == "fkn_bench.kalmannet/params/kalmannet-ds1.weights.pt"
+    assert resolve_artifact_label("fkn_bench.kalmannet/params/kalmannet-ds1.weights.pt") == weights
+    assert resolve_artifact_label("fkn_bench.baselines/params/kalmannet-ds1.weights.pt") == weights  # moved
+    assert resolve_artifact_label("fkn_bench.baselines/params/flexkalmannet-ds1.json") == artifact_path("flexkalmannet", "ds1")
+    assert resolve_artifact_label("fkn_bench.baselines/params/vbakf-ds1.json") == artifact_path("vbakf", "ds1")  # not moved
+    assert resolve_artifact_label("runs/x/parameters.json") == Path("runs/x/parameters.json")
+    assert resolve_artifact_label("fkn_bench.kalmannet/params/gone.pt") == weights.with_name("gone.pt")  # named when missing
+    built = make_estimator("flexkalmannet-tv", scenario=get_scenario("spin"))
+    old = {**built.to_config(), "checkpoint": "fkn_bench.baselines/params/flexkalmannet-tv-spin.weights.pt"}
+    assert type(built).from_config(old).to_config() == built.to_config()
+    assert built.to_config()["checkpoint"] == "fkn_bench.flexkalmannet/params/flexkalmannet-tv-spin.weights.pt"
+    saved = json.loads(built.save(tmp_path / "tv.json").read_text())
+    saved["config"]["checkpoint"] = "fkn_bench.baselines/params/flexkalmannet-tv-spin.weights.pt"  # saved before the move
+    (tmp_path / "old.json").write_text(json.dumps(saved))
+    assert load_estimator(tmp_path / "old.json").to_config() == built.to_config()
+
+
+def test_an_estimator_registered_without_a_params_package_has_no_committed_files(monkeypatch: pytest.MonkeyPatch) -> None:
+    from fkn_bench.estimators import registry
+    from fkn_bench.training.artifacts import ArtifactError, artifact_factory
+
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    registry.register_estimator("plugin-trained", artifact_factory("plugin-trained"))
+    with pytest.raises(ArtifactError, match="'plugin-trained' has no committed parameter files .*pass parameters=PATH"):
+        make_estimator("plugin-trained", scenario=get_scenario("ds1"))
+    with pytest.raises(ValueError, match="params_package of estimator 'x' must be a dotted package name"):
+        registry.register_estimator("x", artifact_factory("x"), params_package="my package/params")
