@@ -46,7 +46,7 @@ import numpy as np
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.estimators.kalman import KalmanEstimator, filter_result_to_estimates
 from fkn_bench.filters.base import FilterState, KalmanFilter, gate_threshold
-from fkn_bench.filters.recursion import Carry, Proposal, scan
+from fkn_bench.filters.recursion import Proposal, scan, start_carry
 from fkn_bench.filters.ekf import ekf_predict, joseph_update
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.pose_twist import PoseTwistModel
@@ -383,8 +383,7 @@ class AdaptiveKalmanFilter:
         batch, steps, _ = measurements.shape
         z_all, usable = self.model.sanitize(measurements, mask)
         recorder = _AdaptiveSteps(self, steps=steps, batch=batch)
-        rejections = np.zeros(batch, dtype=np.int64) if self.gate is not None else None
-        final = scan(recorder, Carry(self.prior(batch), np.zeros(batch, dtype=bool), rejections), z_all, usable, dt)
+        final = scan(recorder, start_carry(recorder, self.prior(batch), np.zeros(batch, dtype=bool)), z_all, usable, dt)
         buffers = (recorder.means, recorder.covariances, recorder.innovations, recorder.innovation_covs,
                    recorder.prior_means, recorder.updated, recorder.initialised, recorder.r_diag, recorder.q_diag)
         return AdaptiveResult(*(None if a is None else np.swapaxes(a, 0, 1) for a in buffers), final=final.state)

@@ -43,7 +43,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from fkn_bench.filters.base import FilterSteps, check_dt
-from fkn_bench.filters.recursion import Carry, Steps, advance
+from fkn_bench.filters.recursion import Carry, Steps, advance, start_carry
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error
 from fkn_bench.inputs import real_array, real_number
 from fkn_bench.io import read_json, write_json_atomic
@@ -496,8 +496,7 @@ class RecursiveEstimator(Estimator):
 
     def _online_start(self, steps: Steps) -> Carry:
         """The carry of a new sequence: the prior, not initialised, no gate rejections."""
-        gated = steps.nis_threshold != math.inf
-        return Carry(self._online_prior(), _NONE, np.zeros(1, dtype=np.int64) if gated else None)
+        return start_carry(steps, self._online_prior(), _NONE)
 
     def _online_steps(self) -> Steps:
         """The step functions of the online recursion (batch 1); by default the filter's

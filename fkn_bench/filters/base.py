@@ -46,7 +46,7 @@ from torch import Tensor
 
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.noise import NoiseLayout, NoiseParameters
-from fkn_bench.filters.recursion import GATE_REINITIALISE_AFTER, Carry, Proposal, accept, count_rejections, gate_threshold, scan
+from fkn_bench.filters.recursion import GATE_REINITIALISE_AFTER, Proposal, accept, count_rejections, gate_threshold, scan, start_carry
 from fkn_bench.linalg import namespace, symmetrize
 from fkn_bench.types import Bool, Float
 
@@ -440,8 +440,7 @@ class KalmanFilter(ABC):
             t.requires_grad for t in (noise.process, noise.measurement, noise.initial, measurements)
         ) or (initial is not None and (initial.mean.requires_grad or initial.covariance.requires_grad))
         steps_ = _KalmanSteps(self, noise, (batch, steps), dtype, device, tracked, store_covariances, store_innovations)
-        rejections = torch.zeros(batch, dtype=torch.long, device=device) if self.gate is not None else None
-        final = scan(steps_, Carry(state, initialised, rejections), z_all, usable, dt, starts=starts)
+        final = scan(steps_, start_carry(steps_, state, initialised), z_all, usable, dt, starts=starts)
         state = final.state
         means, covariances, innovations, innovation_covs, prior_means = (
             steps_.means, steps_.covariances, steps_.innovations, steps_.innovation_covs, steps_.prior_means)

@@ -43,7 +43,7 @@ import numpy as np
 
 from fkn_bench.linalg import namespace
 
-__all__ = ["GATE_REINITIALISE_AFTER", "accept", "count_rejections", "gate_threshold", "Proposal", "Carry", "Steps", "select", "tree_map", "advance", "scan", "first_usable"]
+__all__ = ["GATE_REINITIALISE_AFTER", "start_carry", "accept", "count_rejections", "gate_threshold", "Proposal", "Carry", "Steps", "select", "tree_map", "advance", "scan", "first_usable"]
 
 
 GATE_REINITIALISE_AFTER = 3
@@ -54,6 +54,18 @@ from an outlier, or after a manoeuvre its noise does not cover) rejects every la
 and coasts for good: on ds1-flips (test split, 20 seeds) seed 8 initialised from an outlier and
 used 52 of its 159 measurements, 13-state RMSE 0.49 against 0.02 for the others. Three in a row
 from 1% independent outliers happen once in 10^6 measurements."""
+
+
+def start_carry(steps: Any, state: Any, initialised: Any) -> Carry:
+    """The carry of new sequences: ``state``, ``initialised (B,)`` and, where the filter has a
+    gate (``steps.nis_threshold`` finite), zero rejections (an integer array like
+    ``initialised``)."""
+    if steps.nis_threshold == math.inf:
+        return Carry(state, initialised)
+    xp = namespace(initialised)
+    if xp is np:
+        return Carry(state, initialised, np.zeros(initialised.shape, dtype=np.int64))
+    return Carry(state, initialised, xp.zeros(initialised.shape, dtype=xp.int64, device=initialised.device))
 
 
 def count_rejections(rejections: Any, tried: Any, used: Any) -> tuple[Any, Any]:

@@ -35,7 +35,7 @@ from fkn_bench.filters.recursion import Proposal
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error, with_unit_quaternion
 from fkn_bench.kalmannet.checkpoint import model_from_checkpoint, recursive_model_from_checkpoint
 from fkn_bench.kalmannet.recursion import KalmanNet, KalmanNetState, NetworkSteps
-from fkn_bench.kalmannet.recursive import RecursiveKalmanNet, RecursiveKalmanNetState
+from fkn_bench.kalmannet.recursive import RecursiveKalmanNet
 from fkn_bench.linalg import symmetrize
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
@@ -61,7 +61,10 @@ class _OnlineSteps(NetworkSteps):
 
     def propose(self, state: Any, z: ArrayF, rows: ArrayB, t: int) -> Proposal:
         with torch.no_grad(), torch_threads():
-            return super().propose(state, torch.from_numpy(z), rows, t)
+            proposal = super().propose(state, torch.from_numpy(z), rows, t)
+        if proposal.innovation is None:
+            return proposal
+        return Proposal(proposal.state, proposal.innovation.numpy(), proposal.innovation_covariance.numpy())
 
 
 class KalmanNetEstimator(RecursiveEstimator):
@@ -115,8 +118,18 @@ class KalmanNetEstimator(RecursiveEstimator):
         z, m, step = check_batch_inputs(measurements, mask, dt)
         with torch.no_grad(), torch_threads():
             run = self.net.run(torch.from_numpy(z), torch.from_numpy(m), dt=step)
+        means = with_unit_quaternion(run.means.numpy())
+        covariances = error_covariances = None
+        if run.covariances is not None:
+            native = symmetrize(run.covariances.numpy())
+            if native.shape[-1] == 12:  # the error covariance (pose tangent space)
+                error_covariances, covariances = native, state_covariance_from_error(means[..., :4], native)
+            else:  # a 13x13 state covariance (the Euclidean manifold forced on the pose model)
+                covariances, error_covariances = native, error_covariance_from_state(means[..., :4], native)
         estimates = Estimates(
-            means=with_unit_quaternion(run.means.numpy()),
+            means=means,
+            covariances=covariances,
+            error_covariances=error_covariances,
             innovation_mask=run.updated.numpy(),
             initialised=run.initialised.numpy(),
         )
@@ -133,8 +146,9 @@ class KalmanNetEstimator(RecursiveEstimator):
     def _online_steps(self) -> _OnlineSteps:
         return _OnlineSteps(self.net)
 
-    def _online_report(self, state: KalmanNetState) -> tuple[ArrayF, None]:
-        return state.mean[0].numpy(), None
+    def _online_report(self, state: KalmanNetState) -> tuple[ArrayF, ArrayF | None]:
+        covariance = getattr(state, "covariance", None)
+        return state.mean[0].numpy(), None if covariance is None else symmetrize(covariance[0].numpy())
 
     # ------------------------------------------------------------------ config
     def to_config(self) -> dict[str, Any]:
@@ -184,32 +198,6 @@ class RecursiveKalmanNetEstimator(KalmanNetEstimator):
     @staticmethod
     def _load(checkpoint: str | Path) -> tuple[Any, Any, Any, dict[str, Any]]:
         return recursive_model_from_checkpoint(checkpoint)
-
-    def estimate(self, measurements: ArrayF, mask: ArrayB, dt: float) -> Estimates:
-        z, m, step = check_batch_inputs(measurements, mask, dt)
-        with torch.no_grad(), torch_threads():
-            run = self.net.run(torch.from_numpy(z), torch.from_numpy(m), dt=step)
-        means = with_unit_quaternion(run.means.numpy())
-        native = symmetrize(run.covariances.numpy())
-        if native.shape[-1] == 12:  # the error covariance (pose tangent space)
-            error_covariances, covariances = native, state_covariance_from_error(means[..., :4], native)
-        else:  # a 13x13 state covariance (the Euclidean manifold forced on the pose model)
-            covariances, error_covariances = native, error_covariance_from_state(means[..., :4], native)
-        estimates = Estimates(
-            means=means,
-            covariances=covariances,
-            error_covariances=error_covariances,
-            innovation_mask=run.updated.numpy(),
-            initialised=run.initialised.numpy(),
-        )
-        return restart_diverged(estimates, lambda zs, ms: self.estimate(zs, ms, step), z, m)
-
-    def _online_prior(self) -> RecursiveKalmanNetState:
-        return self.net.prior(1, torch.float64)
-
-    def _online_report(self, state: RecursiveKalmanNetState) -> tuple[ArrayF, ArrayF]:  # type: ignore[override]
-        return state.mean[0].numpy(), symmetrize(state.covariance[0].numpy())
-
 
 def recursive_kalmannet_factory(
     scenario: Scenario | None = None,

@@ -31,6 +31,20 @@ The benchmark's conventions (those of :meth:`fkn_bench.filters.KalmanFilter.run`
 * The network runs in its own dtype (float32 or float64); features are computed and the gain is
   applied in the measurements' dtype (float64 by default).
 
+The error covariance KalmanNet's gain implies (KalmanNet learns no covariance; Klein et al.,
+ICASSP 2022, recover one from the gain given the noise): on the pose tangent space the state
+carries ``P`` of the 12-dim error ``[dtheta, dr, dw, dv]`` (world frame, as the multiplicative
+EKF's), predicted by ``P = Phi P Phi^T + Q`` with the multiplicative EKF's error transition and
+updated by the Joseph form with the learned gain, ``P = (I - K H) P (I - K H)^T + K R K^T``, which
+is the error covariance of a filter with gain ``K`` whatever the gain, when the noise is ``(Q,
+R)``. ``Q``, ``R`` and ``P0`` are the multiplicative EKF's manual tuning
+(:data:`~fkn_bench.filters.mekf.MEKF_MANUAL_LAYOUT`), which the network never sees; the covariance
+is therefore only as consistent as that tuning is for the gain learned, and the leaderboards'
+NEES columns say how far it is. The gain enters it detached: the covariance does not shape the
+training. KalmanNet is not gated: its features are L2-normalised, so its gain stays within the
+range it was trained on, and its estimates stayed within a few times the manual EKF's error on
+every committed scenario (:class:`NetworkSteps` gates Recursive KalmanNet).
+
 The state is a :class:`KalmanNetState` (an immutable value); :meth:`KalmanNet.predict`,
 :meth:`~KalmanNet.initial` and :meth:`~KalmanNet.update` are pure, and the same functions run the
 batch (training, ``estimate``) and the online path (batch of one). What does not depend on the
@@ -45,20 +59,34 @@ import math
 from collections.abc import Callable
 from typing import Any, NamedTuple, TypeVar
 
+import numpy as np
 import torch
 from torch import Tensor
 
 from fkn_bench.filters.base import check_dt
-from fkn_bench.filters.recursion import Carry, Proposal, scan, tree_map
+from fkn_bench.filters.mekf import MEKF_MANUAL_LAYOUT
+from fkn_bench.filters.recursion import Proposal, gate_threshold, scan, start_carry, tree_map
+from fkn_bench.linalg import symmetrize
+from fkn_bench.models.error_state import error_transition
 from fkn_bench.models.base import StateSpaceModel
-from fkn_bench.kalmannet.manifolds import Manifold, manifold_for
+from fkn_bench.kalmannet.manifolds import Manifold, PoseTangent, manifold_for
 from fkn_bench.kalmannet.network import GainNetwork, Hidden, normalize_features
 from fkn_bench.training.data import Sequences
 from fkn_bench.training.trainer import SequenceModel
 
-__all__ = ["KalmanNet", "KalmanNetState", "KalmanNetRun", "ManifoldRecursion", "NetworkSteps"]
+__all__ = ["LEARNED_GATE_LEVEL", "joseph_update", "KalmanNet", "KalmanNetState", "KalmanNetRun", "ManifoldRecursion", "NetworkSteps"]
 
 StateT = TypeVar("StateT")
+
+LEARNED_GATE_LEVEL = 1.0 - 1e-6
+"""The chi-square level of a learned filter's gate (:class:`NetworkSteps`): an innovation whose
+NIS exceeds this quantile (35.9 for a 6-dimensional innovation) is not used, and
+:data:`~fkn_bench.filters.recursion.GATE_REINITIALISE_AFTER` such measurements in a row restart the
+track, the rule of the gated Kalman filters. Under a consistent covariance a rejection is a
+one-in-a-million event, so the gate leaves the filter the measurements its gain was trained on;
+it is looser than the Kalman filters' 0.999 because it tests a learned covariance. Without it
+Recursive KalmanNet ran away where its training had not gone (a 13-state RMSE of 5e96 on
+spin-noise5x)."""
 
 
 class KalmanNetState(NamedTuple):
@@ -76,6 +104,8 @@ class KalmanNetState(NamedTuple):
             length.
         last_measurement: ``(B, m)`` last measurement used (sanitised, sign-aligned).
         hidden: the three GRUs' hidden states (network dtype).
+        covariance: ``(B, n', n')`` the error covariance the learned gain implies
+            (:class:`KalmanNet`; None off the pose tangent space of a pose-twist model).
     """
 
     mean: Tensor
@@ -84,16 +114,27 @@ class KalmanNetState(NamedTuple):
     correction: Tensor
     last_measurement: Tensor
     hidden: Hidden
+    covariance: Tensor | None = None
 
 
 class KalmanNetRun(NamedTuple):
     """Result of :meth:`KalmanNet.run` (batch first): ``means (B, T, n)``, ``updated (B, T)`` (a
-    measurement update happened), ``initialised (B, T)`` and the ``final`` state."""
+    measurement update happened), ``initialised (B, T)``, the ``final`` state and the implied
+    error ``covariances (B, T, n', n')`` (None off the pose tangent space)."""
 
     means: Tensor
     updated: Tensor
     initialised: Tensor
     final: KalmanNetState
+    covariances: Tensor | None = None
+
+
+def joseph_update(P: Tensor, K: Tensor, H: Tensor, R: Tensor) -> Tensor:
+    """``(I - K H) P (I - K H)^T + K R K^T`` for ``P (B, n', n')``, ``K (B, n', m')``, ``H (m',
+    n')``, ``R (m', m')``: the error covariance after an update with the gain ``K``, whichever
+    gain it is, when the measurement noise is ``R`` (Joseph form; symmetrised)."""
+    IKH = torch.eye(P.shape[-1], dtype=P.dtype, device=P.device) - K @ H
+    return symmetrize(IKH @ P @ IKH.transpose(1, 2) + K @ R @ K.transpose(1, 2))
 
 
 def _detached(state: StateT) -> StateT:
@@ -102,13 +143,17 @@ def _detached(state: StateT) -> StateT:
 
 class NetworkSteps:
     """A :class:`ManifoldRecursion`'s step functions for the one recursion
-    (:mod:`fkn_bench.filters.recursion`), for the batch run and the online step alike: no gate,
-    the network's update is the posterior; records nothing."""
+    (:mod:`fkn_bench.filters.recursion`), for the batch run and the online step alike: the
+    network's update is the posterior; records nothing. With ``gate`` and a recursion whose
+    :meth:`~ManifoldRecursion.innovation_covariance` is defined (:attr:`~ManifoldRecursion.gated`),
+    the chi-square gate at :data:`LEARNED_GATE_LEVEL` on the innovation and on the correction
+    (:meth:`~ManifoldRecursion.plausible_correction`), and with it the lost-track rule of every
+    gated filter; else no gate."""
 
-    nis_threshold = math.inf
-
-    def __init__(self, recursion: ManifoldRecursion) -> None:
+    def __init__(self, recursion: ManifoldRecursion, *, gate: bool = True) -> None:
         self.recursion = recursion
+        self.nis_threshold = gate_threshold(LEARNED_GATE_LEVEL, recursion.manifold.measurement_tangent_dim)[1] if (
+            gate and recursion.gated) else math.inf
 
     def predict(self, state: Any, t: int, dt: float) -> Any:
         return self.recursion.predict(state, dt)
@@ -117,10 +162,19 @@ class NetworkSteps:
         return self.recursion.initial(state, z)
 
     def propose(self, state: Any, z: Tensor, rows: Tensor, t: int) -> Proposal:
-        return Proposal(self.recursion.update(state, z))
+        if self.nis_threshold == math.inf:
+            return Proposal(self.recursion.update(state, z))
+        innovation = self.recursion.manifold.measurement_difference(self.recursion.model.align(z, state.mean),
+                                                                    self.recursion.model.measure(state.mean))
+        return Proposal(self.recursion.update(state, z), innovation, self.recursion.innovation_covariance(state))
 
     def commit(self, state: Any, z: Tensor, rows: Tensor, proposal: Proposal, t: int) -> tuple[Any, Tensor]:
-        return proposal.state, rows
+        """The network's posterior; gated, only for the rows whose correction is one a Kalman
+        update could make (:meth:`ManifoldRecursion.plausible_correction`)."""
+        if self.nis_threshold == math.inf:
+            return proposal.state, rows
+        plausible = self.recursion.plausible_correction(state, proposal.state, self.nis_threshold)
+        return proposal.state, rows & (plausible if isinstance(rows, Tensor) else plausible.numpy())
 
     def record(self, *args: Any) -> None:
         pass
@@ -129,8 +183,8 @@ class NetworkSteps:
 class _Recorder(NetworkSteps):
     """:class:`NetworkSteps` of :meth:`ManifoldRecursion.recurse`, keeping ``record(state)`` of every step."""
 
-    def __init__(self, recursion: ManifoldRecursion, record: Callable[[Any], tuple[Tensor, ...]]) -> None:
-        super().__init__(recursion)
+    def __init__(self, recursion: ManifoldRecursion, record: Callable[[Any], tuple[Tensor, ...]], *, gate: bool) -> None:
+        super().__init__(recursion, gate=gate)
         self.record_state = record
         self.records: list[tuple[Tensor, ...]] = []
         self.updated: list[Tensor] = []
@@ -177,6 +231,42 @@ class ManifoldRecursion(SequenceModel):
     def update(self, state: Any, z: Tensor) -> Any:
         raise NotImplementedError
 
+    gated = False
+    """Whether the state carries an error covariance (:meth:`error_covariance`) and the
+    measurement noise is stated (:meth:`measurement_noise`), so that the estimates are gated
+    (:class:`NetworkSteps`)."""
+
+    def error_covariance(self, state: Any) -> Tensor:
+        """``P (B, n', n')``, the covariance of the tangent-space error of ``state`` (its ``covariance``)."""
+        return state.covariance
+
+    def measurement_noise(self, dtype: torch.dtype) -> Tensor:
+        """``R (m', m')``: the multiplicative EKF's manual measurement noise
+        (:data:`~fkn_bench.filters.mekf.MEKF_MANUAL_LAYOUT`: 0.2 rad, 0.1 m), which the networks do
+        not learn (the gate's ``S = H P H^T + R``; KalmanNet's implied covariance)."""
+        return torch.tensor(MEKF_MANUAL_LAYOUT.r_default, dtype=dtype).square().diag()
+
+    def innovation_covariance(self, state: Any) -> Tensor:
+        """``S = H P H^T + R (B, m', m')`` at a predicted ``state``: the covariance the gate tests
+        the innovation against (``H`` the manifold's measurement matrix)."""
+        P = self.error_covariance(state)
+        H = torch.as_tensor(self.manifold.measurement_matrix(), dtype=P.dtype)
+        return H @ P @ H.T + self.measurement_noise(P.dtype)
+
+    def plausible_correction(self, prior: Any, posterior: Any, threshold: float) -> Tensor:
+        """``(B,)`` True where the update's correction ``d`` (the posterior's ``correction``) has
+        ``d^T P^-1 d <= threshold`` under the prior's error covariance ``P``. A Kalman update
+        ``d = P H^T S^-1 nu`` has ``d^T P^-1 d = nu^T S^-1 H P H^T S^-1 nu <= nu^T S^-1 nu`` (the
+        NIS, as ``H P H^T <= S``), so a learned gain whose correction fails where its innovation
+        passed the gate has left the range of any Kalman gain: its update is not used."""
+        d = posterior.correction.detach()
+        P = self.error_covariance(prior).detach()
+        try:
+            length = (d * torch.linalg.solve(P, d[..., None])[..., 0]).sum(-1)
+        except RuntimeError:  # a singular P: no update is plausible
+            return torch.zeros(d.shape[0], dtype=torch.bool, device=d.device)
+        return length <= threshold  # (NaN fails)
+
     def features(self, state: Any, z: Tensor) -> tuple[Tensor, Tensor, Tensor, Tensor]:
         """``(F1, F2, F3, F4)`` at a predicted ``state`` for usable measurements ``z`` (``z``
         sign-aligned with the prediction first), not yet normalised; F2 is the innovation."""
@@ -192,8 +282,10 @@ class ManifoldRecursion(SequenceModel):
         """Filter a batch: ``measurements (B, T, m)`` (entries outside ``mask`` are ignored and
         may be NaN), ``mask (B, T)`` -> ``(records, updated (B, T), initialised (B, T), final
         state)``, ``records`` the tensors ``record(state)`` of every step stacked on axis 1. The
-        rules are the project's one recursion (:func:`fkn_bench.filters.recursion.scan`; no gate).
-        float64 unless the measurements are of another floating dtype."""
+        rules are the project's one recursion (:func:`fkn_bench.filters.recursion.scan`), gated
+        where the recursion is :attr:`gated` and no gradients are recorded (in training the loss
+        sees every measurement, as the gain is trained on them). float64 unless the measurements
+        are of another floating dtype."""
         if measurements.dim() != 3 or measurements.shape[-1] != self.manifold.measurement_dim:
             raise ValueError(f"measurements must have shape (B, T, {self.manifold.measurement_dim}) (got {tuple(measurements.shape)})")
         if mask.shape != measurements.shape[:2]:
@@ -206,8 +298,8 @@ class ManifoldRecursion(SequenceModel):
         truncate = self.detach_every if torch.is_grad_enabled() else None
         begin = None if truncate is None else (lambda state, t: _detached(state) if t > 0 and t % truncate == 0 else state)
         state = self.prior(batch, measurements.dtype, measurements.device)
-        recorder = _Recorder(self, record)
-        final = scan(recorder, Carry(state, torch.zeros(batch, dtype=torch.bool, device=measurements.device)), z_all, usable,
+        recorder = _Recorder(self, record, gate=not torch.is_grad_enabled())
+        final = scan(recorder, start_carry(recorder, state, torch.zeros(batch, dtype=torch.bool, device=measurements.device)), z_all, usable,
                      dt, begin=begin)
         stacked = tuple(torch.stack(parts, 1) for parts in zip(*recorder.records))
         return stacked, torch.stack(recorder.updated, 1), torch.stack(recorder.initialised, 1), final.state
@@ -261,24 +353,42 @@ class KalmanNet(ManifoldRecursion):
         self.network = GainNetwork(self.manifold.state_tangent_dim, self.manifold.measurement_tangent_dim,
                                    in_mult=in_mult, out_mult=out_mult, dtype=network_dtype, initial_gain=start,
                                    output_scale=output_scale)
+        self.implies_covariance = isinstance(self.manifold, PoseTangent) and "pose-state" in getattr(model, "offers", ())
+        if self.implies_covariance:
+            noise = MEKF_MANUAL_LAYOUT.default_noise()
+            self.register_buffer("process_covariance", noise.process, persistent=False)
+            self.register_buffer("initial_covariance", noise.initial, persistent=False)
+            self.register_buffer("H", torch.from_numpy(np.asarray(self.manifold.measurement_matrix(), dtype=np.float64)),
+                                 persistent=False)
 
     # ------------------------------------------------------------------ steps (pure)
+    def _initial_covariance(self, like: Tensor) -> Tensor | None:
+        return self.initial_covariance.to(like).expand(like.shape[0], -1, -1) if self.implies_covariance else None
+
     def prior(self, batch: int, dtype: torch.dtype = torch.float64, device: torch.device | None = None) -> KalmanNetState:
         """The state reported before a sequence's first usable measurement."""
         mean = self.model.prior_state(batch, dtype).to(device)  # (a model's prior is on the CPU)
         tangent = mean.new_zeros(batch, self.manifold.state_tangent_dim)
         return KalmanNetState(mean, mean, tangent, tangent, mean.new_zeros(batch, self.manifold.measurement_dim),
-                              self.network.initial_hidden(batch))
+                              self.network.initial_hidden(batch), self._initial_covariance(mean))
 
     def predict(self, state: KalmanNetState, dt: float) -> KalmanNetState:
-        """The state predicted over ``dt`` seconds by the model (the KF's prediction); memories unchanged."""
-        return state._replace(mean=self.model.predict(state.mean, dt))
+        """The state predicted over ``dt`` seconds by the model (the KF's prediction; the implied
+        covariance ``Phi P Phi^T + Q`` with the multiplicative EKF's error transition); memories unchanged."""
+        mean = self.model.predict(state.mean, dt)
+        if state.covariance is None:
+            return state._replace(mean=mean)
+        Phi = error_transition(self.model, state.mean.detach(), dt)[1]
+        P = Phi @ state.covariance @ Phi.transpose(1, 2) + self.process_covariance.to(Phi)
+        return state._replace(mean=mean, covariance=symmetrize(P))
 
     def initial(self, state: KalmanNetState, z: Tensor) -> KalmanNetState:
-        """The state initialised from usable measurements ``z (B, m)`` (hidden states at their priors)."""
+        """The state initialised from usable measurements ``z (B, m)`` (hidden states at their
+        priors, the implied covariance at ``P0``)."""
         mean = self.model.initial_state(z)
         tangent = mean.new_zeros(z.shape[0], self.manifold.state_tangent_dim)
-        return KalmanNetState(mean, mean, tangent, tangent, z, self.network.initial_hidden(z.shape[0]))
+        return KalmanNetState(mean, mean, tangent, tangent, z, self.network.initial_hidden(z.shape[0]),
+                              self._initial_covariance(mean))
 
     def update(self, state: KalmanNetState, z: Tensor) -> KalmanNetState:
         """The measurement update of every row with usable measurements ``z (B, m)``:
@@ -290,15 +400,22 @@ class KalmanNet(ManifoldRecursion):
         delta = (gain.to(prior.dtype) @ innovation[:, :, None])[:, :, 0]
         posterior = self.model.normalize(self.manifold.correct(prior, delta))[0]
         evolution = self.manifold.state_difference(posterior, state.last_posterior)
-        return KalmanNetState(posterior, posterior, evolution, delta, z, hidden)
+        covariance = None if state.covariance is None else joseph_update(
+            state.covariance, gain.detach().to(prior.dtype), self.H.to(prior.dtype),
+            self.measurement_noise(prior.dtype))
+        return KalmanNetState(posterior, posterior, evolution, delta, z, hidden, covariance)
 
     # ------------------------------------------------------------------ sequences
     def run(self, measurements: Tensor, mask: Tensor, *, dt: float) -> KalmanNetRun:
         """Filter a batch: ``measurements (B, T, m)`` (entries outside ``mask`` are ignored and
         may be NaN), ``mask (B, T)`` -> :class:`KalmanNetRun`. float64 unless the measurements
         are of another floating dtype."""
-        (means,), updates, initialised, final = self.recurse(measurements, mask, dt=dt, record=lambda s: (s.mean,))
-        return KalmanNetRun(means, updates, initialised, final)
+        if not self.implies_covariance:
+            (means,), updates, initialised, final = self.recurse(measurements, mask, dt=dt, record=lambda s: (s.mean,))
+            return KalmanNetRun(means, updates, initialised, final)
+        (means, covariances), updates, initialised, final = self.recurse(
+            measurements, mask, dt=dt, record=lambda s: (s.mean, s.covariance))
+        return KalmanNetRun(means, updates, initialised, final, covariances)
 
     def describe(self) -> dict[str, Any]:
         net = self.network
