@@ -1,4 +1,4 @@
-"""Recursive KalmanNet (``recursive-kalmannet``; Mortada et al., EUSIPCO 2025): shapes, a
+"""Recursive KalmanNet (``recursive-kalmannet``; Mortada et al., EUSIPCO 2025): the gate, shapes, a
 covariance that is symmetric positive definite and finite whatever the input, batch and online
 paths that agree, NEES scored by the metrics, both objectives through the shared pipeline with
 their files and fixed seeds, the registry entry (unavailable without weights), both process
@@ -210,3 +210,39 @@ def test_the_trained_network_deploys_as_an_estimator(runs: dict[str, list], tmp_
         direct = outcome.model.run(torch.as_tensor(episodes.measurements), torch.as_tensor(episodes.valid), dt=SHORT.dt)
     np.testing.assert_allclose(estimates.means[..., 4:], direct.means.numpy()[..., 4:], rtol=1e-5, atol=1e-9)  # deployed: float32 weights evaluated in float64
     np.testing.assert_allclose(estimates.error_covariances, direct.covariances.numpy(), rtol=1e-5, atol=1e-9)
+
+
+def test_the_gate_keeps_a_wild_gain_in_range() -> None:
+    """Untrained with PyTorch's default initialisation, the gain runs away on five times the
+    noise when every measurement is used (as in training, with gradients recorded); gated (where
+    it estimates) the track restarts instead, and the estimate stays near the measurements."""
+    torch.manual_seed(0)
+    wild = build_recursive_model(RecursiveKalmanNetConfig(initial_gain=None, output_scale=1.0, **SMALL))
+    episodes = generate_episodes("ds1-noise5x", [0], split="test").window(0, 300)
+    z, mask = torch.from_numpy(episodes.measurements), torch.from_numpy(episodes.valid)
+    with torch.enable_grad():
+        ungated = wild.run(z, mask, dt=episodes.scenario.dt)
+    with torch.no_grad():
+        gated = wild.run(z, mask, dt=episodes.scenario.dt)
+    assert ungated.means.abs().max() > 1e3
+    assert gated.means.abs().max() < 2 * np.nanmax(np.abs(episodes.measurements))
+    assert gated.initialised.all(1).all() and gated.updated.sum() < ungated.updated.sum()
+
+
+def test_a_correction_no_kalman_gain_could_make_is_refused() -> None:
+    """``d = K nu`` with the Kalman gain has ``d^T P^-1 d <= nu^T S^-1 nu``; twenty times that
+    gain does not."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(0)
+    net = build_recursive_model(RecursiveKalmanNetConfig(**SMALL))
+    A = rng.normal(size=(12, 12))
+    P = torch.from_numpy(A @ A.T / 12 + 0.01 * np.eye(12))[None]
+    S = net.innovation_covariance(SimpleNamespace(covariance=P))
+    H = torch.from_numpy(net.manifold.measurement_matrix())
+    K = P @ H.T @ torch.linalg.inv(S)
+    nu = torch.from_numpy(rng.normal(size=(1, 6)))
+    nis = float((nu * torch.linalg.solve(S, nu[..., None])[..., 0]).sum())
+    prior = SimpleNamespace(covariance=P)
+    assert net.plausible_correction(prior, SimpleNamespace(correction=(K @ nu[..., None])[..., 0]), nis).item()
+    assert not net.plausible_correction(prior, SimpleNamespace(correction=20 * (K @ nu[..., None])[..., 0]), nis).item()
