@@ -349,15 +349,29 @@ def _components_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedR
     return Table("RMSE per state component", header, rows, notes)
 
 
+def covariance_verdict(summary: dict[str, Any]) -> str:
+    """What an estimator's error covariance is on a scenario, by its ANEES against the two-sided
+    95% bounds: ``"consistent"`` (within), ``"overconfident"`` (above: the errors are larger than
+    the covariance says), ``"conservative"`` (below) or ``"none"`` (no covariance reported)."""
+    anees = summary.get("anees")
+    if anees is None or not math.isfinite(anees):
+        return "none"
+    lo, hi = summary["anees_bounds"]
+    return "overconfident" if anees > hi else "conservative" if anees < lo else "consistent"
+
+
 def _consistency_table(ranked: Sequence[dict[str, Any]]) -> Table:
-    header = ["estimator", "runs", "ANEES", "95% bounds", "NEES in bounds", "ANIS", "95% bounds (NIS)",
+    header = ["estimator", "runs", "covariance", "ANEES", "95% bounds", "NEES in bounds", "ANIS", "95% bounds (NIS)",
               "NIS in bounds", "diverged", *DIVERGENCE_REASONS, "failed runs", "score not finite"]
     rows = []
+    verdicts: dict[str, list[str]] = {}
     for s in ranked:
         lo, hi = s["anees_bounds"]
         nlo, nhi = s["anis_bounds"]
+        verdict = covariance_verdict(s)
+        verdicts.setdefault(verdict, []).append(s["estimator"])
         rows.append([
-            s["estimator"], str(s["runs"]), _fmt(s["anees"]), f"[{_fmt(lo)}, {_fmt(hi)}]",
+            s["estimator"], str(s["runs"]), verdict, _fmt(s["anees"]), f"[{_fmt(lo)}, {_fmt(hi)}]",
             _pct(s["nees_in_bounds_fraction"]), _fmt(s["anis"]), f"[{_fmt(nlo)}, {_fmt(nhi)}]",
             _pct(s["nis_in_bounds_fraction"]), _pct(s["diverged_fraction"]),
             *(_pct(s["divergence_reasons"][r]) for r in DIVERGENCE_REASONS), str(s["failed_runs"]),
@@ -369,7 +383,9 @@ def _consistency_table(ranked: Sequence[dict[str, Any]]) -> Table:
         "(Bar-Shalom, Li & Kirubarajan 2001, sec. 5.4); bounds are the two-sided 95% interval for all runs. "
         "Divergence reasons are shares of runs (a run can have several). score not finite: runs whose 13-state "
         "RMSE is NaN or infinite (a failed run, an estimate that overflowed); they are left out of the means "
-        "and IQRs of every table and counted here."
+        "and IQRs of every table and counted here.",
+        "Covariances: " + "; ".join(f"{verdict}: {', '.join(verdicts[verdict])}" for verdict in
+                                    ("consistent", "conservative", "overconfident", "none") if verdict in verdicts) + ".",
     ]
     return Table("Consistency and stability", header, rows, notes)
 
@@ -485,6 +501,7 @@ def _scenario_csv(ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest |
             **{k: s[k] for k in ("settling_time_s", "settled_fraction", "diverged_fraction", "lost_track_fraction", "anees")},
             "anees_lower": s["anees_bounds"][0],
             "anees_upper": s["anees_bounds"][1],
+            "covariance": covariance_verdict(s),
             **{k: s[k] for k in ("nees_in_bounds_fraction", "anis", "nis_in_bounds_fraction")},
             "non_causal": bool(s.get("non_causal")),
             **{f"efficiency_{k}": v for k, v in efficiencies(s, bound).items()},

@@ -11,7 +11,7 @@ import pytest
 
 from fkn_bench.harness import ResultStore, build_grid, run_grid
 from fkn_bench.harness.sources import SimulatedSource
-from fkn_bench.reporting.leaderboard import REGENERATE_COMMAND, build_leaderboards, rank, write_leaderboards
+from fkn_bench.reporting.leaderboard import REGENERATE_COMMAND, build_leaderboards, covariance_verdict, rank, write_leaderboards
 from fkn_bench.reporting.reference import PAPER_ROWS, quoted_rows
 from fkn_bench.reporting.tables import Table, html_table, markdown_table
 
@@ -163,3 +163,9 @@ def test_scenario_names_become_file_names_that_stay_in_the_directory(small_resul
     assert {f"%2E.%2Fx%20y.{ext}" for ext in ("md", "html", "csv")} <= set(files)
     assert all("/" not in name for name in files)
     assert "[../x y](%252E.%252Fx%2520y.md)" in files["README.md"]  # a link that finds the file
+
+
+@pytest.mark.parametrize(("anees", "verdict"), [(12.0, "consistent"), (10.7, "consistent"), (13.5, "overconfident"),
+                                                (9.0, "conservative"), (float("nan"), "none"), (None, "none")])
+def test_covariance_verdict_reads_the_anees_against_its_bounds(anees, verdict) -> None:  # noqa: ANN001
+    assert covariance_verdict({"anees": anees, "anees_bounds": (10.7, 13.4)}) == verdict
