@@ -21,7 +21,7 @@ from fkn_bench.harness.estimators import resolve_estimator
 from fkn_bench.harness.shift import episode_scores
 from fkn_bench.metrics import MetricSettings
 from fkn_bench.scenarios import get_scenario
-from fkn_bench.training.artifacts import artifact_path
+from fkn_bench.training.artifacts import committed_artifact_path
 
 __all__ = ["cross_scores"]
 
@@ -38,8 +38,8 @@ def cross_scores(
         episodes = generate_episodes(scenario, list(range(seeds)), split="test")
         for estimator_name in estimators:
             for family in families:
-                path = artifact_path(estimator_name, family)
-                if not path.is_file():
+                path = committed_artifact_path(estimator_name, family)
+                if path is None:
                     continue
                 resolved = resolve_estimator(estimator_name, scenario, {"parameters": str(path)})
                 if resolved.estimator is None:

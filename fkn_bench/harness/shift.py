@@ -26,7 +26,7 @@ from fkn_bench.envs import generate_episodes
 from fkn_bench.harness.estimators import resolve_estimator
 from fkn_bench.metrics import MetricSettings, score_run
 from fkn_bench.scenarios import Scenario, get_scenario
-from fkn_bench.training.artifacts import artifact_path
+from fkn_bench.training.artifacts import committed_artifact_path
 
 __all__ = ["Shift", "SHIFTS", "SHIFT_ESTIMATORS", "REFERENCE", "ShiftScore", "shifted_scenario", "shift_scores",
            "episode_scores"]
@@ -142,8 +142,8 @@ def shift_scores(
             for name in names:
                 options = {}
                 if name != REFERENCE:  # the family's own parameters (a shifted scenario is no named one,
-                    path = artifact_path(name, family)  # which would get the default mixture's)
-                    if not path.is_file():
+                    path = committed_artifact_path(name, family)  # which would get the default mixture's)
+                    if path is None:
                         continue
                     options = {"parameters": str(path)}
                 resolved = resolve_estimator(name, scenario, options)

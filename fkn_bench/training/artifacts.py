@@ -42,6 +42,7 @@ __all__ = [
     "ARTIFACT_FORMAT_VERSION",
     "ArtifactError",
     "artifact_path",
+    "committed_artifact_path",
     "params_dir",
     "artifact_label",
     "install_artifact",
@@ -92,6 +93,19 @@ def artifact_path(estimator: str, family: str) -> Path:
         raise ArtifactError(f"estimator {estimator!r} has no committed parameter files (its registration names no "
                             "params_package): pass parameters=PATH")
     return params_dir(package) / f"{estimator}-{family}.json"
+
+
+def committed_artifact_path(estimator: str, family: str) -> Path | None:
+    """The committed artefact of ``estimator`` for ``family`` when there is one; None for an
+    estimator that is not registered, declares no ``params_package`` or has no file for
+    ``family`` (for tables that leave such estimators out)."""
+    from fkn_bench.estimators.registry import UnknownEstimatorError
+
+    try:
+        path = artifact_path(estimator, family)
+    except (ArtifactError, UnknownEstimatorError):
+        return None
+    return path if path.is_file() else None
 
 
 _LABEL = re.compile(r"(?P<package>[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)/params/(?P<file>.+)")

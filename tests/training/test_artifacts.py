@@ -140,11 +140,14 @@ def test_labels_name_the_owning_package_and_the_old_baselines_labels_still_resol
 
 def test_an_estimator_registered_without_a_params_package_has_no_committed_files(monkeypatch: pytest.MonkeyPatch) -> None:
     from fkn_bench.estimators import registry
-    from fkn_bench.training.artifacts import ArtifactError, artifact_factory
+    from fkn_bench.training.artifacts import ArtifactError, artifact_factory, artifact_path, committed_artifact_path
 
     monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
     registry.register_estimator("plugin-trained", artifact_factory("plugin-trained"))
     with pytest.raises(ArtifactError, match="'plugin-trained' has no committed parameter files .*pass parameters=PATH"):
         make_estimator("plugin-trained", scenario=get_scenario("ds1"))
+    assert committed_artifact_path("plugin-trained", "ds1") is None and committed_artifact_path("no-such", "ds1") is None
+    assert committed_artifact_path("kalmannet", "nowhere") is None
+    assert committed_artifact_path("kalmannet", "ds1") == artifact_path("kalmannet", "ds1")
     with pytest.raises(ValueError, match="params_package of estimator 'x' must be a dotted package name"):
         registry.register_estimator("x", artifact_factory("x"), params_package="my package/params")
