@@ -306,8 +306,8 @@ def align_se3(estimate: AssociatedEstimate, truth: Float[ArrayF, "T 13"]) -> Ass
         if spread >= MIN_PLANAR_SPREAD:
             transform = umeyama(positions, true_positions)
         else:
-            transform = attitude_alignment(positions, true_positions, quat.to_matrix(estimate.states[mask, :4]),
-                                           quat.to_matrix(truth[mask, :4]))
+            transform = attitude_alignment(positions, true_positions, quat.rotation_matrix(estimate.states[mask, :4]),
+                                           quat.rotation_matrix(truth[mask, :4]))
     except ValueError as exc:
         raise RecordingError(f"{estimate.name}: cannot align (SE(3)) to the truth over its {int(mask.sum())} "
                              f"associated steps: {exc}") from None

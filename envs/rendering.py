@@ -133,7 +133,7 @@ class PoseRenderer:
             for line in lines:
                 line.set_visible(False)
             return
-        matrix = quat.to_matrix(quat.normalize(np.asarray(q, dtype=float)))
+        matrix = quat.rotation_matrix(quat.normalize(np.asarray(q, dtype=float)))
         for column, line in enumerate(lines):
             tip = matrix[:, column]
             line.set_data_3d([0.0, tip[0]], [0.0, tip[1]], [0.0, tip[2]])

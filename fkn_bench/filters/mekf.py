@@ -32,7 +32,7 @@ from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.error_state import error_transition, left_jacobian
 from fkn_bench.models.noise import NoiseLayout
 from fkn_bench.models.pose_twist import PoseTwistModel
-from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.geometry import quaternion as qx
 from fkn_bench.linalg import add_matmul, dot, eye, namespace, symmetrize, zeros
 from fkn_bench.types import Array, ERROR_NAMES
 

@@ -38,7 +38,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.geometry import quaternion as qx
 from fkn_bench.linalg import symmetrize
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.models.error_state import error_transition

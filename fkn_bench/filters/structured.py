@@ -50,7 +50,7 @@ from torch import Tensor
 
 from fkn_bench.filters import kernels
 from fkn_bench.filters.base import FilterState
-from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.geometry import quaternion as qx
 from fkn_bench.linalg import constant
 
 __all__ = ["pose_predict", "pose_predict_steps", "pose_update", "batch_last", "batch_first"]

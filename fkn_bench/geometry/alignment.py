@@ -64,7 +64,7 @@ class RigidTransform:
 
 def matrix_to_quaternion(rotation: Float[ArrayF, "3 3"]) -> Float[ArrayF, "4"]:
     """The unit quaternion ``[qw, qx, qy, qz]`` (``qw >= 0``) of a rotation matrix, with
-    ``quat.to_matrix(q) == rotation``: Shepperd's method (J. Guidance and Control 1(3), 1978),
+    ``quat.rotation_matrix(q) == rotation``: Shepperd's method (J. Guidance and Control 1(3), 1978),
     which takes the square root of the largest of ``4 qw^2, 4 qx^2, 4 qy^2, 4 qz^2`` for accuracy."""
     m = np.asarray(rotation, dtype=np.float64)
     trace = np.trace(m)

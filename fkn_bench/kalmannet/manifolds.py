@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from fkn_bench.models.base import StateSpaceModel
-from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.geometry import quaternion as qx
 from fkn_bench.linalg import namespace
 from fkn_bench.types import Array
 

@@ -217,6 +217,11 @@ class ManifoldRecursion(SequenceModel):
         if detach_every is not None and detach_every < 1:
             raise ValueError(f"detach_every must be >= 1 or None (got {detach_every})")
         self.detach_every = detach_every
+        # H (m', n') and the manual measurement noise R (m', m') as buffers, so they follow the module's device
+        self.register_buffer("H", torch.from_numpy(np.asarray(self.manifold.measurement_matrix(), dtype=np.float64)),
+                             persistent=False)
+        self.register_buffer("manual_measurement_noise", torch.tensor(MEKF_MANUAL_LAYOUT.r_default, dtype=torch.float64)
+                             .square().diag() if isinstance(self.manifold, PoseTangent) else None, persistent=False)
 
     # ------------------------------------------------------------------ steps (pure), by subclasses
     def prior(self, batch: int, dtype: torch.dtype = torch.float64, device: torch.device | None = None) -> Any:
@@ -241,16 +246,18 @@ class ManifoldRecursion(SequenceModel):
         return state.covariance
 
     def measurement_noise(self, dtype: torch.dtype) -> Tensor:
-        """``R (m', m')``: the multiplicative EKF's manual measurement noise
-        (:data:`~fkn_bench.filters.mekf.MEKF_MANUAL_LAYOUT`: 0.2 rad, 0.1 m), which the networks do
-        not learn (the gate's ``S = H P H^T + R``; KalmanNet's implied covariance)."""
-        return torch.tensor(MEKF_MANUAL_LAYOUT.r_default, dtype=dtype).square().diag()
+        """``R (m', m')``: on the pose tangent space the multiplicative EKF's manual measurement
+        noise (:data:`~fkn_bench.filters.mekf.MEKF_MANUAL_LAYOUT`: 0.2 rad, 0.1 m), which the
+        networks do not learn (the gate's ``S = H P H^T + R``; KalmanNet's implied covariance)."""
+        if self.manual_measurement_noise is None:
+            raise NotImplementedError(f"no measurement noise is stated on the {self.manifold.name} manifold")
+        return self.manual_measurement_noise.to(dtype)
 
     def innovation_covariance(self, state: Any) -> Tensor:
         """``S = H P H^T + R (B, m', m')`` at a predicted ``state``: the covariance the gate tests
         the innovation against (``H`` the manifold's measurement matrix)."""
         P = self.error_covariance(state)
-        H = torch.as_tensor(self.manifold.measurement_matrix(), dtype=P.dtype)
+        H = self.H.to(P.dtype)
         return H @ P @ H.T + self.measurement_noise(P.dtype)
 
     def plausible_correction(self, prior: Any, posterior: Any, threshold: float) -> Tensor:
@@ -283,8 +290,9 @@ class ManifoldRecursion(SequenceModel):
         may be NaN), ``mask (B, T)`` -> ``(records, updated (B, T), initialised (B, T), final
         state)``, ``records`` the tensors ``record(state)`` of every step stacked on axis 1. The
         rules are the project's one recursion (:func:`fkn_bench.filters.recursion.scan`), gated
-        where the recursion is :attr:`gated` and no gradients are recorded (in training the loss
-        sees every measurement, as the gain is trained on them). float64 unless the measurements
+        where the recursion is :attr:`gated` and no gradients are recorded (estimation and the
+        trainer's validation; the training loss sees every measurement, as the gain is trained
+        on them). float64 unless the measurements
         are of another floating dtype."""
         if measurements.dim() != 3 or measurements.shape[-1] != self.manifold.measurement_dim:
             raise ValueError(f"measurements must have shape (B, T, {self.manifold.measurement_dim}) (got {tuple(measurements.shape)})")
@@ -358,8 +366,6 @@ class KalmanNet(ManifoldRecursion):
             noise = MEKF_MANUAL_LAYOUT.default_noise()
             self.register_buffer("process_covariance", noise.process, persistent=False)
             self.register_buffer("initial_covariance", noise.initial, persistent=False)
-            self.register_buffer("H", torch.from_numpy(np.asarray(self.manifold.measurement_matrix(), dtype=np.float64)),
-                                 persistent=False)
 
     # ------------------------------------------------------------------ steps (pure)
     def _initial_covariance(self, like: Tensor) -> Tensor | None:

@@ -79,7 +79,6 @@ from __future__ import annotations
 import math
 from typing import Any, NamedTuple
 
-import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.nn import functional
@@ -248,8 +247,6 @@ class RecursiveKalmanNet(ManifoldRecursion):
         self.register_buffer("tril_rows", rows, persistent=False)
         self.register_buffer("tril_cols", cols, persistent=False)
         self.register_buffer("diagonal", rows == cols, persistent=False)
-        self.register_buffer("H", torch.from_numpy(np.asarray(self.manifold.measurement_matrix(), dtype=np.float64)),
-                             persistent=False)
         if isinstance(self.manifold, PoseTangent):
             p0 = torch.tensor(MEKF_MANUAL_LAYOUT.p0_default, dtype=torch.float64).square().diag()
             self._propagator: Any = MultiplicativeEKF(model=model)  # the error transition of the pose state

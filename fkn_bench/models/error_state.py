@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.geometry import quaternion as qx
 from fkn_bench.linalg import broadcast, constant, eye, namespace, zeros
 from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.types import Array

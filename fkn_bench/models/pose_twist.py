@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.geometry import quaternion as qx
 from fkn_bench.linalg import add_matmul, all_last, broadcast, constant, dot, eye, namespace, sum_last, zeros
 from fkn_bench.models.base import StateSpaceModel, prior_array
 from fkn_bench.models.noise import NoiseLayout

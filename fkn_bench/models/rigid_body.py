@@ -44,7 +44,7 @@ from typing import Any
 
 import numpy as np
 
-from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.geometry import quaternion as qx
 from fkn_bench.linalg import constant, eye, namespace, zeros
 from fkn_bench.models.base import prior_array
 from fkn_bench.types import Array

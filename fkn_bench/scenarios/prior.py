@@ -113,7 +113,7 @@ def error_prior(scenario: Scenario, *, ratios: bool | None = None) -> ErrorPrior
     omega0 = np.array(sc.omega0)
     axis = omega0 / np.linalg.norm(omega0) if omega0.any() else np.zeros(3)
     if sc.omega0_frame == "body" and sc.attitude0 is not None:
-        axis = quat.to_matrix(np.array(sc.attitude0)) @ axis
+        axis = quat.rotation_matrix(np.array(sc.attitude0)) @ axis
     isotropic = sc.omega0_axis == "uniform" or (sc.omega0_frame == "body" and sc.attitude0 is None)
     if isotropic:  # uniform in direction: zero mean, E[m^2] / 3 per axis
         rate_mean = np.zeros(3)

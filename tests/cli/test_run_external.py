@@ -59,7 +59,7 @@ def test_an_estimate_topic_of_our_own_output_scores_exactly_like_the_estimator(r
 def _truth_in_another_frame(episodes: Episodes, path: Path) -> Path:
     """The truth as a TUM file, in a world frame rotated by Q and shifted by T."""
     truth = episodes.truth[0]
-    positions = (truth[:, 4:7] - T) @ quat.to_matrix(Q)  # R^T (p - T)
+    positions = (truth[:, 4:7] - T) @ quat.rotation_matrix(Q)  # R^T (p - T)
     attitudes = quat.wxyz_to_xyzw(quat.multiply(quat.conjugate(Q), truth[:, :4]))
     stamps = DEFAULT_START_EPOCH_NS + np.round(episodes.times * 1e9).astype(np.int64)
     lines = [f"{s // 10**9}.{s % 10**9:09d} " + " ".join(f"{v:.17g}" for v in (*p, *q))

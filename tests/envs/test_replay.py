@@ -189,7 +189,7 @@ def test_finite_difference_twist_on_a_sign_flipping_sequence(tools) -> None:
 def test_odometry_truth_with_body_frame_twist(tools, make_mcap) -> None:
     t, states = tools.forced_rotation(50, 0.1)
     stamps = tools.EPOCH_NS + np.round(t * 1e9).astype(np.int64)
-    R_T = np.swapaxes(quat.to_matrix(states[:, :4]), -1, -2)
+    R_T = np.swapaxes(quat.rotation_matrix(states[:, :4]), -1, -2)
     w_body = np.einsum("nij,nj->ni", R_T, states[:, 7:10])
     v_body = np.einsum("nij,nj->ni", R_T, states[:, 10:13])
     cov = np.zeros((50, 36))

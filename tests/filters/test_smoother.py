@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fkn_bench.filters.smoother import pose_correct, pose_difference, rts_smooth, smooth_pose
-from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.geometry import quaternion as qx
 from fkn_bench.models.error_state import error_transition
 from fkn_bench.models.registry import make_model
 

@@ -10,7 +10,7 @@ from fkn_bench.geometry.alignment import attitude_alignment, matrix_to_quaternio
 
 RNG = np.random.default_rng(7)
 Q = quat.normalize(np.array([0.3, -0.5, 0.7, 0.4]))
-R = quat.to_matrix(Q)
+R = quat.rotation_matrix(Q)
 T = np.array([1.5, -2.0, 0.25])
 
 
@@ -44,16 +44,16 @@ def test_collinear_or_too_few_points_are_refused() -> None:
 
 def test_attitude_alignment_takes_the_rotation_from_attitudes_where_positions_are_on_a_line() -> None:
     line = np.outer(np.arange(10.0), [1.0, 2.0, 3.0])
-    attitudes = quat.to_matrix(quat.random_uniform(RNG, 10))
+    attitudes = quat.rotation_matrix(quat.random_uniform(RNG, 10))
     transform = attitude_alignment(line, line @ R.T + T, attitudes, R @ attitudes)
     np.testing.assert_allclose(transform.rotation, R, atol=1e-12)
     np.testing.assert_allclose(transform.translation, T, atol=1e-12)
     assert transform.method == "attitudes"
 
 
-def test_matrix_to_quaternion_inverts_to_matrix_on_every_branch() -> None:
+def test_matrix_to_quaternion_inverts_rotation_matrix_on_every_branch() -> None:
     for q in [Q, np.array([0.0, 1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0, 0.0]), np.array([0.1, 0.0, 0.0, 0.99]),
               *quat.random_uniform(RNG, 20)]:
         q = quat.normalize(q)
-        got = matrix_to_quaternion(quat.to_matrix(q))
+        got = matrix_to_quaternion(quat.rotation_matrix(q))
         np.testing.assert_allclose(got, q if q[0] >= 0 else -q, atol=1e-12)

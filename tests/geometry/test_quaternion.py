@@ -1,4 +1,5 @@
-"""Quaternion helpers (Hamilton, wxyz) against known values and scipy (which is xyzw)."""
+"""Quaternion helpers (Hamilton, wxyz) against known values and scipy (which is xyzw), on numpy
+arrays and torch tensors."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ import warnings
 
 import numpy as np
 import pytest
+import torch
 from scipy import stats
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -188,11 +190,12 @@ def test_error_rotation_vector() -> None:
 
 
 # ---------------------------------------------------------------------------- matrices
-def test_to_matrix_and_rotate_match_scipy() -> None:
+def test_rotation_matrix_and_rotate_match_scipy() -> None:
     rng = np.random.default_rng(6)
     q = _random_unit(rng, 300)
     v = rng.standard_normal((300, 3))
-    np.testing.assert_allclose(quat.to_matrix(q), _scipy(q).as_matrix(), atol=1e-15)
+    np.testing.assert_allclose(quat.rotation_matrix(q), _scipy(q).as_matrix(), atol=1e-15)
+    np.testing.assert_allclose(quat.rotate(q, v, transpose=True), _scipy(q).inv().apply(v), atol=1e-14)
     np.testing.assert_allclose(quat.rotate(q, v), _scipy(q).apply(v), atol=1e-14)
     # rotate equals q (x) [0, v] (x) q*
     pure = np.concatenate([np.zeros((300, 1)), v], axis=1)
@@ -282,3 +285,137 @@ def test_xyzw_wxyz_conversion() -> None:
     q = _random_unit(rng, 50).reshape(5, 10, 4)
     np.testing.assert_array_equal(quat.xyzw_to_wxyz(quat.wxyz_to_xyzw(q)), q)
     np.testing.assert_array_equal(quat.wxyz_to_xyzw(q)[..., 3], q[..., 0])
+
+
+def test_left_and_right_matrices() -> None:
+    """``Theta(q) w = Omega(w) q = [0, w] (x) q``, ``Theta_R(q) w = Omega_R(w) q = q (x) [0, w]``,
+    ``[v x] u = v x u``."""
+    rng = np.random.default_rng(12)
+    q, w, u = _random_unit(rng, 50), rng.standard_normal((50, 3)), rng.standard_normal((50, 3))
+    pure = np.concatenate([np.zeros((50, 1)), w], axis=1)
+    apply = lambda M, x: np.einsum("nij,nj->ni", M, x)  # noqa: E731
+    np.testing.assert_allclose(apply(quat.omega_matrix(w), q), quat.multiply(pure, q), atol=1e-15)
+    np.testing.assert_allclose(apply(quat.right_theta_matrix(q), w), quat.multiply(q, pure), atol=1e-15)
+    np.testing.assert_allclose(apply(quat.right_omega_matrix(w), q), quat.multiply(q, pure), atol=1e-15)
+    np.testing.assert_allclose(apply(quat.skew(w), u), np.cross(w, u), atol=1e-15)
+    assert quat.omega_matrix(w).shape == (50, 4, 4) and quat.right_theta_matrix(q).shape == (50, 4, 3)
+
+
+# ---------------------------------------------------------------------------- numpy evaluation
+def _rows() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Random and edge-case rows: quaternions (unit, scaled, w < 0, half-turns, zero, NaN), a second
+    set, rotation vectors (zero, tiny, near pi, huge, non-finite)."""
+    rng = np.random.default_rng(13)
+    n = 240
+    scale = np.array([1.0, 1e-12, 1e-9, 1e-6, 0.5, 3.0, 1e8])[rng.integers(0, 7, (n, 1))]
+    q, p, v = rng.standard_normal((n, 4)) * scale, rng.standard_normal((n, 4)), rng.standard_normal((n, 3)) * scale
+    q[:4] = 0.0
+    q[4:8, 0] = 0.0
+    q[8:12, 1:] *= 1e-10
+    q[12:16, 0] = -np.abs(q[12:16, 0])
+    q[16:18, 2] = np.nan
+    q[18:20] = [[1e-10, 1e-12, 0.0, 0.0]]
+    v[:4] = 0.0
+    v[4:6, 0] = np.nan
+    v[6:8, 1] = np.inf
+    v[8:12] = (np.pi - 1e-9) * np.array([0.48, -0.6, 0.64])
+    return q, p, v
+
+
+def test_single_rows_give_the_bits_of_a_batch() -> None:
+    """A row alone (``(1, 4)``/``(4,)``: evaluated on Python floats) gives exactly the bits it
+    gets inside a batch: an episode is the same whatever the batch it is generated in."""
+    q, p, v = _rows()
+    with np.errstate(all="ignore"):
+        batch = {
+            "multiply": quat.multiply(q, p),
+            "from_rotation_vector": quat.from_rotation_vector(v),
+            "to_rotation_vector": quat.to_rotation_vector(q),
+            "rotation_matrix": quat.rotation_matrix(q),
+            "align_sign": quat.align_sign(q, p),
+        }
+        for i in range(len(q)):
+            row = {
+                "multiply": quat.multiply(q[i : i + 1], p[i : i + 1]),
+                "from_rotation_vector": quat.from_rotation_vector(v[i : i + 1]),
+                "to_rotation_vector": quat.to_rotation_vector(q[i : i + 1]),
+                "rotation_matrix": quat.rotation_matrix(q[i : i + 1]),
+                "align_sign": quat.align_sign(q[i : i + 1], p[i : i + 1]),
+            }
+            for name, value in row.items():
+                assert value.tobytes() == batch[name][i : i + 1].tobytes(), (name, i)
+            assert quat.multiply(q[i], p[i]).tobytes() == batch["multiply"][i].tobytes()
+
+
+def test_numpy_inputs_are_float64_and_lists() -> None:
+    assert quat.conjugate(np.array([1, 2, 3, 4], dtype=np.float32)).dtype == np.float64
+    assert quat.theta_matrix([1, 0, 0, 0]).dtype == np.float64
+    np.testing.assert_array_equal(quat.rotate([1.0, 0.0, 0.0, 0.0], [1, 2, 3]), [1.0, 2.0, 3.0])
+
+
+# ---------------------------------------------------------------------------- torch
+def test_torch_matches_numpy() -> None:
+    """Every function takes torch tensors and returns tensors of the numpy result (to rounding:
+    torch evaluates the linear maps as products with constant matrices)."""
+    rng = np.random.default_rng(14)
+    q, p, v = _random_unit(rng, 30).reshape(5, 6, 4), _random_unit(rng, 30).reshape(5, 6, 4), rng.standard_normal((5, 6, 3))
+    v[0, 0] = 0.0
+    v[0, 1] = 1e-8
+    calls = {
+        "multiply": lambda m, a, b, x: m.multiply(a, b),
+        "conjugate": lambda m, a, b, x: m.conjugate(a),
+        "normalize": lambda m, a, b, x: m.normalize(2.0 * a),
+        "canonical": lambda m, a, b, x: m.canonical(a),
+        "align_sign": lambda m, a, b, x: m.align_sign(a, b),
+        "from_rotation_vector": lambda m, a, b, x: m.from_rotation_vector(x),
+        "to_rotation_vector": lambda m, a, b, x: m.to_rotation_vector(a),
+        "error_rotation_vector": lambda m, a, b, x: m.error_rotation_vector(a, b),
+        "angle_between": lambda m, a, b, x: m.angle_between(a, b),
+        "rotation_matrix": lambda m, a, b, x: m.rotation_matrix(a),
+        "rotate": lambda m, a, b, x: m.rotate(a, x),
+        "rotate-transpose": lambda m, a, b, x: m.rotate(a, x, transpose=True),
+        "rotation_jacobian": lambda m, a, b, x: m.rotation_jacobian(a, x),
+        "theta_matrix": lambda m, a, b, x: m.theta_matrix(a),
+        "omega_matrix": lambda m, a, b, x: m.omega_matrix(x),
+        "right_theta_matrix": lambda m, a, b, x: m.right_theta_matrix(a),
+        "right_omega_matrix": lambda m, a, b, x: m.right_omega_matrix(x),
+        "skew": lambda m, a, b, x: m.skew(x),
+        "slerp": lambda m, a, b, x: m.slerp(a, b, 0.3),
+        "wxyz_to_xyzw": lambda m, a, b, x: m.wxyz_to_xyzw(a),
+        "xyzw_to_wxyz": lambda m, a, b, x: m.xyzw_to_wxyz(a),
+    }
+    tq, tp, tv = (torch.from_numpy(a) for a in (q, p, v))
+    for name, call in calls.items():
+        expected, got = call(quat, q, p, v), call(quat, tq, tp, tv)
+        assert isinstance(got, torch.Tensor) and got.dtype == torch.float64, name
+        np.testing.assert_allclose(got.numpy(), expected, rtol=0, atol=1e-14, err_msg=name)
+    with pytest.raises(ValueError, match="zero or non-finite"):
+        quat.normalize(torch.zeros(4, dtype=torch.float64))
+    with pytest.raises(ValueError, match="numpy"):
+        quat.multiply(tq, tp, axis=0)
+
+
+def test_torch_gradients() -> None:
+    """Exact first derivatives (``gradcheck``), finite at zero rotation and at a zero quaternion (a
+    masked row); ``rotation_jacobian`` is the derivative of ``rotate``, also for a non-unit ``q``."""
+    rng = np.random.default_rng(15)
+    q = torch.tensor(_random_unit(rng, 3) * [[1.0], [1.5], [0.7]], requires_grad=True)
+    v = torch.tensor(rng.standard_normal((3, 3)), requires_grad=True)
+    for f in (quat.multiply, lambda a, b: quat.error_rotation_vector(a, b[:, [0, 1, 2, 0]])):
+        assert torch.autograd.gradcheck(f, (q, q.detach().flip(0).requires_grad_()))
+    for f in (quat.from_rotation_vector, quat.skew, quat.omega_matrix):
+        assert torch.autograd.gradcheck(f, (v,))
+    for f in (quat.to_rotation_vector, quat.rotation_matrix, quat.theta_matrix):
+        assert torch.autograd.gradcheck(f, (q,))
+    for transpose in (False, True):
+        for i in range(3):
+            jacobian = torch.autograd.functional.jacobian(lambda a: quat.rotate(a, v[i], transpose=transpose), q[i])
+            torch.testing.assert_close(quat.rotation_jacobian(q[i], v[i], transpose=transpose), jacobian, rtol=0, atol=1e-14)
+    # zero rotation, and a zero quaternion: finite gradients through the series branches
+    zero = torch.zeros((1, 3), dtype=torch.float64, requires_grad=True)
+    quat.from_rotation_vector(zero).sum().backward()
+    np.testing.assert_array_equal(zero.grad.numpy(), [[0.5, 0.5, 0.5]])
+    for q0 in ([[1.0, 0.0, 0.0, 0.0]], [[0.0, 0.0, 0.0, 0.0]]):
+        t = torch.tensor(q0, dtype=torch.float64, requires_grad=True)
+        quat.to_rotation_vector(t).sum().backward()
+        assert torch.isfinite(t.grad).all()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from fkn_bench.geometry import quaternion_xp as qx
+from fkn_bench.geometry import quaternion as qx
 from fkn_bench.models import PoseTwistModel
 from fkn_bench.models.error_state import error_transition
 from fkn_bench.models.rigid_body import RigidBodyModel
