@@ -764,13 +764,15 @@ def update_backward(
 def warm_up() -> list[str]:
     """Compile (or load from numba's disk cache) every kernel by running the EKF once, forward and
     backward, on a small batch that reaches each of them: a measurement update, stretches of
-    steps without a measurement (:func:`predict_steps`) and single predictions, and the free-tumble
-    truth's integrator (:mod:`fkn_bench.envs.dynamics`, one test split of tumble-fast); returns the
-    names of the EKF kernels compiled. Raises ``RuntimeError`` when the kernels cannot run here (numba
-    missing, or switched off by ``FKN_BENCH_KERNELS=0``)."""
+    steps without a measurement (:func:`predict_steps`) and single predictions; and the rigid-body
+    model's kernels (:mod:`fkn_bench.models.rigid_body_kernels`): the free-tumble truth's
+    integrator (one test split of tumble-fast) and the model's numpy transition with its Jacobian
+    (one state); returns the names of the EKF kernels compiled. Raises ``RuntimeError`` when the
+    kernels cannot run here (numba missing, or switched off by ``FKN_BENCH_KERNELS=0``)."""
     from fkn_bench.envs import generate_episodes
     from fkn_bench.filters import make_filter
     from fkn_bench.models.noise import NoiseParameters
+    from fkn_bench.models.rigid_body import RigidBodyModel
 
     probe = torch.zeros(1, dtype=torch.float64)
     if not supports(probe):
@@ -783,6 +785,7 @@ def warm_up() -> list[str]:
     noise = NoiseParameters.from_std(torch.exp(log_q), [0.1] * 7, [0.1] * 13)
     result = make_filter("ekf").run(noise, z, mask, dt=float(episodes.scenario.dt))
     torch.autograd.grad(result.means.square().mean(), log_q)
-    generate_episodes("tumble-fast", [0], split="test")  # and the free-tumble truth's integrator (envs.dynamics)
+    generate_episodes("tumble-fast", [0], split="test")  # the free-tumble truth's integrator
+    RigidBodyModel(estimate_ratios=True).transition(np.eye(1, 15), 0.1)  # the rigid-body model's transition
     return [name for name, kernel in _kernels().items() if kernel.signatures]
 

@@ -28,11 +28,12 @@ paper's assumption and lets the data move away from it.
 The Jacobian ``F = df/dx`` is analytic: the tangent of every Runge-Kutta stage is propagated with
 the Jacobian of the continuous dynamics (``d(q (x) [0, w])/dq = Omega_R(w)``,
 ``d/dw = Theta_R(q)``, ``d dw/dw`` bilinear in ``p`` and ``w``), so ``F`` is the exact derivative
-of the discrete map (the tests hold it to autograd). Everything is written once for numpy arrays
-(online) and torch tensors (batched, differentiable). The same equations, with the same
-coefficients (:func:`euler_coefficients`), run compiled one trajectory at a time in
-:mod:`fkn_bench.models.rigid_body_kernels`: the propagation the truth simulator calls
-(:class:`fkn_bench.envs.dynamics.FreeTumble`).
+of the discrete map (the tests hold it to autograd). The batched operations are written once for
+numpy arrays and torch tensors (differentiable); float64 numpy input (the online filters, and
+tensors nobody differentiates) runs the same equations compiled, row by row, in
+:mod:`fkn_bench.models.rigid_body_kernels` (equal to rounding), which also holds the propagation
+the truth simulator calls (:class:`fkn_bench.envs.dynamics.FreeTumble`), with the same
+coefficients (:func:`euler_coefficients`) and the same derivative.
 """
 
 from __future__ import annotations
@@ -129,6 +130,9 @@ def _coefficients_and_derivative(k: Array) -> tuple[Array, Array]:
 
 _CYCLIC = ([1, 2, 0], [2, 0, 1])
 
+_NO_COEFFICIENTS = np.zeros(3)
+"""The compiled transition's ``p_known`` argument of a model with estimated ratios (unused)."""
+
 
 def _rates_matrix() -> np.ndarray:
     """``C (3, 9)``: ``w @ C`` is ``[[0, wz, wy], [wz, 0, wx], [wy, wx, 0]]`` flattened
@@ -179,16 +183,35 @@ class RigidBodyModel(PoseTwistModel):
         return self.transition(x, dt, jacobian=False)[0]
 
     def transition(self, x: Array, dt: float, *, jacobian: bool = True) -> tuple[Array, Array]:
+        """``(f(x) (B, n), F = df/dx (B, n, n) or None)`` of states ``x (B, n)`` over ``dt``
+        seconds. A float64 numpy batch takes the compiled kernel
+        (:func:`fkn_bench.models.rigid_body_kernels.transition`, row by row); a CPU tensor
+        nobody differentiates (the batched filters at evaluation) takes the numpy path on a view
+        of it; anything else (a tensor under autograd, a GPU, another dtype) the batched
+        operations of ``_transition``. The paths agree to rounding."""
         if not isinstance(x, np.ndarray):
             import torch
 
             if x.device.type == "cpu" and not (x.requires_grad and torch.is_grad_enabled()):
-                # a CPU tensor nobody differentiates (the batched filters at evaluation): the same
-                # arithmetic on numpy views of it, whose ~150 small operations per step cost less
-                # than torch's dispatch of them (results agree to rounding)
-                mean, F = self._transition(x.detach().numpy(), dt, jacobian=jacobian)
+                mean, F = self.transition(x.detach().numpy(), dt, jacobian=jacobian)
                 return torch.from_numpy(mean), None if F is None else torch.from_numpy(F)
-        return self._transition(x, dt, jacobian=jacobian)
+            return self._transition(x, dt, jacobian=jacobian)
+        if x.dtype != np.float64 or x.ndim != 2 or x.shape[1] != self.state_dim:
+            return self._transition(x, dt, jacobian=jacobian)
+        return self._compiled_transition(x, dt, jacobian=bool(jacobian))
+
+    def _compiled_transition(self, x: np.ndarray, dt: float, *, jacobian: bool) -> tuple[np.ndarray, np.ndarray | None]:
+        """``_transition`` of a float64 batch ``x (B, n)`` in one compiled call."""
+        from fkn_bench.models import rigid_body_kernels  # (numba, imported where first used)
+
+        batch, n = x.shape
+        if self.estimate_ratios:
+            p = _NO_COEFFICIENTS  # (the kernel takes p from the ratios in the state)
+        else:
+            p = constant(x, ("euler", self.inertia), lambda: np.array([euler_coefficients(self.inertia)]), self._constants())[0]
+        mean, F = np.empty((batch, n)), np.empty((batch, n, n) if jacobian else (0, n, n))
+        rigid_body_kernels.transition(np.ascontiguousarray(x), p, float(dt), self.substeps, MAX_SUBSTEPS, jacobian, mean, F)
+        return mean, F if jacobian else None
 
     def _transition(self, x: Array, dt: float, *, jacobian: bool) -> tuple[Array, Array | None]:
         xp = namespace(x)

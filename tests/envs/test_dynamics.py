@@ -79,7 +79,7 @@ def _numpy_free_tumble(q0: np.ndarray, omega_world: np.ndarray, inertia: np.ndar
 
 @pytest.mark.parametrize("substeps", [1, 3])
 def test_free_tumble_kernel_is_the_element_wise_rk4_bit_for_bit(substeps: int) -> None:
-    """The compiled integration (:func:`fkn_bench.envs.dynamics._advance_free_tumble`) performs
+    """The compiled integration (:func:`fkn_bench.models.rigid_body_kernels.integrate_samples`) performs
     the numpy RK4's IEEE operations in the same order: every sample equal, chunked or not (exact:
     the same element-wise operations on the same values; a fused multiply-add or a reordered sum
     would differ in the last bits within a few steps and grow on a tumble)."""

@@ -1,12 +1,14 @@
-"""The rigid-body model's compiled single-trajectory propagation against the model's batched
-transition, and its independence of the batch."""
+"""The rigid-body model's compiled kernels: the single-trajectory propagation and the numpy
+transition against the model's batched transition, and their independence of the batch."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
+import torch
 
 from fkn_bench.geometry import quaternion as quat
-from fkn_bench.models.rigid_body import RigidBodyModel, euler_coefficients
+from fkn_bench.models.rigid_body import RigidBodyModel, _coefficients_and_derivative, euler_coefficients
 from fkn_bench.models.rigid_body_kernels import body_rates, integrate_samples
 from fkn_bench.scenarios import ASTROBEE_INERTIA
 
@@ -41,3 +43,42 @@ def test_samples_follow_the_models_transition_and_do_not_depend_on_the_batch() -
     integrate_samples(y[1:2].copy(), p[1:2], 0.05, 2, False, q_row, w_row)
     np.testing.assert_array_equal(q_row[:, :, 0], q_out[:, :, 1])
     np.testing.assert_array_equal(w_row[:, :, 0], w_out[:, :, 1])
+
+
+def _rows(model: RigidBodyModel) -> np.ndarray:
+    """Five states, their quaternions off unit norm (as between updates); row 3 spins at about
+    22 rad/s (its step is refined) and, with ratios, row 0's ``p_y`` lies outside ``[-1, 1]``
+    (clipped)."""
+    rng = np.random.default_rng(11)
+    x = 0.3 * rng.normal(size=(5, model.state_dim))
+    x[:, 0:4] = quat.random_uniform(rng, 5) * rng.uniform(0.95, 1.05, size=(5, 1))
+    x[3, 7:10] = (20.0, -5.0, 9.0)
+    if model.estimate_ratios:
+        x[0, 13:15] = (3.0, -2.0)
+    return x
+
+
+@pytest.mark.parametrize("model", [RigidBodyModel(inertia=ASTROBEE_INERTIA, substeps=2),
+                                   RigidBodyModel(inertia=(1.0, 2.0, 2.5), estimate_ratios=True)], ids=["known", "ratios"])
+def test_compiled_transition_is_the_torch_transition(model: RigidBodyModel) -> None:
+    """Numpy input runs :func:`fkn_bench.models.rigid_body_kernels.transition`; a tensor under
+    autograd the batched torch operations: mean and Jacobian agree to rounding, the refined
+    and the clipped rows included. A CPU tensor without gradients takes the compiled path (same
+    bits); the mean without the Jacobian is the same; a row's result does not depend on its batch."""
+    x = _rows(model)
+    assert 0.4 * np.linalg.norm(x[3, 7:10]) * 0.5 > model.substeps  # row 3 is refined
+    if model.estimate_ratios:
+        assert np.abs(_coefficients_and_derivative(x[:, 13:15])[0][0]).max() == 1.0  # row 0 is clipped
+    mean, F = model.transition(x, 0.1)
+    mean_t, F_t = model.transition(torch.from_numpy(x).requires_grad_(), 0.1)
+    np.testing.assert_allclose(mean, mean_t.detach().numpy(), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(F, F_t.detach().numpy(), rtol=1e-12, atol=1e-12 * np.abs(F).max())
+    with torch.no_grad():
+        mean_n, F_n = model.transition(torch.from_numpy(x), 0.1)
+    np.testing.assert_array_equal(mean_n.numpy(), mean)
+    np.testing.assert_array_equal(F_n.numpy(), F)
+    np.testing.assert_array_equal(model.predict(x, 0.1), mean)
+    for row in (1, 4):
+        alone, F_alone = model.transition(x[row:row + 1], 0.1)
+        np.testing.assert_array_equal(alone[0], mean[row])
+        np.testing.assert_array_equal(F_alone[0], F[row])
