@@ -26,7 +26,6 @@ import numpy as np
 
 from fkn_bench.geometry import quaternion as quat
 from fkn_bench.models.rigid_body import euler_coefficients
-from fkn_bench.models.rigid_body_kernels import body_rates, integrate_samples
 from fkn_bench.types import ArrayF
 
 __all__ = ["ForcedRotation", "FreeTumble", "PerturbedRotation"]
@@ -170,6 +169,8 @@ class FreeTumble:
         q0 = np.array(attitude0, dtype=float)
         J = np.broadcast_to(np.array(inertia, dtype=float), (q0.shape[0], 3))
         self._coeff = np.array([euler_coefficients(row) for row in J]).reshape(-1, 3)  # (B, 3)
+        from fkn_bench.models.rigid_body_kernels import body_rates  # numba: imported where a tumble is simulated
+
         omega_body = body_rates(q0, np.ascontiguousarray(omega_world0, dtype=float))
         self._y = np.concatenate([q0, omega_body], axis=1)
         self._h = float(dt) / int(substeps)
@@ -183,6 +184,8 @@ class FreeTumble:
         q_out = np.empty((n, 4, batch))
         w_out = np.empty((n, 3, batch))
         y = np.ascontiguousarray(self._y)
+        from fkn_bench.models.rigid_body_kernels import integrate_samples
+
         integrate_samples(y, self._coeff, self._h, self._substeps, self._started, q_out, w_out)
         self._started = self._started or n > 0
         self._y = y

@@ -1,5 +1,5 @@
 """``fkn-bench --help``, every subcommand's ``--help`` and ``fkn-bench scenarios`` start without
-the heavy libraries (torch, dask, optuna, matplotlib): issue 20, item 1 (under a second; the
+the heavy libraries (torch, numba, dask, optuna, matplotlib): issue 20, item 1 (under a second; the
 imports are what took ~4 s, so the test checks the imports rather than a time)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import json
 import subprocess
 import sys
 
-HEAVY = ("torch", "dask", "distributed", "optuna", "matplotlib", "scipy.signal", "minari", "h5py", "imageio")
+HEAVY = ("torch", "numba", "dask", "distributed", "optuna", "matplotlib", "scipy.signal", "minari", "h5py", "imageio")
 
 PROBE = """
 import contextlib, io, json, sys
