@@ -60,9 +60,9 @@ Deviations from the paper (and its public code), each for a reason:
   a sequence initialises at its first usable measurement as every estimator does.
 * Gate: the paper's filter uses every measurement. Here, where no gradients are recorded, an
   innovation whose NIS under ``S = H P H^T + R`` (``R`` the manual tuning's, which the network
-  does not learn) exceeds the 1 - 1e-6 chi-square quantile, or a correction that no Kalman gain
-  could make under ``P`` (:meth:`~fkn_bench.kalmannet.recursion.ManifoldRecursion.plausible_correction`),
-  is not used, and three such measurements in a row restart the track, the rule of the gated
+  does not learn) exceeds the 1 - 1e-6 chi-square quantile, or a correction a hundred times beyond any
+  Kalman gain's under ``P`` (:meth:`~fkn_bench.kalmannet.recursion.ManifoldRecursion.plausible_correction`,
+  :data:`~fkn_bench.kalmannet.recursion.CORRECTION_MARGIN`), is not used, and three such measurements in a row restart the track, the rule of the gated
   Kalman filters (:class:`~fkn_bench.kalmannet.recursion.NetworkSteps`). Without it the filter ran
   away wherever the test scenario left its training (a 13-state RMSE of 5e96 on spin-noise5x).
 * The error covariance is not reset after the quaternion correction (the paper has no
