@@ -215,17 +215,17 @@ def test_the_trained_network_deploys_as_an_estimator(runs: dict[str, list], tmp_
 def test_the_gate_keeps_a_wild_gain_in_range() -> None:
     """Untrained with PyTorch's default initialisation, the gain runs away on five times the
     noise when every measurement is used (as in training, with gradients recorded); gated (where
-    it estimates) the track restarts instead, and the estimate stays near the measurements."""
+    it estimates) its runaway updates are refused and the track restarts: it stays bounded."""
     torch.manual_seed(0)
     wild = build_recursive_model(RecursiveKalmanNetConfig(initial_gain=None, output_scale=1.0, **SMALL))
-    episodes = generate_episodes("ds1-noise5x", [0], split="test").window(0, 300)
+    episodes = generate_episodes("ds1-noise5x", [0], split="test").window(0, 450)
     z, mask = torch.from_numpy(episodes.measurements), torch.from_numpy(episodes.valid)
     with torch.enable_grad():
         ungated = wild.run(z, mask, dt=episodes.scenario.dt)
     with torch.no_grad():
         gated = wild.run(z, mask, dt=episodes.scenario.dt)
-    assert ungated.means.abs().max() > 1e3
-    assert gated.means.abs().max() < 2 * np.nanmax(np.abs(episodes.measurements))
+    assert ungated.means.abs().max() > 1e6
+    assert gated.means.abs().max() < 1e3
     assert gated.initialised.all(1).all() and gated.updated.sum() < ungated.updated.sum()
 
 
