@@ -46,7 +46,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                              "the paper's; rigid-body, the scenario's inertia; rigid-body-ratios, inertia ratios estimated)")
     parser.add_argument("--objective", choices=("supervised", "nll", "gaussian-nll"),
                         help="training objective (gaussian-nll: estimators with a covariance of their own, "
-                             "recursive-kalmannet)")
+                             "recursive-kalmannet and cholesky-kalmannet)")
     parser.add_argument("--config", metavar="TOML", help="configuration file (options below override it)")
     parser.add_argument("--epochs", type=int, help="maximum epochs")
     parser.add_argument("--lr", type=float, help="learning rate")

@@ -1,7 +1,8 @@
-"""KalmanNet's and Recursive KalmanNet's models: built fresh from a config for training, or
-rebuilt from a training checkpoint (:mod:`fkn_bench.training.checkpoint`; its ``state_dict``
-holds the network's weights). Training is the shared pipeline (:func:`fkn_bench.training.fit`)
-with their declarations :data:`TRAINABLE` and :data:`RECURSIVE_TRAINABLE`.
+"""The learned-gain filters' models (KalmanNet, Recursive KalmanNet, Split-KalmanNet,
+Cholesky-KalmanNet): built fresh from a config for training, or rebuilt from a training checkpoint
+(:mod:`fkn_bench.training.checkpoint`; its ``state_dict`` holds the network's weights). Training is
+the shared pipeline (:func:`fkn_bench.training.fit`) with their declarations :data:`TRAINABLE`,
+:data:`RECURSIVE_TRAINABLE`, :data:`SPLIT_TRAINABLE` and :data:`CHOLESKY_TRAINABLE`.
 
 The process model is the config's (``process_model``: the paper's constant rate by default, or the
 rigid body) unless ``build_model`` is given another
@@ -17,15 +18,18 @@ from typing import Any
 import torch
 
 from fkn_bench.models.base import StateSpaceModel
-from fkn_bench.kalmannet.config import KalmanNetConfig, RecursiveKalmanNetConfig
+from fkn_bench.kalmannet.cholesky import CholeskyKalmanNet
+from fkn_bench.kalmannet.config import CholeskyKalmanNetConfig, KalmanNetConfig, RecursiveKalmanNetConfig, SplitKalmanNetConfig
 from fkn_bench.kalmannet.recursion import KalmanNet, ManifoldRecursion
 from fkn_bench.kalmannet.recursive import RecursiveKalmanNet
+from fkn_bench.kalmannet.split import SplitKalmanNet
 from fkn_bench.scenarios import Scenario
 from fkn_bench.training import Trainable, TrainingData
 from fkn_bench.training.checkpoint import CheckpointError, load_checkpoint
 
 __all__ = ["build_model", "model_from_checkpoint", "TRAINABLE", "build_recursive_model", "recursive_model_from_checkpoint",
-           "RECURSIVE_TRAINABLE"]
+           "RECURSIVE_TRAINABLE", "build_split_model", "split_model_from_checkpoint", "SPLIT_TRAINABLE",
+           "build_cholesky_model", "cholesky_model_from_checkpoint", "CHOLESKY_TRAINABLE"]
 
 
 def build_model(config: KalmanNetConfig, data: TrainingData | None = None, *, model: StateSpaceModel | None = None) -> KalmanNet:
@@ -116,6 +120,58 @@ def recursive_model_from_checkpoint(
                             model)
 
 
+def _build_split(
+    cls: type[SplitKalmanNet], config: SplitKalmanNetConfig, data: TrainingData | None, model: StateSpaceModel | None
+) -> SplitKalmanNet:
+    if model is None:
+        model = config.build_filter(None if data is None else data.scenario).model
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed)
+        net = cls(
+            model,
+            manifold=config.manifold,
+            in_mult=config.in_mult,
+            hidden_mult=config.hidden_mult,
+            out_mult=config.out_mult,
+            network_dtype=getattr(torch, config.network_dtype),
+            detach_every=config.detach_every,
+            initial_gain=config.initial_gain,  # type: ignore[arg-type]  # (> 0: the config checks it)
+            output_scale=config.output_scale,
+            std_floor=config.std_floor,
+        )
+    return net
+
+
+def build_split_model(
+    config: SplitKalmanNetConfig, data: TrainingData | None = None, *, model: StateSpaceModel | None = None
+) -> SplitKalmanNet:
+    """A fresh Split-KalmanNet (weights seeded by ``config.seed``; the global generator is left
+    as it was), on the config's process model unless ``model`` is given."""
+    return _build_split(SplitKalmanNet, config, data, model)
+
+
+def split_model_from_checkpoint(
+    path: str | Path, *, model: StateSpaceModel | None = None
+) -> tuple[SplitKalmanNet, SplitKalmanNetConfig, Scenario, dict[str, Any]]:
+    """Rebuild the trained Split-KalmanNet of a checkpoint (as :func:`model_from_checkpoint`)."""
+    return _from_checkpoint(path, "split-kalmannet", SplitKalmanNetConfig, build_split_model, model)  # type: ignore[return-value]
+
+
+def build_cholesky_model(
+    config: CholeskyKalmanNetConfig, data: TrainingData | None = None, *, model: StateSpaceModel | None = None
+) -> CholeskyKalmanNet:
+    """A fresh Cholesky-KalmanNet (as :func:`build_split_model`)."""
+    return _build_split(CholeskyKalmanNet, config, data, model)  # type: ignore[return-value]
+
+
+def cholesky_model_from_checkpoint(
+    path: str | Path, *, model: StateSpaceModel | None = None
+) -> tuple[CholeskyKalmanNet, CholeskyKalmanNetConfig, Scenario, dict[str, Any]]:
+    """Rebuild the trained Cholesky-KalmanNet of a checkpoint (as :func:`model_from_checkpoint`)."""
+    return _from_checkpoint(path, "cholesky-kalmannet", CholeskyKalmanNetConfig, build_cholesky_model,  # type: ignore[return-value]
+                            model)
+
+
 TRAINABLE = Trainable(
     config=KalmanNetConfig.from_options,
     build=build_model,
@@ -130,3 +186,19 @@ RECURSIVE_TRAINABLE = Trainable(
     notes={"trained_module": "Recursive KalmanNet gain and covariance branches: see checkpoint.pt for the weights"},
 )
 """Recursive KalmanNet's training declaration (its registry entry's ``trainable``)."""
+
+
+SPLIT_TRAINABLE = Trainable(
+    config=SplitKalmanNetConfig.from_options,
+    build=build_split_model,
+    notes={"trained_module": "Split-KalmanNet state and measurement branches: see checkpoint.pt for the weights"},
+)
+"""Split-KalmanNet's training declaration (its registry entry's ``trainable``)."""
+
+
+CHOLESKY_TRAINABLE = Trainable(
+    config=CholeskyKalmanNetConfig.from_options,
+    build=build_cholesky_model,
+    notes={"trained_module": "Cholesky-KalmanNet state and measurement branches: see checkpoint.pt for the weights"},
+)
+"""Cholesky-KalmanNet's training declaration (its registry entry's ``trainable``)."""

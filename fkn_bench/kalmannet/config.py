@@ -4,7 +4,8 @@ The data protocol and optimisation fields are :class:`~fkn_bench.training.TrainC
 benchmark's protocol, shared with FlexKalmanNet and the tuned EKFs); KalmanNet adds the network's
 fields and changes a few defaults (below). It trains with Adam on the supervised objective (the
 paper's MSE against the true state, its training algorithm), so ``variant``, ``objective``, ``optimizer``
-and the L-BFGS settings are not among its options.
+and the L-BFGS settings are not among its options. The other learned-gain filters' configs extend it:
+:class:`RecursiveKalmanNetConfig`, :class:`SplitKalmanNetConfig` and :class:`CholeskyKalmanNetConfig`.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from fkn_bench.training import TrainConfig
 from fkn_bench.training.options import check_option_types, naming_the_file
 from fkn_bench.training.pipeline import options_with_file
 
-__all__ = ["KalmanNetConfig", "RecursiveKalmanNetConfig"]
+__all__ = ["CholeskyKalmanNetConfig", "KalmanNetConfig", "RecursiveKalmanNetConfig", "SplitKalmanNetConfig"]
 
 _MODEL_FIELDS = ("manifold", "in_mult", "out_mult", "network_dtype", "detach_every", "initial_gain", "output_scale")
 _NOT_OPTIONS = ("variant", "objective", "optimizer", "lbfgs_iterations", "lbfgs_history")
@@ -102,8 +103,8 @@ class KalmanNetConfig(TrainConfig):
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Self:
-        """Read a TOML file whose top level (or ``[kalmannet]`` table; ``[recursive-kalmannet]``
-        for :class:`RecursiveKalmanNetConfig`) holds config keys."""
+        """Read a TOML file whose top level (or ``[kalmannet]`` table; ``[recursive-kalmannet]``,
+        ``[split-kalmannet]``, ``[cholesky-kalmannet]`` for the other configs) holds config keys."""
         return cls.from_options({"config": str(path)})
 
     @classmethod
@@ -169,3 +170,60 @@ class RecursiveKalmanNetConfig(KalmanNetConfig):
         if self.process_std is not None and not self.process_std > 0:
             raise ValueError(f"process_std must be > 0 or None (got {self.process_std!r})")
         super().__post_init__()
+
+
+@dataclass
+class SplitKalmanNetConfig(KalmanNetConfig):
+    """Everything that defines a Split-KalmanNet training run (Choi, Park, Shlezinger, Eldar &
+    Lee, "Split-KalmanNet: A Robust Model-Based Deep Learning Approach for State Estimation", IEEE
+    Trans. Vehicular Technology 2023; flat, for TOML files and sweeps; TOML table
+    ``[split-kalmannet]``).
+
+    KalmanNet's fields, read for the two recurrent branches (state and measurement, each ``FC-in
+    -> GRU -> FC-out -> linear``, :class:`~fkn_bench.kalmannet.recursive.GRUBranch`): ``in_mult``,
+    ``hidden_mult`` (GRU hidden size per output), ``out_mult``; ``initial_gain`` (``g > 0``: the
+    branches' zero outputs are the reference covariances, whose gain is ``g`` times the observed
+    gain; a number, not None) and ``output_scale`` (both branches' output weights). Added:
+    ``std_floor`` (``std_floor^2 I`` added to every reported posterior covariance). Trained on the
+    supervised objective (the paper's MSE), so ``objective`` is not among its options.
+    """
+
+    hidden_mult: int = 2
+    out_mult: int = 2
+    std_floor: float = 1e-4
+    patience: int = 20  # the shared defaults (Recursive KalmanNet's)
+    scheduler_patience: int = 5
+
+    _label: ClassVar[str] = "Split-KalmanNet"
+    _table: ClassVar[str] = "split-kalmannet"
+    _model_fields: ClassVar[tuple[str, ...]] = (
+        "manifold", "in_mult", "hidden_mult", "out_mult", "network_dtype", "detach_every", "initial_gain", "output_scale",
+        "std_floor",
+    )
+
+    def __post_init__(self) -> None:
+        if int(self.hidden_mult) < 1:
+            raise ValueError(f"hidden_mult must be >= 1 (got {self.hidden_mult!r})")
+        if self.initial_gain is None or not self.initial_gain > 0:
+            raise ValueError(f"{self._label} needs initial_gain > 0 (got {self.initial_gain!r})")
+        if not self.std_floor > 0:
+            raise ValueError(f"std_floor must be > 0 (got {self.std_floor!r})")
+        super().__post_init__()
+
+
+@dataclass
+class CholeskyKalmanNetConfig(SplitKalmanNetConfig):
+    """Everything that defines a Cholesky-KalmanNet training run (Ko & Shafieezadeh,
+    "Cholesky-KalmanNet: Model-Based Deep Learning with Positive Definite Error Covariance
+    Structure", IEEE Signal Processing Letters 2025; TOML table ``[cholesky-kalmannet]``):
+    Split-KalmanNet's fields, and ``objective``: ``gaussian-nll`` (the Gaussian negative
+    log-likelihood of the true state under the estimate and its posterior covariance, every step
+    after ``loss_cut``; see :mod:`fkn_bench.kalmannet.cholesky` for the reference code's loss) or
+    ``supervised`` (the MSE)."""
+
+    objective: str = "gaussian-nll"
+
+    objectives: ClassVar[tuple[str, ...]] = ("gaussian-nll", "supervised")
+    _label: ClassVar[str] = "Cholesky-KalmanNet"
+    _table: ClassVar[str] = "cholesky-kalmannet"
+    _not_options: ClassVar[tuple[str, ...]] = ("variant", "optimizer", "lbfgs_iterations", "lbfgs_history")

@@ -20,6 +20,11 @@ the 12x12 covariance of the error ``[dtheta, dr, dw, dv]`` (``error_covariances`
 ``native_covariance``, as the multiplicative EKF's), with the 13x13 state covariance derived from
 it (``covariances``), so that the harness scores its NEES. It has no innovation covariance (it
 learns no measurement noise), so no NIS (NaN).
+
+Split-KalmanNet (``split-kalmannet``, :class:`SplitKalmanNetEstimator`) and Cholesky-KalmanNet
+(``cholesky-kalmannet``, :class:`CholeskyKalmanNetEstimator`) report their error covariances the
+same way (:mod:`fkn_bench.kalmannet.split` and :mod:`fkn_bench.kalmannet.cholesky` say what is
+learned and what is derived), and no NIS.
 """
 
 from __future__ import annotations
@@ -33,16 +38,20 @@ import torch
 from fkn_bench.estimators.base import Estimates, RecursiveEstimator, check_batch_inputs, restart_diverged
 from fkn_bench.filters.recursion import Proposal
 from fkn_bench.filters.pose import error_covariance_from_state, state_covariance_from_error, with_unit_quaternion
-from fkn_bench.kalmannet.checkpoint import model_from_checkpoint, recursive_model_from_checkpoint
+from fkn_bench.kalmannet.checkpoint import (cholesky_model_from_checkpoint, model_from_checkpoint,
+                                            recursive_model_from_checkpoint, split_model_from_checkpoint)
+from fkn_bench.kalmannet.cholesky import CholeskyKalmanNet
 from fkn_bench.kalmannet.recursion import KalmanNet, KalmanNetState, NetworkSteps
 from fkn_bench.kalmannet.recursive import RecursiveKalmanNet
+from fkn_bench.kalmannet.split import SplitKalmanNet
 from fkn_bench.linalg import symmetrize
 from fkn_bench.runtime import torch_threads
 from fkn_bench.scenarios import Scenario
 from fkn_bench.training.artifacts import artifact_label, resolve_artifact_label, trained_network
 from fkn_bench.types import ArrayB, ArrayF
 
-__all__ = ["KalmanNetEstimator", "kalmannet_factory", "RecursiveKalmanNetEstimator", "recursive_kalmannet_factory"]
+__all__ = ["KalmanNetEstimator", "kalmannet_factory", "RecursiveKalmanNetEstimator", "recursive_kalmannet_factory",
+           "SplitKalmanNetEstimator", "split_kalmannet_factory", "CholeskyKalmanNetEstimator", "cholesky_kalmannet_factory"]
 
 _ONE = np.ones(1, dtype=bool)
 
@@ -199,6 +208,7 @@ class RecursiveKalmanNetEstimator(KalmanNetEstimator):
     def _load(checkpoint: str | Path) -> tuple[Any, Any, Any, dict[str, Any]]:
         return recursive_model_from_checkpoint(checkpoint)
 
+
 def recursive_kalmannet_factory(
     scenario: Scenario | None = None,
     *,
@@ -208,4 +218,81 @@ def recursive_kalmannet_factory(
     """Registry factory of ``recursive-kalmannet``, as :func:`kalmannet_factory`."""
     return RecursiveKalmanNetEstimator(
         checkpoint=trained_network("recursive-kalmannet", "Recursive KalmanNet", scenario, checkpoint, parameters)
+    )
+
+
+class SplitKalmanNetEstimator(KalmanNetEstimator):
+    """A trained Split-KalmanNet (Choi et al., IEEE TVT 2023; :mod:`fkn_bench.kalmannet.split`):
+    estimates with their error covariance.
+
+    Keyword-only arguments:
+        checkpoint: a training checkpoint of ``split-kalmannet`` (``fkn-bench train --estimator
+            split-kalmannet`` writes ``OUT/checkpoint.pt``).
+        network: a :class:`SplitKalmanNet` module instead.
+        name, description: registry name and one-line description.
+    """
+
+    net: SplitKalmanNet
+
+    def __init__(
+        self,
+        *,
+        checkpoint: str | Path | None = None,
+        network: SplitKalmanNet | None = None,
+        name: str = "split-kalmannet",
+        description: str = "Split-KalmanNet: recurrent networks compute the prior and innovation covariances of the gain",
+    ) -> None:
+        if (checkpoint is None) == (network is None):
+            raise ValueError(f"give either checkpoint=PATH or network={type(self).__name__.removesuffix('Estimator')}(...)")
+        super().__init__(checkpoint=checkpoint, network=network, name=name, description=description)  # type: ignore[arg-type]
+
+    @staticmethod
+    def _load(checkpoint: str | Path) -> tuple[Any, Any, Any, dict[str, Any]]:
+        return split_model_from_checkpoint(checkpoint)
+
+
+def split_kalmannet_factory(
+    scenario: Scenario | None = None,
+    *,
+    checkpoint: str | Path | None = None,
+    parameters: str | Path | None = None,
+) -> SplitKalmanNetEstimator:
+    """Registry factory of ``split-kalmannet``, as :func:`kalmannet_factory`."""
+    return SplitKalmanNetEstimator(
+        checkpoint=trained_network("split-kalmannet", "Split-KalmanNet", scenario, checkpoint, parameters)
+    )
+
+
+class CholeskyKalmanNetEstimator(SplitKalmanNetEstimator):
+    """A trained Cholesky-KalmanNet (Ko & Shafieezadeh, IEEE SPL 2025;
+    :mod:`fkn_bench.kalmannet.cholesky`): estimates with their error covariance; arguments as
+    :class:`SplitKalmanNetEstimator`'s (a ``cholesky-kalmannet`` checkpoint, or a
+    :class:`CholeskyKalmanNet` module)."""
+
+    net: CholeskyKalmanNet
+
+    def __init__(
+        self,
+        *,
+        checkpoint: str | Path | None = None,
+        network: CholeskyKalmanNet | None = None,
+        name: str = "cholesky-kalmannet",
+        description: str = "Cholesky-KalmanNet: recurrent networks compute Cholesky factors of the gain's covariances",
+    ) -> None:
+        super().__init__(checkpoint=checkpoint, network=network, name=name, description=description)
+
+    @staticmethod
+    def _load(checkpoint: str | Path) -> tuple[Any, Any, Any, dict[str, Any]]:
+        return cholesky_model_from_checkpoint(checkpoint)
+
+
+def cholesky_kalmannet_factory(
+    scenario: Scenario | None = None,
+    *,
+    checkpoint: str | Path | None = None,
+    parameters: str | Path | None = None,
+) -> CholeskyKalmanNetEstimator:
+    """Registry factory of ``cholesky-kalmannet``, as :func:`kalmannet_factory`."""
+    return CholeskyKalmanNetEstimator(
+        checkpoint=trained_network("cholesky-kalmannet", "Cholesky-KalmanNet", scenario, checkpoint, parameters)
     )
