@@ -12,23 +12,24 @@ over steps ``1:`` and both components, in dB (``10 log10 MSE``), as the referenc
 Two examples (:data:`SPLIT`, :data:`CHOLESKY`), each its paper's settings:
 
 * Split-KalmanNet (Choi et al., IEEE TVT 2023; the configuration of its reference code,
-  github.com/geonchoi/Split-KalmanNet): ``theta = 10 deg``, ``q^2 = -30 dB``, ``r^2 / q^2 = 40 dB`` (``r^2 = 10 dB``),
-  training sequences of 15 steps, test sequences of 100, ``x_0`` at a uniform angle. The
-  reference repository's committed test estimates (10 sequences of 100 steps) give: Kalman filter -14.13 dB, KalmanNet -7.79 dB (architecture 1) and -6.91 dB
-  (architecture 2), Split-KalmanNet -12.56 dB: within 1.6 dB of the optimal filter and about 5 dB
-  better than KalmanNet. The paper's own figures could not be consulted here (only its abstract:
+  github.com/geonchoi/Split-KalmanNet): ``theta = 10 deg``, ``q^2 = -30 dB``, ``r^2 / q^2 = 40 dB``
+  (``r^2 = 10 dB``), training sequences of 15 steps, test sequences of 100, ``x_0`` at a uniform
+  angle. The reference repository's committed test estimates (10 sequences of 100 steps) give:
+  Kalman filter -14.13 dB, KalmanNet -7.79 dB (architecture 1) and -6.91 dB (architecture 2),
+  Split-KalmanNet -12.56 dB: within 1.6 dB of the optimal filter and about 5 dB better than
+  KalmanNet. The paper's own figures could not be consulted here (only its abstract:
   "Split-KalmanNet outperforms the traditional EKF and the state-of-the-art KalmanNet algorithm in
   various model mismatch scenarios").
 * Cholesky-KalmanNet (Ko & Shafieezadeh, IEEE SPL 2025; the configuration of its reference code,
-  github.com/RAMSIS-Lab/ckn-spl-public): ``theta = 5 deg``, ``q^2 = r^2 = -30 dB``, training sequences of 30 steps with
-  ``x_0`` at an angle uniform in ``[-0.5, 0.5]`` rad, test sequences of 50 from ``x_0 = [1, 0]``.
-  The letter's example measures range and bearing (the reference code's default); this project's
-  models measure linearly, so the check here is the code's linear switch. For the range-bearing
-  example the reference repository's notebook of the letter's figures (300 sequences of 50
-  steps, MSE summed over the two components) gives: EKF -4.68 dB, KalmanNet
-  -9.99 dB, Split-KalmanNet -20.58 dB, Cholesky-KalmanNet -23.84 dB, and the letter's claim is
-  a covariance that brackets the errors (its 2-sigma bands) where KalmanNet's and
-  Split-KalmanNet's do not.
+  github.com/RAMSIS-Lab/ckn-spl-public): ``theta = 5 deg``, ``q^2 = r^2 = -30 dB``, training
+  sequences of 30 steps with ``x_0`` at an angle uniform in ``[-0.5, 0.5]`` rad, test sequences of
+  50 from ``x_0 = [1, 0]``. The letter's example measures range and bearing (the reference code's
+  default); this project's models measure linearly, so the check here is the code's linear switch.
+  For the range-bearing example the reference repository's notebook of the letter's figures (300
+  sequences of 50 steps, MSE summed over the two components) gives: EKF -4.68 dB, KalmanNet -9.99
+  dB, Split-KalmanNet -20.58 dB, Cholesky-KalmanNet -23.84 dB, and the letter's claim is a
+  covariance that brackets the errors (its 2-sigma bands) where KalmanNet's and Split-KalmanNet's do
+  not.
 
 Measured here (``python -m fkn_bench.kalmannet.rotation``: the sizes of :data:`SPLIT` and
 :data:`CHOLESKY`, 100 and 80 training sequences, 10 and 8 epochs, a few seconds each; 200 test
@@ -178,7 +179,8 @@ def train(example: RotationExample, train_data: Sequences, val_data: Sequences) 
     trainable estimator); returns the network (best epoch) and the trainer."""
     config = example.config
     net = untrained(example)
-    trainer = Trainer(net, make_filter("ekf"), ArrayData(train_data, val_data, window=config.window), config)  # type: ignore[arg-type]
+    data = ArrayData(train_data, val_data, window=config.window)
+    trainer = Trainer(net, make_filter("ekf"), data, config)  # type: ignore[arg-type]
     torch.manual_seed(config.seed)
     with torch_threads(1):
         trainer.fit(progress=False)
@@ -207,11 +209,13 @@ def _report(name: str, example: RotationExample) -> None:  # pragma: no cover - 
     net, trainer = train(example, train_data, val_data)
     print(f"{name}: trained in {time.perf_counter() - began:.1f} s, {len(trainer.history)} epochs, best {trainer.best_epoch}")
     truth = test.truth[:, 1:]
-    print(f"  KF (true Q, R)            {mse_db(kalman_means(example, test)[:, 1:], truth):.3f} dB")
-    print(f"  KF (R assumed 1/10)       {mse_db(kalman_means(example, test, r_factor=0.1)[:, 1:], truth):.3f} dB")
-    print(f"  untrained                 {mse_db(start[:, 1:], truth):.3f} dB, mean NEES {mean_nees(start, start_covariances, test.truth):.2f}")
     means, covariances = estimates(net, test)
-    print(f"  {name:24s}  {mse_db(means[:, 1:], truth):.3f} dB, mean NEES {mean_nees(means, covariances, test.truth):.2f} (2 if consistent)")
+    rows = [("KF (true Q, R)", kalman_means(example, test), None),
+            ("KF (R assumed 1/10)", kalman_means(example, test, r_factor=0.1), None),
+            ("untrained", start, start_covariances), (name, means, covariances)]
+    for label, estimate, covariance in rows:
+        nees = "" if covariance is None else f", mean NEES {mean_nees(estimate, covariance, test.truth):.2f} (2 if consistent)"
+        print(f"  {label:24s}  {mse_db(estimate[:, 1:], truth):.3f} dB{nees}")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -28,23 +28,23 @@ model, ``n`` and ``m`` on a Euclidean one):
   observed gain, the start of KalmanNet and Recursive KalmanNet). As in the paper these matrices
   are unconstrained (neither symmetric nor definite) and enter the gain as they are.
 * derived, the error covariance reported (the NEES columns' ``P``, the gate's): the paper's code
-  reports ``(I - K H) P^``, neither symmetric nor definite for an unconstrained ``P^``, and the
-  MSE the paper trains on identifies ``P^`` and ``W^`` only up to a common scale (``(c P^, W^ /
-  c)`` give one gain): on the paper's example (:mod:`fkn_bench.kalmannet.rotation`) a covariance
-  updated from ``P^`` (its nearest SPD matrix, Joseph form; stated ``p0 = 1``) had a mean NEES of
-  4e3 to 3e4 in three trainings, where 2 is consistent. So the covariance reported is the one the learned gain implies under the stated
-  noise, as KalmanNet's here (Klein, Revach, Shlezinger et al., "Uncertainty in data-driven Kalman
-  filtering for partially known state-space models", ICASSP 2022): ``P_t|t-1 = F P_t-1|t-1 F^T +
-  Q``, ``P_t|t = (I - K H) P_t|t-1 (I - K H)^T + K R K^T + floor^2 I`` (Joseph form: the error
-  covariance of an update with the gain ``K``, whatever the gain, when the prior error has
-  covariance ``P_t|t-1`` and the measurement noise is ``R``), from ``P_0 = P_ref``; symmetric
-  positive definite by construction. ``Q = diag(q^2)`` and ``R = diag(r^2)`` are the stated noise
-  (below), which the networks never see (``Q`` is a parameter, ``diag(softplus(.)^2)``, which only
-  Cholesky-KalmanNet's covariance objective trains; here it stays at ``q``): the covariance is exact where they are a linear model's
-  true noise (the example's mean NEES: 1.1) and otherwise as consistent as they are, which the
-  leaderboards' NEES columns say. It is computed from detached tensors and does not shape the
-  training. Cholesky-KalmanNet (:mod:`fkn_bench.kalmannet.cholesky`) learns SPD covariances and
-  trains on them.
+  reports ``(I - K H) P^``, neither symmetric nor definite for an unconstrained ``P^``, and the MSE
+  the paper trains on identifies ``P^`` and ``W^`` only up to a common scale (``(c P^, W^ / c)``
+  give one gain): on the paper's example (:mod:`fkn_bench.kalmannet.rotation`) a covariance updated
+  from ``P^`` (its nearest SPD matrix, Joseph form; stated ``p0 = 1``) had a mean NEES of 4e3 to 3e4
+  in three trainings, where 2 is consistent. So the covariance reported is the one the learned gain
+  implies under the stated noise, as KalmanNet's here (Klein, Revach, Shlezinger et al.,
+  "Uncertainty in data-driven Kalman filtering for partially known state-space models", ICASSP
+  2022): ``P_t|t-1 = F P_t-1|t-1 F^T + Q``, ``P_t|t = (I - K H) P_t|t-1 (I - K H)^T + K R K^T +
+  floor^2 I`` (Joseph form: the error covariance of an update with the gain ``K``, whatever the
+  gain, when the prior error has covariance ``P_t|t-1`` and the measurement noise is ``R``), from
+  ``P_0 = P_ref``; symmetric positive definite by construction. ``Q = diag(q^2)`` and ``R =
+  diag(r^2)`` are the stated noise (below), which the networks never see (``Q`` is a parameter,
+  ``diag(softplus(.)^2)``, which only Cholesky-KalmanNet's covariance objective trains; here it
+  stays at ``q``): the covariance is exact where they are a linear model's true noise (the example's
+  mean NEES: 1.1) and otherwise as consistent as they are, which the leaderboards' NEES columns say.
+  It is computed from detached tensors and does not shape the training. Cholesky-KalmanNet
+  (:mod:`fkn_bench.kalmannet.cholesky`) learns SPD covariances and trains on them.
 
 Frames and units as :mod:`fkn_bench.kalmannet.recursion`: on the pose model the error is
 ``[dtheta, dr, dw, dv]`` (rad, m, rad/s, m/s; world frame, ``q_true = Exp(dtheta) (x) q_est``),
