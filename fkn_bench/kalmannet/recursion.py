@@ -72,6 +72,7 @@ from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.kalmannet.manifolds import Manifold, PoseTangent, manifold_for
 from fkn_bench.kalmannet.network import GainNetwork, Hidden, normalize_features
 from fkn_bench.training.data import Sequences
+from fkn_bench.training.objectives import gaussian_nll
 from fkn_bench.training.trainer import SequenceModel
 
 __all__ = ["LEARNED_GATE_LEVEL", "CORRECTION_MARGIN", "joseph_update", "KalmanNet", "KalmanNetState", "KalmanNetRun", "ManifoldRecursion", "NetworkSteps"]
@@ -322,6 +323,29 @@ class ManifoldRecursion(SequenceModel):
                      dt, begin=begin)
         stacked = tuple(torch.stack(parts, 1) for parts in zip(*recorder.records))
         return stacked, torch.stack(recorder.updated, 1), torch.stack(recorder.initialised, 1), final.state
+
+    def sequence_loss(self, sequences: Sequences, *, dt: float, loss_cut: int, objective: str) -> tuple[Tensor, Tensor]:
+        """``(objective, 13-state MSE)`` over steps ``loss_cut:``: ``supervised``, the MSE; or, where
+        :attr:`objectives` has it (a recursion whose ``run`` reports ``covariances``),
+        ``gaussian-nll``, the mean Gaussian NLL of the true state's error (tangent coordinates)
+        under the reported covariance, per step."""
+        if objective not in self.objectives:
+            name = getattr(self, "architecture", type(self).__name__).split(" (")[0]
+            raise ValueError(f"{name} trains with the objectives {list(self.objectives)} (got {objective!r})")
+        if objective != "gaussian-nll":
+            return super().sequence_loss(sequences, dt=dt, loss_cut=loss_cut, objective=objective)
+        run = self.run(sequences.measurements, sequences.mask, dt=dt)  # type: ignore[attr-defined]
+        if loss_cut >= run.means.shape[1]:
+            raise ValueError(f"loss_cut {loss_cut} leaves no steps of {run.means.shape[1]}")
+        means, truth = run.means[:, loss_cut:], sequences.truth[:, loss_cut:]
+        if truth.shape[-1] != means.shape[-1]:
+            raise ValueError(f"the Gaussian NLL needs the whole state in the truth ({means.shape[-1]} components, "
+                             f"truth has {truth.shape[-1]})")
+        mse = self.manifold.state_error(means, truth).square().mean()
+        flat_means, flat_truth = means.reshape(-1, means.shape[-1]), truth.reshape(-1, truth.shape[-1]).to(means.dtype)
+        errors = self.manifold.state_difference(flat_truth, flat_means)
+        n = self.manifold.state_tangent_dim
+        return gaussian_nll(errors, run.covariances[:, loss_cut:].reshape(-1, n, n)), mse
 
     def run_means(self, measurements: Tensor, mask: Tensor, *, dt: float) -> Tensor:
         return self.recurse(measurements, mask, dt=dt, record=lambda s: (s.mean,))[0][0]

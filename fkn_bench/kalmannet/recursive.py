@@ -90,8 +90,6 @@ from fkn_bench.models.base import StateSpaceModel
 from fkn_bench.kalmannet.manifolds import Manifold, PoseTangent
 from fkn_bench.kalmannet.recursion import ManifoldRecursion
 from fkn_bench.linalg import symmetrize
-from fkn_bench.training.data import Sequences
-from fkn_bench.training.objectives import gaussian_nll
 
 __all__ = ["GRUBranch", "RecursiveHidden", "RecursiveKalmanNet", "RecursiveKalmanNetRun", "RecursiveKalmanNetState"]
 
@@ -212,6 +210,7 @@ class RecursiveKalmanNet(ManifoldRecursion):
     """
 
     objectives = ("gaussian-nll", "supervised")
+    architecture = "Recursive KalmanNet (Mortada et al., EUSIPCO 2025)"
 
     def __init__(
         self,
@@ -334,30 +333,9 @@ class RecursiveKalmanNet(ManifoldRecursion):
             measurements, mask, dt=dt, record=lambda s: (s.mean, s.covariance))
         return RecursiveKalmanNetRun(means, covariances, updates, initialised, final)
 
-    def sequence_loss(self, sequences: Sequences, *, dt: float, loss_cut: int, objective: str) -> tuple[Tensor, Tensor]:
-        """``(objective, 13-state MSE)`` over steps ``loss_cut:``: ``gaussian-nll``, the mean
-        Gaussian NLL of the true state's error (tangent coordinates) under the covariance, per
-        step; or ``supervised``, the MSE (KalmanNet's)."""
-        if objective not in self.objectives:
-            raise ValueError(f"Recursive KalmanNet trains with the objectives {list(self.objectives)} (got {objective!r})")
-        if objective == "supervised":
-            mse = self.sequence_mse(sequences, dt=dt, loss_cut=loss_cut)
-            return mse, mse
-        run = self.run(sequences.measurements, sequences.mask, dt=dt)
-        if loss_cut >= run.means.shape[1]:
-            raise ValueError(f"loss_cut {loss_cut} leaves no steps of {run.means.shape[1]}")
-        means, truth = run.means[:, loss_cut:], sequences.truth[:, loss_cut:]
-        if truth.shape[-1] != means.shape[-1]:
-            raise ValueError(f"the Gaussian NLL needs the whole state in the truth ({means.shape[-1]} components, "
-                             f"truth has {truth.shape[-1]})")
-        mse = self.manifold.state_error(means, truth).square().mean()
-        flat_means, flat_truth = means.reshape(-1, means.shape[-1]), truth.reshape(-1, truth.shape[-1]).to(means.dtype)
-        errors = self.manifold.state_difference(flat_truth, flat_means)
-        return gaussian_nll(errors, run.covariances[:, loss_cut:].reshape(-1, self.n, self.n)), mse
-
     def describe(self) -> dict[str, Any]:
         return {
-            "architecture": "Recursive KalmanNet (Mortada et al., EUSIPCO 2025)",
+            "architecture": self.architecture,
             "process_model": type(self.model).__name__,
             "manifold": self.manifold.name,
             "state_tangent_dim": self.n,

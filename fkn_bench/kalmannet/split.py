@@ -76,9 +76,9 @@ Deviations from the paper (and its public code, geonchoi/Split-KalmanNet), each 
   (:mod:`fkn_bench.kalmannet.recursive`): the steps without a measurement predict mean and
   covariance with the multiplicative EKF's prediction (the EKF's on a Euclidean model); where no
   gradients are recorded, on the pose tangent space, an innovation whose NIS under ``S = H P H^T +
-  R`` exceeds the 1 - 1e-6 chi-square quantile, or a correction that no Kalman gain could make
-  under ``P`` (the predicted reported covariance), is not used, and three in a row restart the
-  track (:class:`~fkn_bench.kalmannet.recursion.NetworkSteps`).
+  R`` exceeds the 1 - 1e-6 chi-square quantile, or a correction a hundred times beyond any
+  Kalman gain's under ``P`` (the predicted reported covariance), is not used, and three in a row
+  restart the track (:class:`~fkn_bench.kalmannet.recursion.NetworkSteps`).
 """
 
 from __future__ import annotations
@@ -98,8 +98,6 @@ from fkn_bench.kalmannet.recursion import ManifoldRecursion, joseph_update
 from fkn_bench.kalmannet.recursive import GRUBranch, _inverse_softplus
 from fkn_bench.linalg import symmetrize
 from fkn_bench.models.base import StateSpaceModel
-from fkn_bench.training.data import Sequences
-from fkn_bench.training.objectives import gaussian_nll
 
 __all__ = ["INPUT_CLIP", "SplitHidden", "SplitKalmanNet", "SplitKalmanNetRun", "SplitKalmanNetState", "reference_stds"]
 
@@ -316,28 +314,6 @@ class SplitKalmanNet(ManifoldRecursion):
         (means, covariances), updates, initialised, final = self.recurse(
             measurements, mask, dt=dt, record=lambda s: (s.mean, s.covariance))
         return SplitKalmanNetRun(means, covariances, updates, initialised, final)
-
-    def sequence_loss(self, sequences: Sequences, *, dt: float, loss_cut: int, objective: str) -> tuple[Tensor, Tensor]:
-        """``(objective, 13-state MSE)`` over steps ``loss_cut:``: ``supervised``, the MSE (the
-        paper's); or, where :attr:`objectives` has it, ``gaussian-nll``, the mean Gaussian NLL of
-        the true state's error (tangent coordinates) under the reported covariance, per step."""
-        if objective not in self.objectives:
-            raise ValueError(f"{self.architecture.split(' (')[0]} trains with the objectives {list(self.objectives)} "
-                             f"(got {objective!r})")
-        if objective == "supervised":
-            mse = self.sequence_mse(sequences, dt=dt, loss_cut=loss_cut)
-            return mse, mse
-        run = self.run(sequences.measurements, sequences.mask, dt=dt)
-        if loss_cut >= run.means.shape[1]:
-            raise ValueError(f"loss_cut {loss_cut} leaves no steps of {run.means.shape[1]}")
-        means, truth = run.means[:, loss_cut:], sequences.truth[:, loss_cut:]
-        if truth.shape[-1] != means.shape[-1]:
-            raise ValueError(f"the Gaussian NLL needs the whole state in the truth ({means.shape[-1]} components, "
-                             f"truth has {truth.shape[-1]})")
-        mse = self.manifold.state_error(means, truth).square().mean()
-        flat_means, flat_truth = means.reshape(-1, means.shape[-1]), truth.reshape(-1, truth.shape[-1]).to(means.dtype)
-        errors = self.manifold.state_difference(flat_truth, flat_means)
-        return gaussian_nll(errors, run.covariances[:, loss_cut:].reshape(-1, self.n, self.n)), mse
 
     def describe(self) -> dict[str, Any]:
         return {
