@@ -14,7 +14,8 @@ their tuned settings once per committed file; the rigid-body EKF (known and esti
 tumbles, FlexKalmanNet on it once per committed parameter file, the rigid-body UKF and MEKF on two
 free tumbles (the rigid-body model's prediction is the same code in every filter); every free
 tumble is gated by at least one rigid-body estimator. The learned-gain networks are gated once per
-committed weights file (ds1, ds2, and tumble-fast for the tumble mixture's; 2-6 s a pair), and
+committed weights file (ds1, ds2, and tumble-fast for the tumble mixture's; spin and free-tumble
+for the prior families'; 2-6 s a pair), and
 KalmanNet also on the two scenarios that exercise its recursion's own handling of the stream
 (ds1-gap100: long predictions; ds1-flips: sign-flipped quaternions and outliers), which Recursive
 KalmanNet shares. The EKFs with committed parameter files (FlexKalmanNet's, the tuned ones) are
@@ -91,6 +92,8 @@ for _name in ("flexkalmannet", "nll-tuned-ekf", "direct-tuned-ekf", "sage-husa",
 for _name in ("flexkalmannet", "flexkalmannet-rigid-body", "flexkalmannet-tv", "nll-tuned-ekf", "direct-tuned-ekf",
               "sage-husa", "akhlaghi", "vbakf", "kalmannet", "recursive-kalmannet"):
     GATED_ON[_name] += PRIOR_HEADLINES  # the committed files of the prior families, once each
+for _name in ("split-kalmannet", "cholesky-kalmannet"):  # trained on the prior families only, so far
+    GATED_ON[_name] = PRIOR_HEADLINES
 GATED_ON["manual-ekf"] = tuple(name for name in scenario_names() if name not in PRIOR_STRESS)
 
 """The estimators on the rigid-body model, and Recursive KalmanNet, are gated on part of the named
