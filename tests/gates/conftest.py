@@ -92,8 +92,8 @@ for _name in ("flexkalmannet", "nll-tuned-ekf", "direct-tuned-ekf", "sage-husa",
 for _name in ("flexkalmannet", "flexkalmannet-rigid-body", "flexkalmannet-tv", "nll-tuned-ekf", "direct-tuned-ekf",
               "sage-husa", "akhlaghi", "vbakf", "kalmannet", "recursive-kalmannet"):
     GATED_ON[_name] += PRIOR_HEADLINES  # the committed files of the prior families, once each
-for _name in ("split-kalmannet", "cholesky-kalmannet"):  # trained on the prior families only, so far
-    GATED_ON[_name] = PRIOR_HEADLINES
+for _name in ("split-kalmannet", "cholesky-kalmannet"):  # trained on ds1 and the prior families, so far
+    GATED_ON[_name] = ("ds1",) + PRIOR_HEADLINES
 GATED_ON["manual-ekf"] = tuple(name for name in scenario_names() if name not in PRIOR_STRESS)
 
 """The estimators on the rigid-body model, and Recursive KalmanNet, are gated on part of the named
