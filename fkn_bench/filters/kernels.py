@@ -767,12 +767,13 @@ def warm_up() -> list[str]:
     steps without a measurement (:func:`predict_steps`) and single predictions; and the rigid-body
     model's kernels (:mod:`fkn_bench.models.rigid_body_kernels`): the free-tumble truth's
     integrator (one test split of tumble-fast) and the model's numpy transition with its Jacobian
-    (one state); returns the names of the EKF kernels compiled. Raises ``RuntimeError`` when the
+    (one state, estimated and known inertia); returns the names of the EKF kernels compiled. Raises ``RuntimeError`` when the
     kernels cannot run here (numba missing, or switched off by ``FKN_BENCH_KERNELS=0``)."""
     from fkn_bench.envs import generate_episodes
     from fkn_bench.filters import make_filter
     from fkn_bench.models.noise import NoiseParameters
     from fkn_bench.models.rigid_body import RigidBodyModel
+    from fkn_bench.scenarios.scenario import ASTROBEE_INERTIA
 
     probe = torch.zeros(1, dtype=torch.float64)
     if not supports(probe):
@@ -786,6 +787,7 @@ def warm_up() -> list[str]:
     result = make_filter("ekf").run(noise, z, mask, dt=float(episodes.scenario.dt))
     torch.autograd.grad(result.means.square().mean(), log_q)
     generate_episodes("tumble-fast", [0], split="test")  # the free-tumble truth's integrator
-    RigidBodyModel(estimate_ratios=True).transition(np.eye(1, 15), 0.1)  # the rigid-body model's transition
+    RigidBodyModel(estimate_ratios=True).transition(np.eye(1, 15), 0.1)  # the rigid-body model's transition,
+    RigidBodyModel(inertia=ASTROBEE_INERTIA).transition(np.eye(1, 13), 0.1)  # known inertia: another signature
     return [name for name, kernel in _kernels().items() if kernel.signatures]
 
