@@ -96,7 +96,7 @@ class KalmanNetEstimator(RecursiveEstimator):
         description: str = "KalmanNet (architecture 2): a recurrent network computes the Kalman gain",
     ) -> None:
         if (checkpoint is None) == (network is None):
-            raise ValueError("give either checkpoint=PATH or network=KalmanNet(...)")
+            raise ValueError(f"give either checkpoint=PATH or network={type(self).__name__.removesuffix('Estimator')}(...)")
         # a committed file is named by its label (fkn_bench.kalmannet/params/...), not by where this
         # checkout is, so that configurations and their fingerprints do not depend on it
         self.checkpoint = None if checkpoint is None else artifact_label(resolve_artifact_label(checkpoint))
@@ -200,8 +200,6 @@ class RecursiveKalmanNetEstimator(KalmanNetEstimator):
         name: str = "recursive-kalmannet",
         description: str = "Recursive KalmanNet: recurrent networks compute the gain and the error covariance",
     ) -> None:
-        if (checkpoint is None) == (network is None):
-            raise ValueError("give either checkpoint=PATH or network=RecursiveKalmanNet(...)")
         super().__init__(checkpoint=checkpoint, network=network, name=name, description=description)  # type: ignore[arg-type]
 
     @staticmethod
@@ -242,8 +240,6 @@ class SplitKalmanNetEstimator(KalmanNetEstimator):
         name: str = "split-kalmannet",
         description: str = "Split-KalmanNet: recurrent networks compute the prior and innovation covariances of the gain",
     ) -> None:
-        if (checkpoint is None) == (network is None):
-            raise ValueError(f"give either checkpoint=PATH or network={type(self).__name__.removesuffix('Estimator')}(...)")
         super().__init__(checkpoint=checkpoint, network=network, name=name, description=description)  # type: ignore[arg-type]
 
     @staticmethod
