@@ -13,6 +13,14 @@ picks the filter's process model. Examples::
     fkn-bench train --estimator flexkalmannet --scenario ds1 --write-artifact
     fkn-bench train --estimator flexkalmannet --model rigid-body-ratios --scenario tumble-fast \\
         --scenario tumble-flip --scenario tumble-slow --family tumble
+
+``--seeds 0 1 2`` is a training-seed study (:mod:`fkn_bench.training.seeds`): the configuration
+trained once per seed into ``OUT/seed-<K>/``, the study in ``OUT/seed_study.json`` and ``.csv``,
+and the seed of the median validation RMSE chosen (the test split is never read by the choice);
+with ``--write-artifact`` the chosen run is installed with the study in its record and the other
+seeds under ``params/seeds/``, where the leaderboards' training-seed spread comes from::
+
+    fkn-bench train --estimator flexkalmannet --scenario spin --seeds 0 1 2 --write-artifact
 """
 
 from __future__ import annotations
@@ -51,6 +59,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--epochs", type=int, help="maximum epochs")
     parser.add_argument("--lr", type=float, help="learning rate")
     parser.add_argument("--seed", type=int, help="random seed")
+    parser.add_argument("--seeds", type=int, nargs="+", metavar="K",
+                        help="a training-seed study: train once per seed K, choose the median-validation seed")
     parser.add_argument("--device", help="where the network, the data and the filter run: cpu (default) or cuda "
                                          "(a GPU; the window order is drawn on the CPU, so a seed trains on the same windows)")
     parser.add_argument(
@@ -88,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
     load_scenario_files(args)
     scenarios = [get_scenario(name) for name in (args.scenario or ["ds1"])]
     label = "+".join(s.name for s in scenarios)
+    if args.seeds is not None:
+        return _seed_study(args, scenarios, label)
     out = output_directory(args.out if args.out is not None else Path("runs") / f"{args.estimator}-{label}")
     started = time.time()
     try:
@@ -116,5 +128,37 @@ def run(args: argparse.Namespace) -> int:
     print(f"  outputs in {summary['out']} ({', '.join(written)})")
     if "installed_artifact" in summary:
         print(f"  installed {summary['installed_artifact']}")
+    sys.stdout.flush()
+    return 0
+
+
+def _seed_study(args: argparse.Namespace, scenarios: list[Any], label: str) -> int:
+    """``--seeds``: a training-seed study (module docstring)."""
+    from fkn_bench.estimators import UnknownEstimatorError
+    from fkn_bench.training.seeds import install_seed_study, train_seeds
+
+    if args.seed is not None:
+        raise UsageError("give either --seed or --seeds, not both")
+    if min(args.seeds) < 0 or len(set(args.seeds)) != len(args.seeds):
+        raise UsageError(f"--seeds must be distinct integers >= 0 (got {' '.join(map(str, args.seeds))})")
+    out = output_directory(args.out if args.out is not None else Path("runs") / f"{args.estimator}-{label}-seeds")
+    with usage_errors(UnknownEstimatorError, ValueError, TypeError):
+        study = train_seeds(args.estimator, scenarios, parse_options(args), args.seeds, out=out, family=args.family,
+                            resume=args.resume, progress=not args.no_progress,
+                            log=None if args.json else lambda line: print(line, flush=True))
+    document = study.to_dict()
+    if args.write_artifact:
+        document["installed"] = [str(p) for p in install_seed_study(study)]
+    if args.json:
+        print(json.dumps(document, indent=2, default=str))
+        return 0
+    for run in study.runs:
+        test = "" if run.test_rmse is None else f", test {run.test_rmse:.5f}"
+        mark = "  <- chosen (median validation)" if run.seed == study.chosen else ""
+        shown = f"validation {run.val_rmse:.5f}{test}" if run.status == "ok" else f"failed: {run.error}"
+        print(f"  seed {run.seed}: {shown}{mark}")
+    print(f"  study in {out / 'seed_study.json'}")
+    for path in document.get("installed", ()):
+        print(f"  installed {path}")
     sys.stdout.flush()
     return 0

@@ -151,6 +151,7 @@ def flexkalmannet_factory(
     mode: str = "constant",
     history: int | None = None,
     gate: float | None = None,
+    training_seed: int | None = None,
 ) -> Estimator:
     """Registry factory of ``flexkalmannet``.
 
@@ -163,9 +164,11 @@ def flexkalmannet_factory(
             time-varying network is ``flexkalmannet-tv``).
         history: time-varying mode: measurements averaged per step.
         gate: chi-square innovation gate level (None: none).
+        training_seed: that seed of the committed artefact's seed study
+            (:mod:`fkn_bench.training.seeds`) instead of the seed the study chose.
     """
-    if checkpoint is not None and parameters is not None:
-        raise ValueError("give either checkpoint=PATH or parameters=PATH, not both")
+    if sum(x is not None for x in (checkpoint, parameters, training_seed)) > 1:
+        raise ValueError("give one of checkpoint=PATH, parameters=PATH and training_seed=K, not several")
     if mode == "time_varying":
         if checkpoint is None:
             raise ValueError("flexkalmannet mode 'time_varying' needs checkpoint=PATH (the network weights); "
@@ -175,7 +178,8 @@ def flexkalmannet_factory(
         raise ValueError(f"mode must be 'constant' or 'time_varying' (got {mode!r})")
     if checkpoint is not None:
         return FlexKalmanNetEstimator.from_checkpoint(checkpoint, gate=gate)
-    return artifact_factory("flexkalmannet", FlexKalmanNetEstimator)(scenario, parameters=parameters, gate=gate)
+    return artifact_factory("flexkalmannet", FlexKalmanNetEstimator)(scenario, parameters=parameters, gate=gate,
+                                                                      training_seed=training_seed)
 
 
 def flexkalmannet_tv_factory(
@@ -185,12 +189,14 @@ def flexkalmannet_tv_factory(
     parameters: str | Path | None = None,
     history: int | None = None,
     gate: float | None = None,
+    training_seed: int | None = None,
 ) -> AdaptiveFlexKalmanNetEstimator:
     """Registry factory of ``flexkalmannet-tv``: FlexKalmanNet trained and run in the time-varying
     mode, from ``checkpoint=PATH``, the ``parameters=PATH`` of a ``fkn-bench train --estimator
     flexkalmannet-tv`` run, or by default the committed weights of the scenario's model family
     (``fkn_bench/flexkalmannet/params/flexkalmannet-tv-<family>.json`` and ``.weights.pt``)."""
-    weights = trained_network("flexkalmannet-tv", "time-varying FlexKalmanNet", scenario, checkpoint, parameters)
+    weights = trained_network("flexkalmannet-tv", "time-varying FlexKalmanNet", scenario, checkpoint, parameters,
+                              training_seed)
     return AdaptiveFlexKalmanNetEstimator(
         checkpoint=weights, history=history, gate=gate, name="flexkalmannet-tv",
         description="FlexKalmanNet, time-varying: per-step noise from the network's outputs on recent measurements",

@@ -171,12 +171,17 @@ def kalmannet_factory(
     *,
     checkpoint: str | Path | None = None,
     parameters: str | Path | None = None,
+    training_seed: int | None = None,
 ) -> KalmanNetEstimator:
     """Registry factory of ``kalmannet``: a trained network from ``checkpoint=PATH``, from the
     ``parameters=PATH`` (``parameters.json``) of a ``fkn-bench train --estimator kalmannet`` run,
     or by default the committed weights of the scenario's model family
-    (``fkn_bench/kalmannet/params/kalmannet-<family>.json`` and ``.weights.pt``)."""
-    return KalmanNetEstimator(checkpoint=trained_network("kalmannet", "KalmanNet", scenario, checkpoint, parameters))
+    (``fkn_bench/kalmannet/params/kalmannet-<family>.json`` and ``.weights.pt``), or with
+    ``training_seed=K`` that seed of the committed artefact's seed study
+    (:mod:`fkn_bench.training.seeds`)."""
+    return KalmanNetEstimator(
+        checkpoint=trained_network("kalmannet", "KalmanNet", scenario, checkpoint, parameters, training_seed)
+    )
 
 
 class RecursiveKalmanNetEstimator(KalmanNetEstimator):
@@ -212,10 +217,11 @@ def recursive_kalmannet_factory(
     *,
     checkpoint: str | Path | None = None,
     parameters: str | Path | None = None,
+    training_seed: int | None = None,
 ) -> RecursiveKalmanNetEstimator:
     """Registry factory of ``recursive-kalmannet``, as :func:`kalmannet_factory`."""
     return RecursiveKalmanNetEstimator(
-        checkpoint=trained_network("recursive-kalmannet", "Recursive KalmanNet", scenario, checkpoint, parameters)
+        checkpoint=trained_network("recursive-kalmannet", "Recursive KalmanNet", scenario, checkpoint, parameters, training_seed)
     )
 
 
@@ -252,10 +258,11 @@ def split_kalmannet_factory(
     *,
     checkpoint: str | Path | None = None,
     parameters: str | Path | None = None,
+    training_seed: int | None = None,
 ) -> SplitKalmanNetEstimator:
     """Registry factory of ``split-kalmannet``, as :func:`kalmannet_factory`."""
     return SplitKalmanNetEstimator(
-        checkpoint=trained_network("split-kalmannet", "Split-KalmanNet", scenario, checkpoint, parameters)
+        checkpoint=trained_network("split-kalmannet", "Split-KalmanNet", scenario, checkpoint, parameters, training_seed)
     )
 
 
@@ -287,8 +294,9 @@ def cholesky_kalmannet_factory(
     *,
     checkpoint: str | Path | None = None,
     parameters: str | Path | None = None,
+    training_seed: int | None = None,
 ) -> CholeskyKalmanNetEstimator:
     """Registry factory of ``cholesky-kalmannet``, as :func:`kalmannet_factory`."""
     return CholeskyKalmanNetEstimator(
-        checkpoint=trained_network("cholesky-kalmannet", "Cholesky-KalmanNet", scenario, checkpoint, parameters)
+        checkpoint=trained_network("cholesky-kalmannet", "Cholesky-KalmanNet", scenario, checkpoint, parameters, training_seed)
     )

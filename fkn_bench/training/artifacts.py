@@ -43,6 +43,10 @@ __all__ = [
     "ArtifactError",
     "artifact_path",
     "committed_artifact_path",
+    "seed_artifact_path",
+    "seed_study",
+    "training_seed_artifact",
+    "SEEDS_DIR",
     "params_dir",
     "artifact_label",
     "install_artifact",
@@ -93,6 +97,50 @@ def artifact_path(estimator: str, family: str) -> Path:
         raise ArtifactError(f"estimator {estimator!r} has no committed parameter files (its registration names no "
                             "params_package): pass parameters=PATH")
     return params_dir(package) / f"{estimator}-{family}.json"
+
+
+SEEDS_DIR = "seeds"
+"""The folder, inside a params folder, of the training seeds a seed study did not choose
+(:mod:`fkn_bench.training.seeds`)."""
+
+
+def seed_artifact_path(estimator: str, family: str, seed: int) -> Path:
+    """Where the artefact of training seed ``seed`` of a seed study of ``estimator`` on
+    ``family`` lives when the study did not choose it: ``params/seeds/<estimator>-<family>-seed<K>.json``
+    beside the committed artefact (:func:`artifact_path`)."""
+    return artifact_path(estimator, family).parent / SEEDS_DIR / f"{estimator}-{family}-seed{int(seed)}.json"
+
+
+def training_seed_artifact(path: str | Path, estimator: str, family: str, seed: int) -> Path:
+    """The artefact of training seed ``seed`` of the seed study that produced the committed
+    artefact ``path`` of ``estimator`` for ``family``: ``path`` itself for the chosen seed, else
+    its file under ``params/seeds/``. Raises :class:`ArtifactError` for an artefact trained with one
+    seed, a seed the study did not train (naming those it did) or a missing seed file."""
+    study = (read_artifact(path).get("training") or {}).get("seed_study")
+    if not isinstance(study, dict):
+        raise ArtifactError(f"{path} was trained with one seed (its 'training' has no seed_study): training_seed= "
+                            f"needs a seed study, `fkn-bench train --estimator {estimator} ... --seeds 0 1 2 "
+                            "--write-artifact`")
+    trained = [int(r["seed"]) for r in study.get("runs", ()) if r.get("status") == "ok"]
+    if int(seed) not in trained:
+        raise ArtifactError(f"training_seed={seed}: the seed study of {path} trained seeds "
+                            f"{', '.join(map(str, trained))}")
+    if int(seed) == int(study["chosen_seed"]):
+        return Path(path)
+    target = seed_artifact_path(estimator, family, seed)
+    if not target.is_file():
+        raise ArtifactError(f"training_seed={seed}: {target} is missing (the seed study of {path} trained it)")
+    return target
+
+
+def seed_study(path: str | Path) -> dict[str, Any] | None:
+    """The ``training.seed_study`` of the artefact ``path`` (None: trained with one seed, or an
+    unreadable file)."""
+    try:
+        study = (read_artifact(path).get("training") or {}).get("seed_study")
+    except ArtifactError:
+        return None
+    return study if isinstance(study, dict) else None
 
 
 def committed_artifact_path(estimator: str, family: str) -> Path | None:
@@ -185,9 +233,12 @@ WEIGHTS_SUFFIX = ".weights.pt"
 _WEIGHTS_KEYS = ("estimator", "config", "scenario", "deployed", "state_dict", "best_epoch", "provenance")
 
 
-def install_artifact(artifact: str | Path, estimator: str, family: str) -> Path:
+def install_artifact(artifact: str | Path, estimator: str, family: str, *, target: str | Path | None = None,
+                     training_extra: Mapping[str, Any] | None = None) -> Path:
     """Install the ``parameters.json`` of a training run as the committed artefact of
-    ``estimator`` for ``family`` (:func:`artifact_path`); returns its path.
+    ``estimator`` for ``family`` (:func:`artifact_path`, or ``target``: e.g. a training seed's
+    :func:`seed_artifact_path`); returns its path. ``training_extra`` is merged into the
+    artefact's ``training`` (a seed study's record).
 
     An artefact of constant parameters is copied. One that deploys a network (KalmanNet, Recursive
     KalmanNet: its ``estimator_config`` names a training ``checkpoint``, or installed ``weights``)
@@ -203,9 +254,17 @@ def install_artifact(artifact: str | Path, estimator: str, family: str) -> Path:
     from fkn_bench.training.checkpoint import load_checkpoint, save_checkpoint
 
     document = read_artifact(artifact)
-    target = artifact_path(estimator, family)
+    target = Path(target) if target is not None else artifact_path(estimator, family)
+    if training_extra:
+        document["training"] = {**(document.get("training") or {}), **training_extra}
     if not {"checkpoint", "weights"} & set(document["estimator_config"]):
-        write_bytes_atomic(target, Path(artifact).read_bytes())
+        if not training_extra:
+            write_bytes_atomic(target, Path(artifact).read_bytes())
+            return target
+        fields = {k: document[k] for k in ("estimator", "family", "scenario", "estimator_config", "parameters", "training")
+                  if k in document}
+        write_json_atomic(target, {"format": ARTIFACT_FORMAT, "format_version": ARTIFACT_FORMAT_VERSION, **fields,
+                                   "provenance": document.get("provenance") or run_provenance()})
         return target
     full = load_checkpoint(weights_of_artifact(artifact, estimator))
     weights = target.with_name(target.name.removesuffix(".json") + WEIGHTS_SUFFIX)
@@ -354,11 +413,13 @@ def artifact_family(name: str, scenario: Scenario | None) -> str:
     return scenario.model_family if scenario is not None else "ds1"
 
 
-def committed_artifact(name: str, scenario: Scenario | None, label: str | None = None, *, swept: bool = False) -> Path:
+def committed_artifact(name: str, scenario: Scenario | None, label: str | None = None, *, swept: bool = False,
+                       training_seed: int | None = None) -> Path:
     """The committed artefact of estimator ``name`` for ``scenario`` (:func:`artifact_family`);
     raises :class:`ArtifactError` with the command that trains and installs it (``label``: how the
     message names the estimator, default ``name``; ``swept``: settings found by ``fkn-bench
-    sweep --space <name>``, not trained)."""
+    sweep --space <name>``, not trained). ``training_seed``: that seed of the artefact's seed study
+    (:func:`training_seed_artifact`)."""
     from fkn_bench.scenarios import scenario_names
 
     family = artifact_family(name, scenario)
@@ -372,32 +433,37 @@ def committed_artifact(name: str, scenario: Scenario | None, label: str | None =
         data = f"--scenario {family}" if named else f"--scenario S1 --scenario S2 ... --family {family}"
         raise ArtifactError(f"no trained {label or name} for model family '{family}' ({path}): train one with "
                             f"`fkn-bench train --estimator {name} {data} --write-artifact`")
-    return path
+    return path if training_seed is None else training_seed_artifact(path, name, family, training_seed)
 
 
 def trained_network(
-    estimator: str, label: str, scenario: Scenario | None, checkpoint: str | Path | None, parameters: str | Path | None
+    estimator: str, label: str, scenario: Scenario | None, checkpoint: str | Path | None, parameters: str | Path | None,
+    training_seed: int | None = None,
 ) -> Path:
     """The network weights a registry factory of ``estimator`` loads (``label``: how messages name
     it): ``checkpoint=PATH``, the ``parameters=PATH`` of a training run, or the committed artefact
     of the scenario's model family (:func:`artifact_family`: a recording or a user scenario gets
-    the ``default`` family's when one is committed)."""
-    if checkpoint is not None and parameters is not None:
-        raise ValueError("give either checkpoint= or parameters=, not both")
+    the ``default`` family's when one is committed), or its seed study's ``training_seed``."""
+    if sum(x is not None for x in (checkpoint, parameters, training_seed)) > 1:
+        raise ValueError("give one of checkpoint=, parameters= and training_seed=, not several")
     if checkpoint is not None:
         return Path(checkpoint)
-    return weights_of_artifact(parameters or committed_artifact(estimator, scenario, label), estimator)
+    return weights_of_artifact(parameters or committed_artifact(estimator, scenario, label, training_seed=training_seed),
+                               estimator)
 
 
 def artifact_factory(name: str, cls: type[TrainedKalmanEstimator] = TrainedKalmanEstimator) -> Callable[..., Any]:
     """Registry factory of the trained estimator ``name``: the committed artefact of the
     scenario's model family (see :func:`artifact_family`), or ``parameters=PATH`` (a
     ``parameters.json`` written by ``fkn-bench train``); ``gate``: a chi-square innovation gate
-    level (:class:`~fkn_bench.estimators.KalmanEstimator`)."""
+    level (:class:`~fkn_bench.estimators.KalmanEstimator`); ``training_seed``: that seed of the
+    committed artefact's seed study (:mod:`fkn_bench.training.seeds`)."""
 
     def factory(scenario: Scenario | None = None, *, parameters: str | Path | None = None,
-                gate: float | None = None) -> TrainedKalmanEstimator:
-        path = parameters if parameters is not None else committed_artifact(name, scenario)
+                gate: float | None = None, training_seed: int | None = None) -> TrainedKalmanEstimator:
+        if parameters is not None and training_seed is not None:
+            raise ValueError("give either parameters= or training_seed=, not both")
+        path = parameters if parameters is not None else committed_artifact(name, scenario, training_seed=training_seed)
         return cls.from_artifact(path, name=name, gate=gate)
 
     factory.__name__ = f"{name.replace('-', '_')}_factory"
