@@ -91,6 +91,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
                         help="worker processes (local: a process pool when > 1; dask: LocalCluster size)")
     parser.add_argument("--scheduler", metavar="ADDRESS", help="Dask scheduler address (default: start a LocalCluster)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar on stderr")
+    parser.add_argument("--training-seeds", action=argparse.BooleanOptionalAction, default=None,
+                        help="also run every other training seed of an estimator whose committed parameters a seed "
+                             "study chose (fkn-bench train --seeds), for the leaderboards' training-seed spread "
+                             "(default: with --all)")
     parser.add_argument("--estimator-option", action="append", default=[], metavar="KEY=VALUE",
                         help="option for the estimators' factories, e.g. parameters=runs/fkn/parameters.json "
                              "(repeatable)")
@@ -179,7 +183,9 @@ def _estimators(args: argparse.Namespace, scenarios: list[Any]) -> list[Any]:
     if options and not args.estimator:
         raise UsageError("--estimator-option needs --estimator NAME")
     with usage_errors(UnknownEstimatorError, SelectionError):
-        selection = select_estimators(args.estimator, scenarios, every=args.all, options=options)
+        seeds = args.all if args.training_seeds is None else args.training_seeds
+        selection = select_estimators(args.estimator, scenarios, every=args.all, options=options,
+                                      training_seeds=seeds and not options)
     for note in selection.notes:
         print(f"fkn-bench run: {note}", file=sys.stderr)
     return selection.resolved

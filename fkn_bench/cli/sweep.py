@@ -44,7 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser = add_command(subparsers, "sweep", "hyperparameter search (random then grid, or TPE) on optuna",
                          __doc__)
     parser.add_argument("--space", required=True, metavar="TOML",
-                        help="search-space file, or a packaged space name (paper, quick, kalmannet-seeds)")
+                        help="search-space file, or a packaged space name (paper, quick, seeds, kalmannet-seeds)")
     parser.add_argument("--estimator", help="trainable estimator (default: the space's, else flexkalmannet)")
     parser.add_argument("--scenario", help="training scenario (default: the space's, else ds1)")
     parser.add_argument("--trials", type=int, metavar="N",
@@ -111,6 +111,10 @@ def run(args: argparse.Namespace) -> int:
                                  f"and these do not build it: {exc}") from None
         if sampler == "grid":
             space.grid()
+    if args.write_artifact and is_trainable(estimator) and [k.name for k in space.knobs] == ["seed"]:
+        raise UsageError(f"--write-artifact: a seed study of {estimator} installs its median-validation seed through "
+                         f"training: fkn-bench train --estimator {estimator} --scenario {scenario.name} --seeds "
+                         f"{' '.join(str(v) for v in space.knobs[0].values or ())} --write-artifact")
     if args.write_artifact and is_trainable(estimator):
         raise UsageError(f"--write-artifact installs the searched options of an estimator that is not trained; train "
                          f"{estimator} with the sweep's best.toml instead: fkn-bench train --estimator {estimator} "

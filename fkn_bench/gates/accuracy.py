@@ -261,10 +261,10 @@ def _committed_rows(records: Iterable[Any], seeds: Mapping[tuple[str, str], tupl
 
 
 def _committed_cells(results_dir: str | Path, gated: set[tuple[str, str]]) -> tuple[Any, list[str]]:
-    """``(results, labels)``: the committed cells of the ``gated`` ``(estimator label, scenario)``
+    """``(results, names)``: the committed cells of the ``gated`` ``(estimator label, scenario)``
     pairs as :class:`~fkn_bench.harness.Results` (read and checksummed as
-    :meth:`~fkn_bench.harness.ResultStore.load` reads them), and the estimator labels of every
-    committed cell, from the cells' JSON records alone: the rows of the pairs not gated (most of
+    :meth:`~fkn_bench.harness.ResultStore.load` reads them), and the estimator names of every
+    committed cell (a run with options, such as a training-seed replica, is its estimator's), from the cells' JSON records alone: the rows of the pairs not gated (most of
     the store) are not parsed. Raises :class:`~fkn_bench.harness.StoreError` as ``load`` does for
     a missing or empty directory, and for a cell record that cannot be read."""
     from fkn_bench.harness import ResultStore, Results, StoreError
@@ -280,16 +280,18 @@ def _committed_cells(results_dir: str | Path, gated: set[tuple[str, str]]) -> tu
     if not everything:
         store.load()  # raises the store's error (no such directory, no cells)
     labels: dict[Path, tuple[str, str]] = {}
+    names = set()
     for path in everything:
         try:
             document = read_json(path)
             labels[path] = (estimator_label(document["estimator"], document["key"].get("estimator_options") or ()),
                             document["scenario"])
+            names.add(document["estimator"])
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise StoreError(f"{path} is not a readable fkn-bench cell file: {exc}") from None
     files = [path for path in everything if labels[path] in gated]
     results = _Gated(results_dir).load() if files else Results([])
-    return results, sorted({label for label, _ in labels.values()})
+    return results, sorted(names)
 
 
 def _compare(committed: pd.DataFrame, now: pd.DataFrame, tolerances: Sequence[tuple[str, Tolerance]]) -> tuple[list[Difference], int]:

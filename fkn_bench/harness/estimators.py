@@ -27,6 +27,8 @@ __all__ = [
     "resolve_estimator",
     "resolve",
     "select_estimators",
+    "TRAINING_SEED_OPTION",
+    "training_seed_replicas",
 ]
 
 DEFAULT_ESTIMATOR_PREFERENCE: tuple[str, ...] = ("flexkalmannet", "manual-ekf")
@@ -198,12 +200,50 @@ def _default(scenarios: Sequence[Scenario]) -> tuple[list[ResolvedEstimator], li
     return pairs, [f"{better} is not available ({reason}); running {name}" for better, reason in passed]
 
 
+TRAINING_SEED_OPTION = "training_seed"
+"""The factory option that builds another training seed of a seed study
+(:mod:`fkn_bench.training.seeds`): a cell with this option alone is a *training-seed replica* of
+the estimator's committed row, which the leaderboards fold into that row's training-seed spread
+instead of ranking it."""
+
+
+def _seed_study_of(name: str, scenario: Scenario) -> dict[str, Any] | None:
+    """The seed study of the committed artefact ``name`` runs from on ``scenario`` (None: none)."""
+    from fkn_bench.training.artifacts import artifact_family, committed_artifact_path, seed_study
+
+    try:
+        path = committed_artifact_path(name, artifact_family(name, scenario))
+    except (ValueError, KeyError, OSError):
+        return None
+    return None if path is None else seed_study(path)
+
+
+def training_seed_replicas(pairs: Sequence[ResolvedEstimator], scenarios: Sequence[Scenario]) -> list[ResolvedEstimator]:
+    """For every available pair of ``pairs`` built without options from a committed artefact that
+    a seed study chose, the same estimator built with each other seed of the study
+    (``training_seed=K``): what the leaderboards' training-seed spread is computed from."""
+    by_name = {s.name: s for s in scenarios}
+    replicas = []
+    for pair in pairs:
+        scenario = by_name.get(pair.scenario)
+        if not pair.available or pair.options or scenario is None:
+            continue
+        study = _seed_study_of(pair.name, scenario)
+        if study is None:
+            continue
+        for run in study.get("runs", ()):
+            if run.get("status") == "ok" and int(run["seed"]) != int(study["chosen_seed"]):
+                replicas.append(resolve_estimator(pair.name, scenario, {TRAINING_SEED_OPTION: int(run["seed"])}))
+    return replicas
+
+
 def select_estimators(
     names: Sequence[str] | None,
     scenarios: Sequence[Scenario],
     *,
     every: bool = False,
     options: dict[str, Any] | None = None,
+    training_seeds: bool = False,
 ) -> Selection:
     """The estimators to run on ``scenarios``, each pair resolved once.
 
@@ -213,6 +253,9 @@ def select_estimators(
     * no names, ``every``: every registered estimator; unavailable pairs are skipped with a note,
       estimators with no available pair dropped.
     * no names: the default (:data:`DEFAULT_ESTIMATOR_PREFERENCE`), which must be available.
+
+    ``training_seeds``: also every :func:`training_seed_replicas` of the chosen pairs (one whose
+    seed file is missing is skipped with a note).
     """
     if names or every:
         pairs, notes = resolve(names or None, scenarios, options), []
@@ -228,4 +271,10 @@ def select_estimators(
             notes.append(f"skipping {pair.name} on {pair.scenario} (not available: {pair.error})")
     if not chosen:
         raise SelectionError("no available estimator to run")
+    if training_seeds:
+        for replica in training_seed_replicas(chosen, scenarios):
+            if replica.available:
+                chosen.append(replica)
+            else:
+                notes.append(f"skipping a training seed of {replica.name} on {replica.scenario} ({replica.error})")
     return Selection(chosen, notes)

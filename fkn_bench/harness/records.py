@@ -64,6 +64,16 @@ class CellRecord:
         return estimator_label(self.estimator, self.key.get("estimator_options") or ())
 
     @property
+    def training_seed(self) -> int | None:
+        """The training seed of a training-seed replica (a cell run with the option
+        ``training_seed=K`` alone, :data:`fkn_bench.harness.estimators.TRAINING_SEED_OPTION`),
+        else None."""
+        options = self.key.get("estimator_options") or ()
+        if len(options) == 1 and options[0][0] == "training_seed":
+            return int(options[0][1])
+        return None
+
+    @property
     def name(self) -> str:
         """Human-readable cell name, e.g. ``manual-ekf/ds1/seeds-0-9``
         (:attr:`fkn_bench.harness.grid.CellSpec.name`)."""
@@ -104,6 +114,14 @@ class Results:
 
     def __len__(self) -> int:
         return len(self.records)
+
+    def split_training_seeds(self) -> tuple[Results, Results]:
+        """``(ranked, replicas)``: the records that leaderboards rank (bounds kept) and the
+        training-seed replicas (:attr:`CellRecord.training_seed`), which they fold into the
+        training-seed spread of the estimator's row."""
+        ranked = Results(r for r in self.records if r.training_seed is None)
+        ranked.bounds = self.bounds
+        return ranked, Results(r for r in self.records if r.training_seed is not None)
 
     @property
     def rows(self) -> pd.DataFrame:

@@ -273,7 +273,8 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
                    references: Sequence[dict[str, Any]] = (), bound: dict[str, Any] | None = None) -> Table:
     numbers = rank_numbers(ranked, tests)
     header = [
-        "rank", "estimator", "13-state RMSE [95% CI]", "vs. above", "median [IQR]", "efficiency", "attitude (deg)",
+        "rank", "estimator", "13-state RMSE [95% CI]", "vs. above", "training seeds", "median [IQR]", "efficiency",
+        "attitude (deg)",
         "position (m)", "rate (rad/s)",
         "velocity (m/s)", "settling (s)", "settled", "lost track", "NEES flag", "ANEES", "NEES in 95% bounds",
         "µs/step online",
@@ -287,6 +288,7 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
             _label(s),
             _with_interval(s),
             _versus_above(test, i == 0) if number is not None else _DASH,
+            _training_seed_cell(s),
             f"{_fmt(st['median'], 4)} [{_fmt(st['q25'], 3)}, {_fmt(st['q75'], 3)}]",
             format_efficiency(efficiencies(s, bound)["state"]),
             *(_fmt(s[k]) for k in (*GROUP_RMSE_KEYS.values(), "settling_time_s")),
@@ -299,8 +301,8 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
             _fmt(s["us_per_step_batched"]),
         ])
     if bound is not None:
-        rows.append([_DASH, BOUND_LABEL, _bound_cell(bound, "state", 4), _DASH, _DASH, "1",
-                     *(_bound_cell(bound, g) for g in GROUPS)] + [_DASH] * (len(header) - 10))
+        rows.append([_DASH, BOUND_LABEL, _bound_cell(bound, "state", 4), _DASH, _DASH, _DASH, "1",
+                     *(_bound_cell(bound, g) for g in GROUPS)] + [_DASH] * (len(header) - 11))
     for q in quoted:
         rows.append([_DASH, q.label, f"{_fmt(q.state_rmse, 4)}*"] + [_DASH] * (len(header) - 3))
     runs = sorted({s["runs"] for s in [*ranked, *references]})
@@ -315,6 +317,11 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
         f"vs. above: {TEST_METHOD}. '=': the test cannot separate the estimator from the one ranked above "
         f"(p >= {ALPHA:g}), so it shares that rank; '<': separated; n/a: not tested (no common episode, or a score "
         "that is not finite).",
+        "training seeds: the spread over training seeds beside the spread over test episodes: the lowest and "
+        "highest mean 13-state RMSE, on the same test episodes, of the parameters that each seed of the estimator's "
+        "training-seed study produced (fkn-bench train --seeds; in brackets the number of seeds). The ranked row is "
+        "the seed of the median validation RMSE, chosen before any test score was read; a dash: trained with one "
+        "seed, or not trained.",
         "settling: mean over seeds of the time until every group error stays in its band; settled: share of "
         "seeds where every group settled. lost track: share of seeds whose estimate lost the track (NaN, "
         "a failed Cholesky factorisation, or error growth); NEES flag: share of seeds whose NEES stayed above the "
@@ -437,8 +444,37 @@ def _scenario_intro(results: Results, scenario: str, runs: int) -> list[str]:
 
 
 def _summaries(results: Results, scenario: str) -> list[dict[str, Any]]:
-    estimators = sorted({r.label for r in results.records if r.scenario == scenario})
-    return [summarize_pair(results, e, scenario) for e in estimators]
+    """The summary of every estimator stored for ``scenario`` except the training-seed replicas,
+    which become the ``training_seed_rmse`` of their estimator's summary (:func:`_training_seeds`)."""
+    estimators = sorted({r.label for r in results.records if r.scenario == scenario and r.training_seed is None})
+    summaries = [summarize_pair(results, e, scenario) for e in estimators]
+    for summary in summaries:
+        _training_seeds(results, summary, scenario)
+    return summaries
+
+
+def _training_seeds(results: Results, summary: dict[str, Any], scenario: str) -> None:
+    """Add ``training_seed_rmse`` to ``summary`` when training-seed replicas of its estimator
+    (:attr:`~fkn_bench.harness.records.CellRecord.training_seed`) were scored on the same test
+    episodes: the mean 13-state RMSE of the committed row (the seed its study chose) and of each
+    other training seed, in that order."""
+    name, episodes = summary["estimator"], results.seeds(summary["estimator"], scenario)
+    replicas = sorted({(r.training_seed, r.label) for r in results.records
+                       if r.scenario == scenario and r.estimator == name and r.training_seed is not None})
+    values = [summary["state_rmse"]]
+    for _, label in replicas:
+        if results.seeds(label, scenario) == episodes:
+            values.append(summarize_pair(results, label, scenario)["state_rmse"])
+    if len(values) > 1:
+        summary["training_seed_rmse"] = values
+
+
+def _training_seed_cell(summary: dict[str, Any]) -> str:
+    """``min – max (n)`` of the mean 13-state RMSE over the training seeds (a dash: one seed)."""
+    values = summary.get("training_seed_rmse")
+    if not values:
+        return _DASH
+    return f"{_fmt(min(values), 4)} – {_fmt(max(values), 4)} ({len(values)})"
 
 
 def ranked_and_references(results: Results, scenario: str) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
@@ -496,6 +532,9 @@ def _scenario_csv(ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest |
             "tied_with_above": test.tied if tested else None,
             "p_vs_above": float(f"{test.pvalue:.3g}") if tested else None,
             **{f"state_rmse_{k}": st[k] for k in ("median", "q25", "q75")},
+            "training_seeds": len(s.get("training_seed_rmse") or ()) or None,
+            "state_rmse_training_seed_min": min(s["training_seed_rmse"]) if s.get("training_seed_rmse") else None,
+            "state_rmse_training_seed_max": max(s["training_seed_rmse"]) if s.get("training_seed_rmse") else None,
             **{k: s[k] for k in GROUP_RMSE_KEYS.values()},
             **{f"rmse_{n}": s["rmse"][n] for n in STATE_NAMES},
             **{k: s[k] for k in ("settling_time_s", "settled_fraction", "diverged_fraction", "lost_track_fraction", "anees")},
@@ -515,6 +554,7 @@ def _scenario_csv(ranked: Sequence[dict[str, Any]], tests: Sequence[PairedTest |
                         **{f"efficiency_{k}": 1.0 for k in EFFICIENCY_KEYS}})
     frame = pd.DataFrame(records)
     frame["rank"] = frame["rank"].astype("Int64")
+    frame["training_seeds"] = frame["training_seeds"].astype("Int64")
     frame["tied_with_above"] = frame["tied_with_above"].astype("boolean")
     return rows_to_csv(frame, float_format=CSV_FLOAT_FORMAT)
 

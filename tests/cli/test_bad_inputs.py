@@ -45,6 +45,12 @@ BAD_INPUTS = [
     ("train --set hidden=abc --estimator flexkalmannet --out t", "FlexKalmanNet config key 'hidden' must be an integer (got 'abc')"),
     ("train --epochs 0 --estimator flexkalmannet --out t", "--epochs must be a positive integer (got 0)"),
     ("train --lr -1 --estimator flexkalmannet --out t", "--lr must be a finite number > 0 (got -1)"),
+    ("train --seeds 0 1 --seed 3 --out t", "give either --seed or --seeds, not both"),
+    ("train --seeds 0 0 --out t", "--seeds must be distinct integers >= 0 (got 0 0)"),
+    ("train --seeds 1 2 --set hiddn=64 --out t", "unknown FlexKalmanNet config keys ['hiddn']; valid:"),
+    ("sweep --space seeds --scenario spin --write-artifact --out t",
+     "a seed study of flexkalmannet installs its median-validation seed through training: fkn-bench train "
+     "--estimator flexkalmannet --scenario spin --seeds 0 1 2 --write-artifact"),
     ("train --device gpu --estimator flexkalmannet --out t", "unknown device 'gpu': use cpu, cuda or cuda:N"),
     ("train --device cuda:7 --estimator flexkalmannet --out t", "device 'cuda:7' asked for, but "),
     ("bench train --device cuda:7", "device 'cuda:7' asked for, but "),

@@ -143,6 +143,12 @@ def test_files_and_packaged_spaces(tmp_path: Path) -> None:
     seeds = load_space(resolve_space("kalmannet-seeds"))  # KalmanNet's training robustness: ten seeds
     assert seeds.defaults["estimator"] == "kalmannet" and seeds.pruner.kind == "none"
     assert [trial_config("kalmannet", seeds, {"seed": s}).train_config().seed for s in (0, 9)] == [0, 9]
+    study = load_space(resolve_space("seeds"))  # any trainable estimator's training-seed study
+    assert "estimator" not in study.defaults and study.pruner.kind == "none" and study.names == ["seed"]
+    from fkn_bench.estimators.registry import estimator_specs
+
+    for name in sorted(s.name for s in estimator_specs() if s.trainable is not None):
+        assert [trial_config(name, study, {"seed": s}).train_config().seed for s in (0, 2)] == [0, 2], name
     paper = load_space(resolve_space("paper"))
     assert {"hidden", "layers", "lr", "window", "loss_cut", "dropout", "weight_decay", "activation", "variant",
             "objective"} <= set(paper.names)

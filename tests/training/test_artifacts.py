@@ -69,7 +69,7 @@ def test_parameter_files_are_complete_or_rejected_naming_file_and_key(tmp_path) 
         make_estimator("flexkalmannet", parameters="")
     with pytest.raises(ArtifactError, match="is a directory"):
         make_estimator("flexkalmannet", parameters=str(tmp_path))
-    with pytest.raises(ValueError, match="either checkpoint=PATH or parameters=PATH, not both"):
+    with pytest.raises(ValueError, match="give one of checkpoint=PATH, parameters=PATH and training_seed=K, not several"):
         make_estimator("flexkalmannet", parameters=written("same.json", lambda d: None), checkpoint="x.pt")
 
 
