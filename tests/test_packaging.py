@@ -27,7 +27,7 @@ def test_every_data_file_of_a_package_is_shipped() -> None:
     directories = {**{name: REPO / Path(*name.split(".")) for name in config["packages"]}, **{n: REPO / d for n, d in MAPPED.items()}}
     for package, directory in directories.items():
         for folder in ("params", "spaces"):
-            for path in sorted((directory / folder).glob("*")):
+            for path in sorted(p for p in (directory / folder).rglob("*") if p.is_file() and "__pycache__" not in p.parts):
                 patterns = config["package-data"].get(package, [])
                 assert any(path.relative_to(directory).match(p) for p in patterns), \
                     f"{path.relative_to(REPO)} is not shipped: add a pattern to pyproject.toml [tool.setuptools.package-data] {package!r}"

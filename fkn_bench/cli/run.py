@@ -14,6 +14,11 @@ refused unless ``--force``. A cell is filed under its estimator, scenario and va
 a killed run leaves nothing that the next run trusts and resumes to the same results. Results are
 identical for the same seeds whatever the backend or worker count.
 
+With ``--all`` (or ``--training-seeds``) every other training seed of an estimator whose committed
+parameters a seed study chose (``fkn-bench train --seeds``, :mod:`fkn_bench.training.seeds`) runs
+too, as ``flexkalmannet (training_seed=1)``: the leaderboards fold those rows into the estimator's
+training-seed spread instead of ranking them.
+
 Examples::
 
     fkn-bench run                                   # the best built-in estimator on spin (a prior family), 20 test episodes
