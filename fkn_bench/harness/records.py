@@ -115,14 +115,6 @@ class Results:
     def __len__(self) -> int:
         return len(self.records)
 
-    def split_training_seeds(self) -> tuple[Results, Results]:
-        """``(ranked, replicas)``: the records that leaderboards rank (bounds kept) and the
-        training-seed replicas (:attr:`CellRecord.training_seed`), which they fold into the
-        training-seed spread of the estimator's row."""
-        ranked = Results(r for r in self.records if r.training_seed is None)
-        ranked.bounds = self.bounds
-        return ranked, Results(r for r in self.records if r.training_seed is not None)
-
     @property
     def rows(self) -> pd.DataFrame:
         """All tidy rows, sorted (:func:`fkn_bench.harness.rows.sort_rows`)."""
