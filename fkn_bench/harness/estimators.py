@@ -218,15 +218,25 @@ def _seed_study_of(name: str, scenario: Scenario) -> dict[str, Any] | None:
     return None if path is None else seed_study(path)
 
 
+def family_headline(scenario: Scenario) -> bool:
+    """Whether ``scenario`` is its model family's headline: the scenario the family is named after
+    (spin, free-tumble, ds1, ds2, ds1-noise-step), or any scenario of a family that none is named
+    after (the tumble mixture's tumble-slow, tumble-fast, ...). Training seeds are scored there."""
+    from fkn_bench.scenarios import scenario_names
+
+    return scenario.name == scenario.model_family or scenario.model_family not in scenario_names()
+
+
 def training_seed_replicas(pairs: Sequence[ResolvedEstimator], scenarios: Sequence[Scenario]) -> list[ResolvedEstimator]:
-    """For every available pair of ``pairs`` built without options from a committed artefact that
-    a seed study chose, the same estimator built with each other seed of the study
-    (``training_seed=K``): what the leaderboards' training-seed spread is computed from."""
+    """For every available pair of ``pairs`` on a :func:`family_headline` scenario, built without
+    options from a committed artefact that a seed study chose, the same estimator built with each
+    other seed of the study (``training_seed=K``): what the leaderboards' training-seed spread is
+    computed from."""
     by_name = {s.name: s for s in scenarios}
     replicas = []
     for pair in pairs:
         scenario = by_name.get(pair.scenario)
-        if not pair.available or pair.options or scenario is None:
+        if not pair.available or pair.options or scenario is None or not family_headline(scenario):
             continue
         study = _seed_study_of(pair.name, scenario)
         if study is None:

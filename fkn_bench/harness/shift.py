@@ -36,7 +36,7 @@ REFERENCE = "manual-ekf"
 
 SHIFT_ESTIMATORS: tuple[str, ...] = (
     "flexkalmannet", "flexkalmannet-rigid-body", "flexkalmannet-tv", "direct-tuned-ekf", "nll-tuned-ekf",
-    "kalmannet", "recursive-kalmannet", "akhlaghi", "sage-husa", "vbakf",
+    "kalmannet", "recursive-kalmannet", "split-kalmannet", "cholesky-kalmannet", "akhlaghi", "sage-husa", "vbakf",
 )
 """The learned and tuned estimators: each runs with its family's committed parameters."""
 

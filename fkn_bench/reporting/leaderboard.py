@@ -320,8 +320,9 @@ def _ranking_table(ranked: Sequence[dict[str, Any]], quoted: Sequence[QuotedRow]
         "training seeds: the spread over training seeds beside the spread over test episodes: the lowest and "
         "highest mean 13-state RMSE, on the same test episodes, of the parameters that each seed of the estimator's "
         "training-seed study produced (fkn-bench train --seeds; in brackets the number of seeds). The ranked row is "
-        "the seed of the median validation RMSE, chosen before any test score was read; a dash: trained with one "
-        "seed, or not trained.",
+        "the seed of the median validation RMSE, chosen before any test score was read. Scored on each family's "
+        "headline scenarios (the one it is named after, and the tumble scenarios); a dash: trained with one seed, "
+        "not trained, or not a headline scenario.",
         "settling: mean over seeds of the time until every group error stays in its band; settled: share of "
         "seeds where every group settled. lost track: share of seeds whose estimate lost the track (NaN, "
         "a failed Cholesky factorisation, or error growth); NEES flag: share of seeds whose NEES stayed above the "

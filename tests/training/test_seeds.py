@@ -97,6 +97,8 @@ def test_the_leaderboard_shows_the_spread_over_training_seeds(installed: tuple[o
     selection = select_estimators([NAME, "manual-ekf"], [SHORT], training_seeds=True)
     assert sorted(dict(r.options).get("training_seed", -1) for r in selection.resolved) == sorted(
         [-1, -1, *(r.seed for r in study.runs if r.seed != study.chosen)])
+    stress = get_scenario("ds1-noise5x", n_steps=2000)  # ds1's family, not its headline: no replicas
+    assert [dict(r.options) for r in select_estimators([NAME], [stress], training_seeds=True).resolved] == [{}]
     store = ResultStore(tmp_path)
     run_grid(build_grid(selection.resolved, [SimulatedSource(SHORT)], range(3)), store=store, progress=False)
     files = build_leaderboards(store.load())
