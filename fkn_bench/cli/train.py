@@ -21,6 +21,8 @@ with ``--write-artifact`` the chosen run is installed with the study in its reco
 seeds under ``params/seeds/``, where the leaderboards' training-seed spread comes from::
 
     fkn-bench train --estimator flexkalmannet --scenario spin --seeds 0 1 2 --write-artifact
+    fkn-bench train --estimator kalmannet --scenario spin --config fkn_bench/kalmannet/params/kalmannet-spin.json \\
+        --seeds 0 1 2 --write-artifact     # the committed configuration, again
 """
 
 from __future__ import annotations
@@ -55,7 +57,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--objective", choices=("supervised", "nll", "gaussian-nll"),
                         help="training objective (gaussian-nll: estimators with a covariance of their own, "
                              "recursive-kalmannet and cholesky-kalmannet)")
-    parser.add_argument("--config", metavar="TOML", help="configuration file (options below override it)")
+    parser.add_argument("--config", metavar="TOML|JSON",
+                        help="configuration file (options below override it), or a learned-parameter file "
+                             "(params/<estimator>-<family>.json) whose training configuration to train with again")
     parser.add_argument("--epochs", type=int, help="maximum epochs")
     parser.add_argument("--lr", type=float, help="learning rate")
     parser.add_argument("--seed", type=int, help="random seed")

@@ -106,15 +106,32 @@ def trainable(estimator: str) -> Trainable:
     return declared
 
 
+def _artifact_config(path: str | Path) -> dict[str, Any]:
+    """The training configuration a learned-parameter artefact (``.json``) records, without its
+    seed and the values it left unset: what retrains it (``--config ARTEFACT --seed K``, or a seed
+    study's ``--seeds``)."""
+    from fkn_bench.training.artifacts import read_artifact
+
+    config = (read_artifact(path).get("training") or {}).get("config")
+    if not isinstance(config, dict):
+        raise ValueError(f"{path}: a learned-parameter file without a training configuration ('training.config')")
+    return {k: v for k, v in config.items() if v is not None and k != "seed"}
+
+
 def options_with_file(options: Mapping[str, Any], *tables: str) -> dict[str, Any]:
     """``options`` over the values of the TOML file named by option ``config`` (its first table
-    of ``tables`` that exists, else its top level), as :class:`~fkn_bench.training.options.FileOptions`
-    that remember which keys the file gave (errors name it); ``options`` without ``config`` as
-    they are."""
+    of ``tables`` that exists, else its top level), or of the training configuration of the
+    learned-parameter artefact it names (a ``.json`` file: a committed ``params/<estimator>-<family>.json``
+    retrains with the configuration it was trained with), as
+    :class:`~fkn_bench.training.options.FileOptions` that remember which keys the file gave
+    (errors name it); ``options`` without ``config`` as they are."""
     options = dict(options)
     path = options.pop("config", None)
     if not path:
         return options
+    if str(path).endswith(".json"):
+        table = _artifact_config(path)
+        return FileOptions({**table, **options}, {key: str(path) for key in table if key not in options})
     document = read_toml(path)
     table = next((document[t] for t in tables if t in document), document)
     if not isinstance(table, dict):

@@ -25,6 +25,7 @@ from fkn_bench.training.seeds import install_seed_study, median_seed, train_seed
 SHORT = get_scenario("ds1", n_steps=2000)
 OPTIONS = {"window": 200, "loss_cut": 50, "episodes": 1, "epochs": 2, "lr": 0.05, "windows_per_batch": 2}
 NAME = "seed-study-test-ekf"
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_the_median_validation_seed_is_chosen() -> None:
@@ -110,3 +111,20 @@ def test_the_leaderboard_shows_the_spread_over_training_seeds(installed: tuple[o
     assert row.state_rmse_training_seed_min < row.state_rmse_training_seed_max
     assert pd.isna(ranking.set_index("estimator").loc["manual-ekf"].training_seeds)
     assert "training seeds" in files["ds1.md"] and "(3) |" in files["ds1.md"]
+
+
+@pytest.mark.parametrize("name, path", [
+    ("flexkalmannet", "fkn_bench/flexkalmannet/params/flexkalmannet-spin.json"),
+    ("kalmannet", "fkn_bench/kalmannet/params/kalmannet-spin.json"),
+    ("direct-tuned-ekf", "baselines/params/direct-tuned-ekf-spin.json"),
+])
+def test_a_committed_artifact_retrains_with_the_configuration_it_records(name: str, path: str) -> None:
+    """``--config ARTEFACT.json``: what a seed study of a committed estimator starts from."""
+    from fkn_bench.training import trainable
+
+    committed = read_artifact(REPO / path)["training"]["config"]
+    again = trainable(name).config({"config": str(REPO / path), "seed": 7}).train_config()
+    assert again.seed == 7
+    assert {k: v for k, v in committed.items() if v is not None and k != "seed"} == {
+        k: list(v) if isinstance(v, tuple) else v for k, v in vars(again).items()
+        if k in committed and committed[k] is not None and k != "seed"}
