@@ -39,7 +39,7 @@ from fkn_bench.scenarios import Scenario
 __all__ = ["SEED_STUDY_FILE", "SEED_RULE", "SeedRun", "SeedStudy", "median_seed", "train_seeds", "install_seed_study"]
 
 SEED_STUDY_FILE = "seed_study.json"
-SEED_RULE = "median validation 13-state RMSE (ties: the lower seed; an even count: the lower middle)"
+SEED_RULE = "median validation 13-state RMSE (equal values ordered by seed; an even count: the lower middle)"
 """How the committed seed is chosen (module docstring), as the study records it."""
 
 
