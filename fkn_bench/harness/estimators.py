@@ -41,8 +41,9 @@ class ResolvedEstimator:
     """Estimator ``name`` (registered name) built once for scenario ``scenario`` (its name) with
     factory ``options`` (sorted ``(name, value)`` pairs). ``estimator`` is None when the factory
     raised and ``error`` (``"Type: message"``) says why. ``fingerprint``: 16 hex digits of SHA-256
-    over ``to_config()`` (floats rounded to :data:`FINGERPRINT_DIGITS`), so that a retuned
-    estimator is recomputed on resume; "" when unknown (unavailable, or not JSON-compatible)."""
+    over ``to_config()`` (floats rounded to :data:`FINGERPRINT_DIGITS`) and the content of the
+    weights files it names (:func:`_named_files`), so that a retuned or retrained estimator is
+    recomputed on resume; "" when unknown (unavailable, or not JSON-compatible)."""
 
     name: str
     scenario: str
@@ -101,6 +102,27 @@ def _rounded(value: Any) -> Any:
     return value
 
 
+WEIGHT_FILE_SUFFIXES = (".pt", ".pth")
+"""Configuration values naming a file with these endings are weights whose content the
+fingerprint covers (:func:`_named_files`)."""
+
+
+def _named_files(config: Any) -> dict[str, str]:
+    """``{key: SHA-256}`` of the weights files that ``config``'s top-level string values name (a
+    checkpoint, a committed ``.weights.pt`` by its label): a network estimator's configuration
+    names its weights by path, so without their content a retrained network in the same file would
+    keep its fingerprint and its stale cells would be reused."""
+    from fkn_bench.training.artifacts import resolve_artifact_label
+
+    digests = {}
+    for key, value in (config.items() if isinstance(config, dict) else ()):
+        if isinstance(value, str) and value.endswith(WEIGHT_FILE_SUFFIXES):
+            path = resolve_artifact_label(value)
+            if path.is_file():
+                digests[key] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return digests
+
+
 def resolve_estimator(name: str, scenario: Scenario, options: dict[str, Any] | None = None) -> ResolvedEstimator:
     """Build ``name`` for ``scenario`` (with factory ``options``) once and describe it (never
     raises for factory errors: they make the result unavailable)."""
@@ -116,6 +138,9 @@ def resolve_estimator(name: str, scenario: Scenario, options: dict[str, Any] | N
         return ResolvedEstimator(name, scenario.name, error=f"{type(exc).__name__}: {exc}", options=items)
     try:
         text = json.dumps(_rounded(to_jsonable(config)), sort_keys=True)
+        files = _named_files(config)
+        if files:  # (estimators that name no file keep the fingerprint they always had)
+            text += json.dumps(files, sort_keys=True)
         fingerprint = hashlib.sha256(text.encode()).hexdigest()[:16]
     except (TypeError, ValueError):
         fingerprint = ""

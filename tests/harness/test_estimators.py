@@ -64,3 +64,22 @@ def test_default_prefers_flexkalmannet(monkeypatch: pytest.MonkeyPatch) -> None:
                                "running manual-ekf"]
     registry.register_estimator("flexkalmannet", lambda scenario=None, **_: make_estimator("manual-ekf"), overwrite=True)
     assert select_estimators(None, [get_scenario("ds1")]).names == ["flexkalmannet"]
+
+
+def test_a_network_retrained_into_the_same_file_gets_another_fingerprint(tmp_path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A network estimator's configuration names its weights by path: the fingerprint covers their
+    content, so that cells of the network that was there before are recomputed, not reused."""
+    import shutil
+    from pathlib import Path
+
+    from fkn_bench.training.artifacts import committed_artifact_path, weights_of_artifact
+
+    weights = weights_of_artifact(committed_artifact_path("kalmannet", "ds1"), "kalmannet")
+    mine = tmp_path / "checkpoint.pt"
+    shutil.copy(weights, mine)
+    scenario = get_scenario("ds1")
+    first = resolve_estimator("kalmannet", scenario, {"checkpoint": str(mine)})
+    assert first.available and first.fingerprint == resolve_estimator("kalmannet", scenario, {"checkpoint": str(mine)}).fingerprint
+    shutil.copy(Path(str(weights).replace("-ds1.", "-ds2.")), mine)  # retrained: other weights, same file
+    assert resolve_estimator("kalmannet", scenario, {"checkpoint": str(mine)}).fingerprint != first.fingerprint
+    assert resolve_estimator("manual-ekf", scenario).fingerprint  # estimators naming no file: as before
