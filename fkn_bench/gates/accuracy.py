@@ -264,8 +264,9 @@ def _committed_cells(results_dir: str | Path, gated: set[tuple[str, str]]) -> tu
     """``(results, names)``: the committed cells of the ``gated`` ``(estimator label, scenario)``
     pairs as :class:`~fkn_bench.harness.Results` (read and checksummed as
     :meth:`~fkn_bench.harness.ResultStore.load` reads them), and the estimator names of every
-    committed cell (a run with options, such as a training-seed replica, is its estimator's), from the cells' JSON records alone: the rows of the pairs not gated (most of
-    the store) are not parsed. Raises :class:`~fkn_bench.harness.StoreError` as ``load`` does for
+    committed cell (a run with options, such as a training-seed replica, counts as its estimator),
+    from the cells' JSON records alone: the rows of the pairs not gated (most of the store) are not
+    parsed. Raises :class:`~fkn_bench.harness.StoreError` as ``load`` does for
     a missing or empty directory, and for a cell record that cannot be read."""
     from fkn_bench.harness import ResultStore, Results, StoreError
     from fkn_bench.harness.grid import estimator_label

@@ -151,8 +151,8 @@ def train_seeds(
     ``seeds`` (each overrides ``options``' seed) into ``out/seed-<K>/``, choose the median
     validation seed and write ``out/seed_study.json`` and ``.csv`` (module docstring).
 
-    ``resume`` continues each seed from its own checkpoint where one is there (a finished seed
-    is then evaluated again, not retrained). A seed whose training raises ``ValueError`` or
+    ``resume`` continues each seed from its own checkpoint where one is there (``fit(...,
+    resume=True)``), so an interrupted study goes on where it stopped. A seed whose training raises ``ValueError`` or
     ``FloatingPointError`` (a configuration the estimator refuses fails every seed alike and is
     raised at once, before any seed is recorded) is recorded as failed. Raises ``ValueError``
     for fewer than one seed, repeated seeds or no seed that trained.
