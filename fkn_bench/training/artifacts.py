@@ -116,8 +116,8 @@ def training_seed_artifact(path: str | Path, estimator: str, family: str, seed: 
     artefact ``path`` of ``estimator`` for ``family``: ``path`` itself for the chosen seed, else
     its file under ``params/seeds/``. Raises :class:`ArtifactError` for an artefact trained with one
     seed, a seed the study did not train (naming those it did) or a missing seed file."""
-    study = (read_artifact(path).get("training") or {}).get("seed_study")
-    if not isinstance(study, dict):
+    study = _seed_study_of(read_artifact(path))
+    if study is None:
         raise ArtifactError(f"{path} was trained with one seed (its 'training' has no seed_study): training_seed= "
                             f"needs a seed study, `fkn-bench train --estimator {estimator} ... --seeds 0 1 2 "
                             "--write-artifact`")
@@ -133,14 +133,18 @@ def training_seed_artifact(path: str | Path, estimator: str, family: str, seed: 
     return target
 
 
+def _seed_study_of(document: Mapping[str, Any]) -> dict[str, Any] | None:
+    study = (document.get("training") or {}).get("seed_study")
+    return study if isinstance(study, dict) else None
+
+
 def seed_study(path: str | Path) -> dict[str, Any] | None:
     """The ``training.seed_study`` of the artefact ``path`` (None: trained with one seed, or an
     unreadable file)."""
     try:
-        study = (read_artifact(path).get("training") or {}).get("seed_study")
+        return _seed_study_of(read_artifact(path))
     except ArtifactError:
         return None
-    return study if isinstance(study, dict) else None
 
 
 def committed_artifact_path(estimator: str, family: str) -> Path | None:
@@ -257,21 +261,18 @@ def install_artifact(artifact: str | Path, estimator: str, family: str, *, targe
     target = Path(target) if target is not None else artifact_path(estimator, family)
     if training_extra:
         document["training"] = {**(document.get("training") or {}), **training_extra}
-    if not {"checkpoint", "weights"} & set(document["estimator_config"]):
-        if not training_extra:
-            write_bytes_atomic(target, Path(artifact).read_bytes())
-            return target
-        fields = {k: document[k] for k in ("estimator", "family", "scenario", "estimator_config", "parameters", "training")
-                  if k in document}
-        write_json_atomic(target, {"format": ARTIFACT_FORMAT, "format_version": ARTIFACT_FORMAT_VERSION, **fields,
-                                   "provenance": document.get("provenance") or run_provenance()})
+    network = bool({"checkpoint", "weights"} & set(document["estimator_config"]))
+    if not network and not training_extra:
+        write_bytes_atomic(target, Path(artifact).read_bytes())
         return target
-    full = load_checkpoint(weights_of_artifact(artifact, estimator))
-    weights = target.with_name(target.name.removesuffix(".json") + WEIGHTS_SUFFIX)
-    save_checkpoint(weights, {k: full[k] for k in _WEIGHTS_KEYS if k in full})
-    digest = hashlib.sha256(weights.read_bytes()).hexdigest()
-    document["estimator_config"] = {"weights": weights.name, "weights_sha256": digest}
-    fields = {k: document[k] for k in ("estimator", "family", "scenario", "estimator_config", "parameters", "training")}
+    if network:
+        full = load_checkpoint(weights_of_artifact(artifact, estimator))
+        weights = target.with_name(target.name.removesuffix(".json") + WEIGHTS_SUFFIX)
+        save_checkpoint(weights, {k: full[k] for k in _WEIGHTS_KEYS if k in full})
+        digest = hashlib.sha256(weights.read_bytes()).hexdigest()
+        document["estimator_config"] = {"weights": weights.name, "weights_sha256": digest}
+    fields = {k: document[k] for k in ("estimator", "family", "scenario", "estimator_config", "parameters", "training")
+              if k in document}
     write_json_atomic(target, {"format": ARTIFACT_FORMAT, "format_version": ARTIFACT_FORMAT_VERSION, **fields,
                                "provenance": document.get("provenance") or run_provenance()})
     return target
