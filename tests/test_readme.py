@@ -1,6 +1,6 @@
 """README.md stays true: its leaderboard excerpt is copied from the committed leaderboard it names
 (``Excerpt of [`leaderboards/<scenario>.md`]``: the same estimators in the same order with the same
-numbers), and the test command that ``.ci/run`` extracts is the one README shows."""
+numbers), its training-seed table from the leaderboards' index, and the test command that ``.ci/run`` extracts is the one README shows."""
 
 from __future__ import annotations
 
@@ -49,6 +49,20 @@ def test_leaderboard_excerpt_matches_the_committed_leaderboard_it_names() -> Non
                 f"README excerpt, {row['estimator']}, {header}: {value} but leaderboards/{name} has "
                 f"{committed_row[_column(header, committed_row)]} (copy the regenerated table)"
             )
+
+
+def test_training_seed_table_is_copied_from_the_leaderboards() -> None:
+    """README's training-seed table: every trained estimator of the leaderboards' table, each shown
+    cell as the leaderboards have it (README may show fewer scenarios)."""
+    shown = _markdown_table_after(README.read_text(), "copied from the leaderboards' training-seed table")
+    committed = _markdown_table_after((REPO / "leaderboards" / "README.md").read_text(), "### Spread over training seeds")
+    by_estimator = {row["estimator"]: row for row in committed}
+    assert [row["estimator"] for row in shown] == list(by_estimator), "README must list the same estimators in order"
+    for row in shown:
+        for header, value in row.items():
+            assert by_estimator[row["estimator"]].get(header) == value, (
+                f"README training-seed table, {row['estimator']}, {header}: {value} but leaderboards/README.md has "
+                f"{by_estimator[row['estimator']].get(header)} (copy the regenerated table)")
 
 
 def test_ci_runs_the_readme_test_command() -> None:

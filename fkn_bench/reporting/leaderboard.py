@@ -589,6 +589,40 @@ def _overview(section: str, scenarios: Sequence[str], ranked: dict[str, list[dic
     )
 
 
+TRAINING_SEEDS_HEADING = "Training seeds"
+"""The index's section that gathers every trained estimator's spread over training seeds."""
+
+
+def _training_seed_overview(scenarios: Sequence[str], ranked: dict[str, list[dict[str, Any]]]) -> Table | None:
+    """Every trained estimator (a row labelled "trained on"; by name) x every scenario of
+    ``scenarios`` (in that order) where training seeds were scored, i.e. the family headline
+    scenarios (:func:`fkn_bench.harness.estimators.family_headline`): the mean 13-state RMSE of the
+    committed seed and, in brackets, the lowest and highest over its training seeds (a value alone:
+    one seed). None where no scenario has training-seed replicas."""
+    columns = [s for s in scenarios if any(r.get("training_seed_rmse") for r in ranked[s])]
+    if not columns:
+        return None
+    cells: dict[tuple[str, str], str] = {}
+    for scenario in columns:
+        for summary in ranked[scenario]:
+            if not summary.get("trained_on"):
+                continue
+            text, spread = _fmt(summary["state_rmse"], 4), summary.get("training_seed_rmse")
+            if spread:
+                text += f" ({_fmt(min(spread), 4)}-{_fmt(max(spread), 4)})"
+            cells[(summary["estimator"], scenario)] = text
+    estimators = sorted({e for e, _ in cells})
+    return Table(
+        "Spread over training seeds",
+        ["estimator", *(f"`{s}`" for s in columns)],
+        [[e, *(cells.get((e, s), _DASH) for s in columns)] for e in estimators],
+        notes=["Mean 13-state RMSE of the committed parameters (the median-validation seed of a training-seed "
+               "study, `fkn-bench train ... --seeds 0 1 2`) on each family's headline scenario, and in brackets the "
+               "lowest and highest over the study's training seeds on the same test episodes; a value alone: "
+               "trained with one seed; – : not trained for that family."],
+    )
+
+
 def _episodes(results: Results, scenarios: Sequence[str]) -> str:
     counts = sorted({len(set(results.seeds(e, s))) for s in scenarios for e in results.estimators()
                      if results.cells(e, s)})
@@ -628,6 +662,13 @@ def _index(results: Results, scenarios: Sequence[str], ranked: dict[str, list[di
     ]
     settings = results.settings()
     body = [line for key in SECTIONS if key != "other" or sections[key] for line in _section(results, key, sections[key], ranked, tests)]
+    seed_table = _training_seed_overview([s for key in SECTIONS for s in sections[key]], ranked)
+    if seed_table is not None:
+        body += [f"## {TRAINING_SEEDS_HEADING}", "",
+                 "A learned or tuned estimator's score is one draw from its training: the seed fixes the network's "
+                 "initialisation and the order of the training windows. Each scenario's page shows this spread in "
+                 "its `training seeds` column; here it is for every trained estimator at once.", "",
+                 markdown_table(seed_table, level=3).rstrip("\n"), ""]
     return "\n".join([
         "# fkn-bench leaderboards",
         "",

@@ -16,6 +16,7 @@ from fkn_bench.estimators import make_estimator, registry
 from fkn_bench.filters import ParameterSet, make_filter
 from fkn_bench.harness import ResultStore, SimulatedSource, build_grid, run_grid, select_estimators
 from fkn_bench.reporting.leaderboard import build_leaderboards
+from fkn_bench.reporting.report import format_number
 from fkn_bench.scenarios import get_scenario
 from fkn_bench.training import DirectParameters, Trainable, TrainConfig
 from fkn_bench.training import artifacts
@@ -111,6 +112,12 @@ def test_the_leaderboard_shows_the_spread_over_training_seeds(installed: tuple[o
     assert row.state_rmse_training_seed_min < row.state_rmse_training_seed_max
     assert pd.isna(ranking.set_index("estimator").loc["manual-ekf"].training_seeds)
     assert "training seeds" in files["ds1.md"] and "(3) |" in files["ds1.md"]
+    index = files["README.md"]
+    overview = index[index.index("### Spread over training seeds"):].splitlines()
+    rows = {line.split("|")[1].strip(): line for line in overview if line.startswith("| ")}
+    assert NAME in rows and "manual-ekf" not in rows  # every trained estimator, nothing else
+    low, high = (format_number(v, 4) for v in (row.state_rmse_training_seed_min, row.state_rmse_training_seed_max))
+    assert f"({low}-{high})" in rows[NAME]
 
 
 @pytest.mark.parametrize("name, path", [
