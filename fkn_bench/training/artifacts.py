@@ -203,13 +203,30 @@ def artifact_label(path: str | Path) -> str:
     return str(path)
 
 
+def portable_command(argv: list[str]) -> list[str]:
+    """``argv`` as anyone can rerun it from the repository's root: the program by its name
+    (``fkn-bench``, not the path of one machine's virtual environment), and every argument that
+    names a file inside the repository (or the installed package's folder) by its path relative to
+    it (``fkn_bench/kalmannet/params/kalmannet-ds1.json``). Other arguments are kept as given."""
+    root = Path(__file__).resolve().parents[2]
+    command = [Path(argv[0]).name if argv else "fkn-bench"]
+    for argument in argv[1:]:
+        try:
+            relative = Path(argument).resolve().relative_to(root) if Path(argument).exists() else None
+        except (OSError, ValueError):
+            relative = None
+        command.append(relative.as_posix() if relative is not None else argument)
+    return command
+
+
 def run_provenance() -> dict[str, Any]:
-    """Versions, git commit, machine, command line and UTC time of this process."""
+    """Versions, git commit, machine, command line (:func:`portable_command`) and UTC time of this
+    process."""
     from fkn_bench.provenance import environment
 
     return {
         **environment(),
-        "command": sys.argv,
+        "command": portable_command(sys.argv),
         "created_utc": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
 

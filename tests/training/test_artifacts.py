@@ -151,3 +151,16 @@ def test_an_estimator_registered_without_a_params_package_has_no_committed_files
     assert committed_artifact_path("kalmannet", "ds1") == artifact_path("kalmannet", "ds1")
     with pytest.raises(ValueError, match="params_package of estimator 'x' must be a dotted package name"):
         registry.register_estimator("x", artifact_factory("x"), params_package="my package/params")
+
+
+def test_the_recorded_command_reruns_from_the_repository_root(tmp_path: Path) -> None:
+    from fkn_bench.training.artifacts import artifact_path, portable_command
+
+    committed = artifact_path("kalmannet", "ds1").resolve()
+    outside = tmp_path / "run"
+    outside.mkdir()
+    command = portable_command(["/some/venv/bin/fkn-bench", "train", "--config", str(committed), "--out", str(outside),
+                                "--seeds", "0", "1"])
+    root = Path(__file__).resolve().parents[2]
+    assert command == ["fkn-bench", "train", "--config", committed.relative_to(root).as_posix(), "--out", str(outside),
+                       "--seeds", "0", "1"]
