@@ -173,6 +173,15 @@ class TrainConfig:
         seed: seed of initialisation and window order (paper: 0).
         scheduler_factor, scheduler_patience: ``ReduceLROnPlateau`` settings.
         max_grad_norm: gradient-norm clip (None: off).
+        restart_on_divergence: a factor ``f`` (None: off, the default). An epoch whose validation
+            loss is not finite, or exceeds the best so far by more than ``f`` times the best's
+            magnitude (``val - best > f |best|``: twice the best RMSE for ``f = 1``; for an NLL,
+            which is negative, a jump by its own size), is a divergence that finite-loss steps
+            cannot undo: the weights return to the best epoch's, Adam's moments are cleared and
+            the learning rate is multiplied by ``scheduler_factor`` (counted in
+            :attr:`Trainer.divergence_restarts`). Without it, a learned gain whose training
+            loss jumped to 1e7 in one epoch (Cholesky-KalmanNet on ds1) kept rolling back every
+            later step and stopped at that epoch's best.
         threads: torch threads during training.
         device: where the model, the data and the filter run (``cpu``, the default; ``cuda``
             where a GPU exists: :func:`fkn_bench.runtime.resolve_device`). The window order and
@@ -202,6 +211,7 @@ class TrainConfig:
     scheduler_factor: float = 0.5
     scheduler_patience: int = 5
     max_grad_norm: float | None = None
+    restart_on_divergence: float | None = None
     threads: int = 1
     device: str = "cpu"
 
@@ -237,6 +247,9 @@ class TrainConfig:
             raise ValueError(f"scheduler_factor must be a number in (0, 1) (got {self.scheduler_factor!r})")
         if self.scheduler_patience < 0:
             raise ValueError(f"scheduler_patience must be >= 0 (got {self.scheduler_patience!r})")
+        if self.restart_on_divergence is not None and not (math.isfinite(self.restart_on_divergence)
+                                                           and self.restart_on_divergence > 0):
+            raise ValueError(f"restart_on_divergence must be None or a finite number > 0 (got {self.restart_on_divergence!r})")
         if self.max_grad_norm is not None and not (math.isfinite(self.max_grad_norm) and self.max_grad_norm > 0):
             raise ValueError(f"max_grad_norm must be a finite number > 0 or none (got {self.max_grad_norm!r})")
         for name in ("stride", "train_measurement_every"):
@@ -334,6 +347,7 @@ class Trainer:
         self.best_state: dict[str, Tensor] = copy.deepcopy(model.state_dict())
         self.epochs_without_improvement = 0
         self.evaluations = 0  # loss evaluations of the L-BFGS steps
+        self.divergence_restarts = 0  # epochs restarted from the best weights (TrainConfig.restart_on_divergence)
         # Adam steps taken, of them with the gradient norm clipped (counted when max_grad_norm is
         # set), batches skipped for a non-finite loss or gradient, and steps undone for one
         self.gradient_steps = {"taken": 0, "clipped": 0, "skipped_nonfinite": 0, "rolled_back": 0}
@@ -447,6 +461,22 @@ class Trainer:
                                      "diverges at the starting weights on every batch")
         return self._reported(total / count) if count else math.inf
 
+    def _diverged(self, val_loss: float) -> bool:
+        """Whether ``val_loss`` is a divergence by ``restart_on_divergence`` (:class:`TrainConfig`)."""
+        factor = self.config.restart_on_divergence
+        if factor is None or not math.isfinite(self.best_loss):
+            return False
+        return not math.isfinite(val_loss) or val_loss - self.best_loss > factor * abs(self.best_loss)
+
+    def _restart_from_best(self) -> None:
+        """Back to the best epoch's weights, with fresh Adam moments and a lower learning rate."""
+        self.model.load_state_dict(self.best_state)
+        self.optimizer.state.clear()
+        for group in self.optimizer.param_groups:
+            group["lr"] *= self.config.scheduler_factor
+        self._before_step = None
+        self.divergence_restarts += 1
+
     def deployed_parameters(self) -> dict[str, float]:
         """The deployed standard deviations by name (e.g. ``sigma_Q_qw``); for a
         :class:`SequenceModel`, the gradient-step counts so far (steps taken, clipped, skipped)."""
@@ -478,7 +508,9 @@ class Trainer:
                                      time.perf_counter() - began, self.deployed_parameters())
                 self.history.append(record)
                 margin = self.config.min_improvement * abs(self.best_loss) if math.isfinite(self.best_loss) else 0.0
-                if val_loss < self.best_loss - margin:
+                if self._diverged(val_loss):
+                    self._restart_from_best()
+                elif val_loss < self.best_loss - margin:
                     self.best_loss, self.best_epoch = val_loss, epoch
                     self.best_state = copy.deepcopy(self.model.state_dict())
                     self.epochs_without_improvement = 0
@@ -494,7 +526,7 @@ class Trainer:
 
     # ------------------------------------------------------------------ resume
     _MODULES = ("model", "optimizer", "scheduler")
-    _VALUES = ("best_loss", "best_epoch", "best_state", "epochs_without_improvement", "evaluations")
+    _VALUES = ("best_loss", "best_epoch", "best_state", "epochs_without_improvement", "evaluations", "divergence_restarts")
 
     def _generators(self) -> dict[str, torch.Generator]:
         """Every random generator the training draws from, by name: the window order's

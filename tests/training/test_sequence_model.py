@@ -113,3 +113,37 @@ def test_an_epoch_without_a_finite_loss_at_the_starting_weights_is_an_error(data
     with pytest.raises(FloatingPointError, match="no finite training loss in epoch 1"):
         _trainer(data, model).fit(progress=False)
     assert float(model.offset[0].detach()) == 0.5
+
+
+@pytest.mark.parametrize("factor", [None, 1.0], ids=["off", "restart"])
+def test_a_divergent_epoch_restarts_from_the_best_weights_when_asked(data: TrainingData, factor: float | None) -> None:
+    model = Offset()
+    trainer = _trainer(data, model, restart_on_divergence=factor)
+    validate, seen, at_epoch_2 = trainer.validate, [], {}
+
+    def spiking() -> tuple[float, float]:  # epoch 2's validation loss jumps a million-fold (finite)
+        loss, rmse = validate()
+        seen.append(loss)
+        return (loss * 1e6 if len(seen) == 2 else loss), rmse
+
+    def look(epoch: int, history: list) -> bool:  # type: ignore[type-arg]
+        at_epoch_2.setdefault("after_1", model.offset.detach().clone())  # epoch 1: the best so far
+        if epoch == 2:
+            at_epoch_2.update(offset=model.offset.detach().clone(), adam=len(trainer.optimizer.state))
+        return False
+
+    trainer.validate = spiking  # type: ignore[method-assign]
+    trainer.fit(on_epoch=look, progress=False)
+    if factor is None:  # the spike is just a bad epoch
+        assert trainer.divergence_restarts == 0 and trainer.optimizer.param_groups[0]["lr"] == 0.05
+        assert not torch.equal(at_epoch_2["offset"], at_epoch_2["after_1"])  # it trained on from epoch 2's
+        return
+    assert trainer.divergence_restarts == 1 and trainer.best_epoch != 2
+    assert trainer.optimizer.param_groups[0]["lr"] == pytest.approx(0.05 * trainer.config.scheduler_factor)
+    assert torch.equal(at_epoch_2["offset"], at_epoch_2["after_1"])  # back to epoch 1's weights
+    assert at_epoch_2["adam"] == 0  # with Adam's moments afresh
+
+
+def test_restart_on_divergence_must_be_a_positive_factor() -> None:
+    with pytest.raises(ValueError, match="restart_on_divergence must be None or a finite number > 0"):
+        TrainConfig(restart_on_divergence=0.0)
