@@ -61,17 +61,29 @@ def innovation_nll(result: FilterResult, loss_cut: int) -> Tensor:
         raise ValueError("no measurement updates after the loss cut: the NLL is undefined")
     nu = result.innovations[:, loss_cut:][used]
     S = result.innovation_covariances[:, loss_cut:][used]
-    L = torch.linalg.cholesky(S)
+    L, failed = torch.linalg.cholesky_ex(S)
+    if bool(failed.any()):
+        return _not_positive_definite(S)
     whitened = torch.linalg.solve_triangular(L, nu.unsqueeze(-1), upper=False).squeeze(-1)
     log_det = 2.0 * torch.log(torch.diagonal(L, dim1=-2, dim2=-1)).sum(-1)
     m = nu.shape[-1]
     return 0.5 * (m * math.log(2.0 * math.pi) + log_det + whitened.square().sum(-1)).mean()
 
 
+def _not_positive_definite(covariances: Tensor) -> Tensor:
+    """The NLL where a covariance is not positive definite: +inf, so that training takes it as a
+    non-finite loss (the step that led there is undone, :mod:`fkn_bench.training.trainer`) and
+    validation as a diverged epoch, instead of raising from the factorisation."""
+    return covariances.new_tensor(math.inf)
+
+
 def gaussian_nll(errors: Float[Tensor, "... k"], covariances: Float[Tensor, "... k k"]) -> Float[Tensor, ""]:
     """Mean Gaussian negative log-likelihood ``1/2 [k log 2 pi + log det P + e^T P^-1 e]`` of
-    errors ``(..., k)`` under covariances ``(..., k, k)`` (symmetric positive definite; a scalar)."""
-    L = torch.linalg.cholesky(covariances)
+    errors ``(..., k)`` under covariances ``(..., k, k)`` (a scalar); +inf where any covariance
+    is not positive definite (the recursion left the physical range)."""
+    L, failed = torch.linalg.cholesky_ex(covariances)
+    if bool(failed.any()):
+        return _not_positive_definite(covariances)
     whitened = torch.linalg.solve_triangular(L, errors.unsqueeze(-1), upper=False).squeeze(-1)
     log_det = 2.0 * torch.log(torch.diagonal(L, dim1=-2, dim2=-1)).sum(-1)
     k = errors.shape[-1]

@@ -48,3 +48,15 @@ def test_innovation_nll_matches_the_gaussian_formula() -> None:
     assert nll.item() == pytest.approx(torch.stack(expected).mean().item(), rel=1e-12)
     with pytest.raises(ValueError, match="no measurement updates"):
         innovation_nll(result, loss_cut=3)
+
+
+def test_gaussian_nll_is_infinite_where_a_covariance_is_not_positive_definite() -> None:
+    from fkn_bench.training.objectives import gaussian_nll
+
+    errors = torch.tensor([[0.1, -0.2], [0.3, 0.0]], dtype=torch.float64)
+    covariances = torch.stack([torch.eye(2, dtype=torch.float64), torch.diag(torch.tensor([2.0, 0.5], dtype=torch.float64))])
+    expected = torch.distributions.MultivariateNormal(torch.zeros(2, dtype=torch.float64), covariances).log_prob(errors)
+    assert float(gaussian_nll(errors, covariances)) == pytest.approx(-float(expected.mean()), rel=1e-12)
+    broken = covariances.clone()
+    broken[1] = torch.tensor([[1.0, 2.0], [2.0, 1.0]])  # indefinite: a recursion that left the physical range
+    assert gaussian_nll(errors, broken).item() == math.inf  # a non-finite loss the trainer undoes, not an exception
