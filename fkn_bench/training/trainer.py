@@ -508,8 +508,9 @@ class Trainer:
                                      time.perf_counter() - began, self.deployed_parameters())
                 self.history.append(record)
                 margin = self.config.min_improvement * abs(self.best_loss) if math.isfinite(self.best_loss) else 0.0
-                if self._diverged(val_loss):
+                if self._diverged(val_loss):  # no better, and trained on from the best weights
                     self._restart_from_best()
+                    self.epochs_without_improvement += 1
                 elif val_loss < self.best_loss - margin:
                     self.best_loss, self.best_epoch = val_loss, epoch
                     self.best_state = copy.deepcopy(self.model.state_dict())
