@@ -317,12 +317,13 @@ def _fit(estimator: str, scenario: str | Scenario | Sequence[str | Scenario], co
             last_saved = time.monotonic()
         return on_epoch(epoch, history) if on_epoch is not None else None
 
+    earlier = sum(record.seconds for record in trainer.history)  # resumed: the epochs run before
     trainer.fit(on_epoch=after_epoch, progress=progress)  # restores the best epoch's weights
     save()
     history = pd.DataFrame([record.flat() for record in trainer.history])
     outcome = TrainingOutcome(
         estimator, model, config, scenario, history, trainer.best_epoch, trainer.best_loss, directory, {},
-        time.perf_counter() - began,
+        time.perf_counter() - began + earlier,
         {"checkpoint": None if checkpoint is None else str(checkpoint)}
         if isinstance(model, SequenceModel) or model.deploys_network else deployed_estimator_config(model, settings), tuple(scenarios), family,
     )
@@ -340,7 +341,7 @@ def _fit(estimator: str, scenario: str | Scenario | Sequence[str | Scenario], co
             plot_parameters(history, directory / "parameters.png",
                             title=f"{estimator}: learned standard deviations ({label})")
     outcome.test = _mean_metrics([split_metrics(model, settings, s) for s in scenarios], scenarios)
-    outcome.seconds = time.perf_counter() - began
+    outcome.seconds = time.perf_counter() - began + earlier  # a resumed run counts its earlier epochs
     training = {
         "objective": settings.objective,
         "optimizer": settings.optimizer,

@@ -152,7 +152,8 @@ def train_seeds(
     validation seed and write ``out/seed_study.json`` and ``.csv`` (module docstring).
 
     ``resume`` continues each seed from its own checkpoint where one is there (``fit(...,
-    resume=True)``), so an interrupted study goes on where it stopped. A seed whose training
+    resume=True)``), so an interrupted study goes on where it stopped (a finished seed is evaluated
+    again, not retrained; its seconds still count the epochs it ran before). A seed whose training
     raises ``ValueError`` or ``FloatingPointError`` is recorded as failed (a ``ValueError`` of the
     first seed is raised at once: a configuration the estimator refuses fails every seed alike). Raises ``ValueError``
     for fewer than one seed, repeated seeds or no seed that trained.

@@ -3,6 +3,8 @@ estimator), on_epoch sees every epoch and can stop it, and checkpoints are check
 
 from __future__ import annotations
 
+import json
+
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,7 +18,7 @@ from fkn_bench.filters import ParameterSet, make_filter
 from fkn_bench.scenarios import get_scenario
 from fkn_bench.training import DirectParameters, Trainable, TrainConfig, fit
 from fkn_bench.training.artifacts import TrainedKalmanEstimator, artifact_factory, read_artifact
-from fkn_bench.training.checkpoint import CHECKPOINT_FORMAT, CheckpointError, load_checkpoint
+from fkn_bench.training.checkpoint import CHECKPOINT_FORMAT, CheckpointError, load_checkpoint, save_checkpoint
 
 SHORT = get_scenario("ds1", n_steps=2000)
 OPTIONS = {"window": 200, "loss_cut": 50, "episodes": 1, "epochs": 2, "lr": 0.05, "windows_per_batch": 4}
@@ -148,6 +150,12 @@ def test_a_full_disk_ends_train_in_one_line_and_resume_trusts_only_complete_chec
     with directory_lock(out):
         assert main([*argv, str(out), "--resume"]) == 2
     assert "in use by another fkn-bench process" in capsys.readouterr().err
+    saved = load_checkpoint(out / "checkpoint.pt")  # epoch 1 as if it had taken 1000 s
+    saved["trainer"]["history"][0]["seconds"] = 1000.0
+    save_checkpoint(out / "checkpoint.pt", saved)
     assert main([*argv, str(out), "--resume"]) == 0
     straight = fit(NAME, get_scenario("tiny-train"), {}, progress=False).history.drop(columns="seconds")
     pd.testing.assert_frame_equal(pd.read_csv(out / "history.csv").drop(columns="seconds"), straight, check_exact=True)
+    # the resumed run's recorded time includes the epoch run before the interruption
+    recorded = json.loads((out / "parameters.json").read_text())["training"]["seconds_total"]
+    assert recorded >= 1000.0
