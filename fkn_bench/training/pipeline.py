@@ -356,6 +356,8 @@ def _fit(estimator: str, scenario: str | Scenario | Sequence[str | Scenario], co
         "seconds_per_epoch": float(history["seconds"].mean()) if len(history) else None,
         "loss_evaluations": trainer.evaluations if settings.optimizer == "lbfgs" else None,
         "gradient_steps": dict(trainer.gradient_steps),
+        "divergence_restarts": trainer.divergence_restarts,  # TrainConfig.restart_on_divergence
+        "loss_spikes": trainer.loss_spikes,
         **outcome.test,
         "history": {str(c): history[c].tolist() for c in history.columns if c != "seconds"},
     }

@@ -29,7 +29,10 @@ the filter off its measurements, cf. KalmanNet's issues #23 and #27). Otherwise 
 weights, or a step just undone) the batch is skipped (``skipped_nonfinite``); an epoch with no
 finite loss and no step to undo raises ``FloatingPointError``. The counts are in
 :attr:`Trainer.gradient_steps`; a SequenceModel's history records them per epoch, the artefact
-their totals. L-BFGS raises ``FloatingPointError`` on a non-finite loss instead.
+their totals. L-BFGS raises ``FloatingPointError`` on a non-finite loss instead. A finite loss can
+blow up too (an NLL from -24 to 3e7 in one batch); with ``TrainConfig.restart_on_divergence`` such
+a spike is treated as a non-finite loss, and an epoch whose validation loss blows up restarts from
+the best weights.
 """
 
 from __future__ import annotations
@@ -179,9 +182,15 @@ class TrainConfig:
             which is negative, a jump by its own size), is a divergence that finite-loss steps
             cannot undo: the weights return to the best epoch's, Adam's moments are cleared and
             the learning rate is multiplied by ``scheduler_factor`` (counted in
-            :attr:`Trainer.divergence_restarts`). Without it, a learned gain whose training
-            loss jumped to 1e7 in one epoch (Cholesky-KalmanNet on ds1) kept rolling back every
-            later step and stopped at that epoch's best.
+            :attr:`Trainer.divergence_restarts`). The same margin guards every Adam batch from
+            the second epoch on: a batch whose finite training loss exceeds the last epoch's
+            mean training loss by ``f`` times its magnitude is a loss spike, treated as a
+            non-finite loss (the step that led there is undone and the learning rate halved;
+            counted in :attr:`Trainer.loss_spikes`; the spiked loss is left out of the epoch's
+            mean), so ``f`` must exceed the spread between one epoch's batches.
+            Without it, a learned gain whose training loss jumped to 3e7 in one epoch
+            (Cholesky-KalmanNet on ds1) went on from the wrecked weights: only a non-finite
+            loss undoes a step.
         threads: torch threads during training.
         device: where the model, the data and the filter run (``cpu``, the default; ``cuda``
             where a GPU exists: :func:`fkn_bench.runtime.resolve_device`). The window order and
@@ -348,6 +357,7 @@ class Trainer:
         self.epochs_without_improvement = 0
         self.evaluations = 0  # loss evaluations of the L-BFGS steps
         self.divergence_restarts = 0  # epochs restarted from the best weights (TrainConfig.restart_on_divergence)
+        self.loss_spikes = 0  # finite training losses past the divergence margin (TrainConfig.restart_on_divergence)
         # Adam steps taken, of them with the gradient norm clipped (counted when max_grad_norm is
         # set), batches skipped for a non-finite loss or gradient, and steps undone for one
         self.gradient_steps = {"taken": 0, "clipped": 0, "skipped_nonfinite": 0, "rolled_back": 0}
@@ -443,9 +453,14 @@ class Trainer:
         if self.config.optimizer == "lbfgs":
             return self._lbfgs_epoch()
         self.model.train()
-        total, count, undone = 0.0, 0, self.gradient_steps["rolled_back"]
+        total, count, undone, spikes = 0.0, 0, self.gradient_steps["rolled_back"], self.loss_spikes
         for batch in self.data.batches(self.config.windows_per_batch, self.generator):
             loss = self._backward(batch, raise_nonfinite=False)
+            if torch.isfinite(loss) and self._spiked(self._reported(float(loss.detach()))):  # as a non-finite loss
+                self.loss_spikes += 1
+                if self._before_step is not None:
+                    self._undo_last_step()
+                continue
             if torch.isfinite(loss):
                 total += float(loss.detach()) * batch.batch_size
                 count += batch.batch_size
@@ -456,7 +471,8 @@ class Trainer:
             self.optimizer.step()
             self.gradient_steps["taken"] += 1
         self.model.eval()
-        if not count and self.gradient_steps["rolled_back"] == undone:  # nothing to learn from, nothing undone
+        if not count and self.gradient_steps["rolled_back"] == undone and self.loss_spikes == spikes:
+            # nothing to learn from, nothing undone, no spike (an epoch of spikes is a divergence: inf)
             raise FloatingPointError(f"no finite training loss in epoch {len(self.history) + 1}: the filter "
                                      "diverges at the starting weights on every batch")
         return self._reported(total / count) if count else math.inf
@@ -467,6 +483,15 @@ class Trainer:
         if factor is None or not math.isfinite(self.best_loss):
             return False
         return not math.isfinite(val_loss) or val_loss - self.best_loss > factor * abs(self.best_loss)
+
+    def _spiked(self, train_loss: float) -> bool:
+        """Whether a batch's finite ``train_loss`` is a loss spike by ``restart_on_divergence``
+        (:class:`TrainConfig`): past the margin above the last epoch's mean training loss."""
+        factor = self.config.restart_on_divergence
+        reference = self.history[-1].train_loss if self.history else math.inf
+        if factor is None or not math.isfinite(reference):
+            return False
+        return train_loss - reference > factor * abs(reference)
 
     def _restart_from_best(self) -> None:
         """Back to the best epoch's weights, with fresh Adam moments and a lower learning rate."""
@@ -527,7 +552,8 @@ class Trainer:
 
     # ------------------------------------------------------------------ resume
     _MODULES = ("model", "optimizer", "scheduler")
-    _VALUES = ("best_loss", "best_epoch", "best_state", "epochs_without_improvement", "evaluations", "divergence_restarts")
+    _VALUES = ("best_loss", "best_epoch", "best_state", "epochs_without_improvement", "evaluations", "divergence_restarts",
+               "loss_spikes")
 
     def _generators(self) -> dict[str, torch.Generator]:
         """Every random generator the training draws from, by name: the window order's

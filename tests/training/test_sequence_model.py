@@ -144,6 +144,38 @@ def test_a_divergent_epoch_restarts_from_the_best_weights_when_asked(data: Train
     assert at_epoch_2["adam"] == 0  # with Adam's moments afresh
 
 
+class Spike(Offset):
+    """``Offset`` whose training loss is a million times larger (finite) on batch ``at``."""
+
+    def __init__(self, at: int) -> None:
+        super().__init__()
+        self.at, self.batches = at, 0
+
+    def sequence_mse(self, sequences: Sequences, *, dt: float, loss_cut: int) -> Tensor:
+        loss = super().sequence_mse(sequences, dt=dt, loss_cut=loss_cut)
+        if self.training:
+            self.batches += 1
+            return loss * 1e6 if self.batches == self.at else loss
+        return loss
+
+
+@pytest.mark.parametrize("factor", [None, 1.0], ids=["off", "guarded"])
+def test_a_finite_loss_spike_undoes_the_step_that_led_there_when_asked(data: TrainingData,
+                                                                        factor: float | None) -> None:
+    model = Spike(at=3)  # two batches an epoch: the first batch of epoch 2, after a best exists
+    trainer = _trainer(data, model, restart_on_divergence=factor)
+    trainer.fit(progress=False)
+    steps = trainer.gradient_steps
+    if factor is None:  # the spike is trained on and averaged into epoch 2's loss
+        assert trainer.loss_spikes == 0 and steps == {"taken": 6, "clipped": 0, "skipped_nonfinite": 0, "rolled_back": 0}
+        assert trainer.history[1].train_loss > 100 * trainer.history[0].train_loss
+        return
+    assert trainer.loss_spikes == 1 and steps["rolled_back"] == 1 and steps["taken"] == 5
+    assert trainer.optimizer.param_groups[0]["lr"] == pytest.approx(0.05 * 0.5)
+    assert trainer.history[1].train_loss < 10 * trainer.history[0].train_loss  # left out of the mean
+    assert int(trainer.optimizer.state[model.offset]["step"]) == steps["taken"] - steps["rolled_back"]
+
+
 def test_restart_on_divergence_must_be_a_positive_factor() -> None:
     with pytest.raises(ValueError, match="restart_on_divergence must be None or a finite number > 0"):
         TrainConfig(restart_on_divergence=0.0)
