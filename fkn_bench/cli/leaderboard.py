@@ -22,6 +22,10 @@ figures/comparison-ds1.png) is refused in one line naming it, and nothing is wri
 ``--force``. Results that mix, for one scenario, another split, cut or scenario
 configuration are refused in one line: build those from one results directory each.
 
+``--novelty SCENARIO`` prints instead, from the same results, each estimator's mean 13-state RMSE
+on the test episodes of SCENARIO whose spin axis is near / far (45 deg) from every trajectory its
+family trained on (:mod:`fkn_bench.harness.novelty`): a filter that estimates scores alike on both.
+
 Regenerate the committed leaderboards from scratch (cells already stored are reused; add --rerun
 to the first command to recompute them)::
 
@@ -57,6 +61,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--shift", action="store_true",
                         help="instead: score each prior family's learned and tuned estimators, and manual-ekf, on "
                              "shifted priors and write the shift table (shift.md/.csv)")
+    parser.add_argument("--novelty", metavar="SCENARIO",
+                        help="instead: print, from the stored results, each estimator's mean 13-state RMSE on the test "
+                             "episodes of SCENARIO whose spin axis is near / far from every trajectory its family's "
+                             "artefacts trained on (fkn_bench.harness.novelty); writes nothing")
     parser.add_argument("--seeds", type=int, default=None, metavar="N",
                         help="--cross, --shift: test episodes 0 .. N-1 (default: 20 for --cross, 50 for --shift)")
     parser.set_defaults(handler=run)
@@ -67,8 +75,10 @@ def run(args: argparse.Namespace) -> int:
         args.results = str(default_leaderboards() / "results")
     if args.out is None:
         args.out = str(Path(args.results).parent)
-    if args.cross and args.shift:
-        raise UsageError("--cross and --shift write different tables: give one")
+    if sum(map(bool, (args.cross, args.shift, args.novelty))) > 1:
+        raise UsageError("--cross, --shift and --novelty make different tables: give one")
+    if args.novelty:
+        return _novelty(args)
     if args.cross:
         return _cross(args)
     if args.shift:
@@ -90,6 +100,32 @@ def run(args: argparse.Namespace) -> int:
     print(f"fkn-bench leaderboard: wrote {len(paths)} files from {len(results)} cells to {args.out}", file=sys.stderr)
     for path in paths:
         print(path)
+    return 0
+
+
+def _novelty(args: argparse.Namespace) -> int:
+    import math
+
+    from fkn_bench.harness.novelty import NEAR_DEGREES, novelty_table
+    from fkn_bench.harness.store import ResultStore, StoreError
+
+    if args.seeds is not None:
+        raise UsageError("--seeds goes with --cross or --shift (--novelty reads the stored results' seeds)")
+    try:
+        rows = ResultStore(args.results).load().rows
+    except StoreError as exc:
+        raise UsageError(f"{exc} (write results with: fkn-bench run --all --out {args.results})") from None
+    with usage_errors(ValueError, KeyError):
+        table, degrees = novelty_table(rows, args.novelty)
+    far = int((degrees > NEAR_DEGREES).sum())
+    print(f"{args.novelty}: angle (deg) from each test episode's angular momentum to the nearest training "
+          f"trajectory's, seeds 0..{len(degrees) - 1}: {' '.join(f'{d:.0f}' for d in degrees)}")
+    print(f"near: <= {NEAR_DEGREES:g} deg ({len(degrees) - far} episodes); far: > {NEAR_DEGREES:g} deg ({far} episodes)\n")
+    print("| estimator | near RMSE | far RMSE | far / near | diverged near | diverged far |")
+    print("|:---|---:|---:|---:|---:|---:|")
+    for row in table.itertuples(index=False):
+        cells = [f"{value:.4g}" if not math.isnan(value) else "–" for value in (row[1], row[2], row[3])]
+        print(f"| {row[0]} | {' | '.join(cells)} | {row[4]} | {row[5]} |")
     return 0
 
 

@@ -138,10 +138,27 @@ def test_shift_and_cross_options_are_checked_before_any_work(tmp_path, capsys) -
     from fkn_bench.cli import main
 
     assert main(["leaderboard", "--shift", "--cross", "--out", str(tmp_path)]) == 2
-    assert "--cross and --shift" in capsys.readouterr().err
+    assert "--cross, --shift and --novelty make different tables" in capsys.readouterr().err
+    assert main(["leaderboard", "--shift", "--novelty", "tumble-flip", "--out", str(tmp_path)]) == 2
+    assert main(["leaderboard", "--novelty", "tumble-flip", "--seeds", "5", "--results", str(tmp_path)]) == 2
+    assert "--novelty reads the stored results' seeds" in capsys.readouterr().err
+    assert main(["leaderboard", "--novelty", "tumble-flip", "--results", str(tmp_path / "none")]) == 2
+    assert "results directory not found" in capsys.readouterr().err
     assert main(["leaderboard", "--seeds", "5", "--out", str(tmp_path)]) == 2
     assert "--seeds goes with --cross or --shift" in capsys.readouterr().err
     assert main(["leaderboard", "--shift", "--seeds", "1", "--out", str(tmp_path)]) == 2
     (tmp_path / "shift.md").write_text("MINE\n")  # a file fkn-bench did not write is never replaced
     assert main(["leaderboard", "--shift", "--seeds", "2", "--out", str(tmp_path)]) == 2
     assert (tmp_path / "shift.md").read_text() == "MINE\n" and not (tmp_path / "shift.csv").exists()
+
+
+@pytest.mark.slow(seconds=10)  # every committed cell read, the test and training episodes' axes generated
+def test_novelty_separates_memory_from_estimation_on_the_committed_tumble_flip(capsys: pytest.CaptureFixture) -> None:
+    assert main(["leaderboard", "--novelty", "tumble-flip", "--results", str(LEADERBOARDS / "results")]) == 0
+    out = capsys.readouterr().out
+    assert "far: > 45 deg (9 episodes)" in out
+    ratio = {line.split("|")[1].strip(): float(line.split("|")[4]) for line in out.splitlines()
+             if line.startswith("| ") and not line.startswith("| estimator")}
+    # the learned noise generalises to spin axes never trained on; Split-KalmanNet's learned gain does not
+    assert ratio["manual-ekf"] < 1.25 and ratio["flexkalmannet"] < 1.25
+    assert ratio["split-kalmannet"] > 5
