@@ -94,8 +94,9 @@ def family_training_set(family: str) -> TrainingSet:
         path = committed_artifact_path(name, family)
         if path is None:
             continue
-        data = json.loads(path.read_text()).get("training", {}).get("data") or {}
-        label = (json.loads(path.read_text()).get("scenario") or {}).get("name")
+        artefact = json.loads(path.read_text())
+        data = artefact.get("training", {}).get("data") or {}
+        label = (artefact.get("scenario") or {}).get("name")
         if not label or not isinstance(data.get("episodes"), int):
             continue
         found.setdefault(TrainingSet(tuple(label.split("+")), int(data["episodes"])), []).append(name)
@@ -117,17 +118,16 @@ def novelty_table(rows: pd.DataFrame, scenario: str, *, near_degrees: float = NE
     seeds = sorted(int(s) for s in own["seed"].unique())
     training = family_training_set(get_scenario(scenario).model_family).directions()
     degrees = novelty_degrees(momentum_directions(scenario, seeds), training)
-    far = {seed for seed, angle in zip(seeds, degrees) if angle > near_degrees}
+    far = [seed for seed, angle in zip(seeds, degrees) if angle > near_degrees]
     table = []
     for label, part in own.groupby("estimator", sort=True):
         rmse = part[(part["group"] == "state") & (part["metric"] == "rmse")].set_index("seed")["value"]
         diverged = part[part["metric"] == "diverged"].set_index("seed")["value"]
-        is_far = rmse.index.isin(list(far))
-        near_mean, far_mean = float(rmse[~is_far].mean()), float(rmse[is_far].mean())
+        near_mean, far_mean = float(rmse[~rmse.index.isin(far)].mean()), float(rmse[rmse.index.isin(far)].mean())
+        far_diverged = diverged.index.isin(far)
         table.append({
             "estimator": label, "near": near_mean, "far": far_mean,
             "far / near": far_mean / near_mean if near_mean > 0 else math.nan,
-            "diverged near": int(diverged[~diverged.index.isin(list(far))].sum()),
-            "diverged far": int(diverged[diverged.index.isin(list(far))].sum()),
+            "diverged near": int(diverged[~far_diverged].sum()), "diverged far": int(diverged[far_diverged].sum()),
         })
     return pd.DataFrame(table), degrees

@@ -190,10 +190,9 @@ class TrainConfig:
             a non-finite loss it neither undoes the last step nor halves the learning rate:
             the spike is that batch's at weights that hold on the others, and halving at each
             took Cholesky-KalmanNet's learning rate on ds1 from 3e-4 to 1e-11 in 31 epochs
-            (45 spikes).
-            Without it, a learned gain whose training loss jumped to 3e7 in one epoch
-            (Cholesky-KalmanNet on ds1) went on from the wrecked weights: only a non-finite
-            loss undoes a step.
+            (45 spikes). Without the option, a learned gain whose training loss jumped to 3e7 in
+            one epoch (Cholesky-KalmanNet on ds1) went on from the wrecked weights: only a
+            non-finite loss undoes a step.
         threads: torch threads during training.
         device: where the model, the data and the filter run (``cpu``, the default; ``cuda``
             where a GPU exists: :func:`fkn_bench.runtime.resolve_device`). The window order and
@@ -478,21 +477,23 @@ class Trainer:
                                      "diverges at the starting weights on every batch")
         return self._reported(total / count) if count else math.inf
 
-    def _diverged(self, val_loss: float) -> bool:
-        """Whether ``val_loss`` is a divergence by ``restart_on_divergence`` (:class:`TrainConfig`)."""
+    def _past_margin(self, loss: float, reference: float) -> bool:
+        """Whether ``loss`` is past ``restart_on_divergence``'s margin above ``reference``
+        (:class:`TrainConfig`): not finite, or ``loss - reference > f |reference|``; never while
+        the option is off or there is no finite reference yet."""
         factor = self.config.restart_on_divergence
-        if factor is None or not math.isfinite(self.best_loss):
-            return False
-        return not math.isfinite(val_loss) or val_loss - self.best_loss > factor * abs(self.best_loss)
-
-    def _spiked(self, train_loss: float) -> bool:
-        """Whether a batch's finite ``train_loss`` is a loss spike by ``restart_on_divergence``
-        (:class:`TrainConfig`): past the margin above the last epoch's mean training loss."""
-        factor = self.config.restart_on_divergence
-        reference = self.history[-1].train_loss if self.history else math.inf
         if factor is None or not math.isfinite(reference):
             return False
-        return train_loss - reference > factor * abs(reference)
+        return not math.isfinite(loss) or loss - reference > factor * abs(reference)
+
+    def _diverged(self, val_loss: float) -> bool:
+        """Whether ``val_loss`` is a divergence: past the margin above the best so far."""
+        return self._past_margin(val_loss, self.best_loss)
+
+    def _spiked(self, train_loss: float) -> bool:
+        """Whether a batch's ``train_loss`` is a spike: past the margin above the last epoch's
+        mean training loss."""
+        return self._past_margin(train_loss, self.history[-1].train_loss if self.history else math.inf)
 
     def _restart_from_best(self) -> None:
         """Back to the best epoch's weights, with fresh Adam moments and a lower learning rate."""
